@@ -1,0 +1,1 @@
+"""Subcommands of the `farm` command line, one module each."""

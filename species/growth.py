@@ -1,0 +1,51 @@
+"""One `grow` for every growth model: dispatch on the dictionary's `generator` key.
+
+A dictionary without a generator key is Weber-Penn, so Sapling dictionaries load unchanged.
+"""
+from __future__ import annotations
+
+import importlib
+from typing import Callable
+
+import numpy as np
+
+from .errors import ParameterError
+from .skeleton import Skeleton
+
+__all__ = ["grow", "GENERATORS", "generator_of", "rng_for"]
+
+# generator name -> "module:function" taking (params, rng) and returning a Skeleton.
+GENERATORS: dict[str, str] = {
+    "weber_penn": "species.weber_penn:grow",
+    "colonization": "species.colonization:grow",
+    "lsystem": "species.lsystem:grow",
+}
+
+
+def generator_of(params: dict) -> str:
+    if not isinstance(params, dict):
+        raise ParameterError("params", type(params).__name__, "a JSON object (dict) of parameters")
+    name = params.get("generator", "weber_penn")
+    if name not in GENERATORS:
+        raise ParameterError("generator", name, f"one of {sorted(GENERATORS)}")
+    return name
+
+
+def _grower(name: str) -> Callable[[dict, np.random.Generator], Skeleton]:
+    module, function = GENERATORS[name].split(":")
+    return getattr(importlib.import_module(module), function)
+
+
+def grow(params: dict, rng: np.random.Generator) -> Skeleton:
+    """Grow the tree a parameter dictionary describes. Same dictionary and same rng state, same skeleton."""
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+    return _grower(generator_of(params))(params, rng)
+
+
+def rng_for(params: dict) -> np.random.Generator:
+    """The generator a dictionary's own `seed` key defines: how a dictionary alone rebuilds its tree."""
+    seed = params.get("seed", 0) if isinstance(params, dict) else 0
+    if isinstance(seed, bool) or not isinstance(seed, (int, float)) or seed < 0 or int(seed) != seed:
+        raise ParameterError("seed", seed, "a non-negative integer")
+    return np.random.default_rng(int(seed))
