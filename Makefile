@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test env bench clean
+.PHONY: run test env blender-env bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -13,7 +13,18 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test]'
 	touch $(STAMP)
 
-env: $(STAMP)
+# Blender (bpy) pins numpy<2, so its worker runs in a venv of its own (renderers/blender_worker/).
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed
+
+$(BLENDER_STAMP): renderers/blender_worker/requirements.txt
+	test -x $(BLENDER_VENV)/bin/python || $(PYTHON) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install -q -r renderers/blender_worker/requirements.txt
+	touch $(BLENDER_STAMP)
+
+blender-env: $(BLENDER_STAMP)
+
+env: $(STAMP) blender-env
 
 run: env
 	$(VENV)/bin/farm trees --out out/trees
@@ -25,4 +36,4 @@ bench: env
 	$(PY) benchmarks/bench_weber_penn.py
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) $(BLENDER_VENV) out
