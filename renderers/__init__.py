@@ -1,1 +1,19 @@
-"""treefarm: renderers."""
+"""treefarm renderers: cameras and view rigs, depth/mask/silhouette maps, trunk strokes, sketch styles, contact sheets.
+
+Public surface: `ViewRenderer(size).render(tree, skeleton, rig, outputs, rng) -> list[RenderedView]`, `Camera`,
+`make_rig`/`RIGS`, `OUTPUTS`/`DEFAULT_OUTPUTS`, `PALETTE`, `write_contact_sheet`. Output arrays (per view):
+"depth" (H, W) float32 metres, 0 background; "depth01" (H, W) float32 in [0, 1], 1 background/far;
+"mask" (H, W) uint8 0 background / 1 bark / 2 leaves; "order" (H, W) uint8 branch order + 1 on bark, 0 elsewhere;
+"normals" (H, W, 3) uint8 camera-frame normals; "silhouette" (H, W, 3) float32 (front depth01, front-to-back gap,
+mask); "depth_back" (H, W) float32 metres of the farthest surface; "trunk_strokes" (H, W, 3) uint8;
+"trunk_depth" (H, W) float32 in [0, 1], 1 = no stroke; "sketch_*" (H, W) uint8, black lines on white.
+"""
+from __future__ import annotations
+
+from .camera import RIGS, Camera, CameraError, make_rig, parse_rig
+from .contact_sheet import write_contact_sheet
+from .strokes import PALETTE, main_branches
+from .views import DEFAULT_OUTPUTS, OUTPUTS, OutputError, RenderedView, ViewRenderer, check_outputs
+
+__all__ = ["ViewRenderer", "RenderedView", "Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "OUTPUTS",
+           "DEFAULT_OUTPUTS", "OutputError", "check_outputs", "PALETTE", "main_branches", "write_contact_sheet"]

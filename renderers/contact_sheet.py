@@ -1,0 +1,65 @@
+"""Contact sheets: one grid PNG of trees (rows) x images (columns) with labels, for looking at a batch at a glance.
+
+In: rows of labelled images (uint8 grey or RGB, float maps in [0, 1]); out: a PNG file.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+__all__ = ["to_rgb8", "contact_sheet", "write_contact_sheet"]
+
+LABEL_PX = 18
+
+
+def to_rgb8(image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 from a grey or RGB image: uint8 kept, floats taken as [0, 1] (depth, silhouette)."""
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        img = np.clip(np.nan_to_num(img.astype(np.float32)) * 255.0, 0, 255).astype(np.uint8)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    if img.ndim != 3 or img.shape[2] != 3:
+        raise ValueError(f"a contact sheet cell must be (H, W) or (H, W, 3); got shape {img.shape}")
+    return img
+
+
+def _label(text: str, width: int) -> np.ndarray:
+    bar = np.full((LABEL_PX, width, 3), 255, np.uint8)
+    cv2.putText(bar, text[: max(1, width // 7)], (3, LABEL_PX - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    return bar
+
+
+def contact_sheet(rows: Sequence[tuple[str, Sequence[tuple[str, np.ndarray]]]], cell: int = 160) -> np.ndarray:
+    """(H, W, 3) uint8 grid: each row is (row label, [(column label, image), ...]); cells resized to `cell` px."""
+    if not rows:
+        raise ValueError("a contact sheet needs at least one row")
+    n_cols = max(len(cells) for _, cells in rows)
+    pad = 4
+    row_images = []
+    for row_label, cells in rows:
+        tiles = []
+        for col_label, image in cells:
+            tile = cv2.resize(to_rgb8(image), (cell, cell), interpolation=cv2.INTER_AREA)
+            tiles.append(np.concatenate([_label(f"{row_label} | {col_label}", cell), tile]))
+        tiles += [np.full((cell + LABEL_PX, cell, 3), 255, np.uint8)] * (n_cols - len(tiles))
+        spaced = []
+        for tile in tiles:
+            spaced += [tile, np.full((tile.shape[0], pad, 3), 200, np.uint8)]
+        row_images += [np.concatenate(spaced, axis=1), np.full((pad, n_cols * (cell + pad), 3), 200, np.uint8)]
+    return np.concatenate(row_images)
+
+
+def write_contact_sheet(path: str | Path, rows: Sequence[tuple[str, Sequence[tuple[str, np.ndarray]]]],
+                        cell: int = 160) -> Path:
+    """Write `contact_sheet(rows, cell)` as a PNG at `path` (folders created); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet = contact_sheet(rows, cell)
+    if not cv2.imwrite(str(path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR)):
+        raise OSError(f"could not write the contact sheet {path}")
+    return path

@@ -1,0 +1,146 @@
+"""ViewRenderer: the one-per-process renderer that turns a tree and a rig into named images per view.
+
+In: TreeMesh, Skeleton, rig name, output names, rng; out: a list of RenderedView (camera + images by name).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable, Sequence
+
+import numpy as np
+
+from species.errors import TreefarmError
+from species.skeleton import Skeleton
+from species.tree_mesh import TreeMesh
+
+from . import sketch
+from .camera import Camera, make_rig, parse_rig
+from .maps import DepthRenderer, combine_parts, normals_from_depth, silhouette_map
+from .strokes import trunk_strokes
+
+__all__ = ["ViewRenderer", "RenderedView", "OUTPUTS", "DEFAULT_OUTPUTS", "OutputError", "check_outputs"]
+
+
+class OutputError(TreefarmError):
+    """An unknown output (map or sketch style) name."""
+
+
+@dataclass
+class RenderedView:
+    """One view of one tree: its index in the rig, name ("front", ...), camera, and images by output name."""
+
+    index: int
+    name: str
+    camera: Camera
+    images: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class _ViewFrame:
+    """Everything one view's outputs are made from, each computed once and only when an output asks for it."""
+
+    def __init__(self, gl: DepthRenderer, camera: Camera, skeleton: Skeleton, split_orders: bool,
+                 rng: np.random.Generator):
+        self.gl, self.camera, self.skeleton, self.split_orders, self.rng = gl, camera, skeleton, split_orders, rng
+
+    @cached_property
+    def parts(self):
+        return self.gl.part_depths(self.camera, self.split_orders)
+
+    @cached_property
+    def visible(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return combine_parts(self.parts)
+
+    @cached_property
+    def back(self) -> np.ndarray:
+        return self.gl.back_depth(self.camera)
+
+    @cached_property
+    def normals(self) -> np.ndarray:
+        return normals_from_depth(self.camera, self.visible[0])
+
+    @cached_property
+    def trunk(self) -> tuple[np.ndarray, np.ndarray]:
+        return trunk_strokes(self.camera, self.skeleton)
+
+    @cached_property
+    def crown(self) -> np.ndarray:
+        """(H, W) bool crown region from the leaves; a leafless tree's crown is its whole silhouette."""
+        leaves = self.parts.leaves > 0
+        return sketch.crown_region(leaves if leaves.any() else self.visible[1] > 0)
+
+
+# Output name -> function of the view frame. Array types are the renderers contract (see renderers/__init__.py).
+OUTPUTS: dict[str, Callable[[_ViewFrame], np.ndarray]] = {
+    "depth": lambda f: f.visible[0],
+    "depth01": lambda f: f.camera.depth01(f.visible[0]),
+    "mask": lambda f: f.visible[1],
+    "order": lambda f: f.visible[2],
+    "normals": lambda f: f.normals,
+    "silhouette": lambda f: silhouette_map(f.camera, f.visible[0], f.back),
+    "depth_back": lambda f: np.where(f.visible[0] > 0, f.back, 0.0).astype(np.float32),
+    "trunk_strokes": lambda f: f.trunk[0],
+    "trunk_depth": lambda f: f.trunk[1],
+    "sketch_tsn": lambda f: sketch.sketch_tsn(f.parts.bark > 0, f.parts.leaves > 0),
+    "sketch_edges": lambda f: sketch.sketch_edges(f.normals, f.visible[1]),
+    "sketch_strokes": lambda f: sketch.sketch_strokes(f.camera, f.skeleton),
+    "sketch_strokes_brush": lambda f: sketch.sketch_strokes_brush(f.camera, f.skeleton),
+    "sketch_crown": lambda f: sketch.sketch_crown(f.crown),
+    "sketch_hand": lambda f: sketch.sketch_hand(f.camera, f.skeleton, f.crown, f.rng),
+}
+DEFAULT_OUTPUTS = ("depth", "mask", "silhouette", "trunk_strokes", "trunk_depth", "sketch_tsn")
+
+
+def check_outputs(outputs: Sequence[str]) -> tuple[str, ...]:
+    """The output names as a tuple, or an OutputError naming the first unknown one and listing the allowed."""
+    if isinstance(outputs, str):
+        outputs = [outputs]
+    names = tuple(outputs)
+    for name in names:
+        if name not in OUTPUTS:
+            raise OutputError(f"output {name!r} is unknown: allowed {', '.join(OUTPUTS)}")
+    if not names:
+        raise OutputError(f"no outputs asked for: choose from {', '.join(OUTPUTS)}")
+    return names
+
+
+class ViewRenderer:
+    """The farm's renderer: create once per process (it owns the GL context), call `render` for every tree.
+
+    size : image width and height in pixels; may be changed between calls (the framebuffer follows).
+    """
+
+    def __init__(self, size: int = 256):
+        self.size = int(size)
+        self._gl = DepthRenderer(self.size)
+
+    def close(self) -> None:
+        self._gl.close()
+
+    def cameras(self, tree: TreeMesh, rig: str, rng: np.random.Generator) -> list[Camera]:
+        """The rig's cameras framed on the tree's vertices (what `render` uses)."""
+        points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
+        return make_rig(rig, points, self.size, rng)
+
+    def render(self, tree: TreeMesh, skeleton: Skeleton, rig: str, outputs: Sequence[str],
+               rng: np.random.Generator) -> list[RenderedView]:
+        """Render each view of the rig and the named outputs (see OUTPUTS) for each.
+
+        The rng is drawn in a fixed order: rig jitter (":jitter" rigs only), then one seed per view for the
+        hand-drawn style; the same inputs and rng state give identical arrays.
+        """
+        names = check_outputs(outputs)
+        parse_rig(rig)
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        if tree.n_faces == 0:
+            raise TreefarmError(f"tree {tree.name!r} has no triangles to render")
+        cameras = self.cameras(tree, rig, rng)
+        view_seeds = rng.integers(0, 2**63, len(cameras))
+        self._gl.load(tree)
+        views = []
+        for index, camera in enumerate(cameras):
+            frame = _ViewFrame(self._gl, camera, skeleton, "order" in names,
+                               np.random.default_rng(int(view_seeds[index])))
+            views.append(RenderedView(index, camera.name, camera, {n: OUTPUTS[n](frame) for n in names}))
+        return views
