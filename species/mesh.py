@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ParameterError, TreefarmError
-from .frames import parallel_transport_frames
+from .frames import parallel_transport_frames, polyline_tangents
 from .skeleton import Skeleton
 from .tree_mesh import MeshPart, TreeMesh
 
@@ -135,6 +135,8 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
               thick_more: bool = True) -> MeshPart:
     """Bark: a tube per branch along rotation-minimizing frames, a cone at each tip, a disc under the root.
 
+    The trunk's first ring is horizontal, so the bark never dips below the ground plane.
+
     Vertex layout: branches grouped by side count (ascending), then in branch order; per branch its rings
     (S + 1 vertices each, the seam duplicated so u runs 0..repeat), then its tip apex; the root branch's
     base centre comes last in its group. u = tiles around (round(circumference / 0.25 m), at least 1),
@@ -144,11 +146,14 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     points, radius, offsets, branch = _branch_polylines(skeleton)
     if len(branch) == 0:
         return _empty_bark()
-    tangent, normal, binormal = parallel_transport_frames(points, offsets)
     sizes = np.diff(offsets)
     starts = offsets[:-1]
-    point_branch = np.repeat(np.arange(len(branch)), sizes)  # index into `branch`, per point
     own_node = np.asarray(skeleton.branch_starts)[branch]
+    tangent = polyline_tangents(points, offsets)
+    # The trunk's first ring lies flat on the ground (z = 0) even when the trunk leans.
+    tangent[starts[own_node == 0]] = (0.0, 0.0, 1.0)
+    tangent, normal, binormal = parallel_transport_frames(points, offsets, tangent)
+    point_branch = np.repeat(np.arange(len(branch)), sizes)  # index into `branch`, per point
     order = skeleton.order[own_node].astype(np.int64)
     base_radius = radius[starts]
     sides = radial_segments(order, base_radius, by_order, min_segments, thick_more)
