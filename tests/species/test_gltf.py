@@ -1,0 +1,133 @@
+"""Specification of species.gltf: GLB bytes of a TreeMesh, valid glTF 2.0, Y up, deterministic."""
+import io
+import struct
+
+import numpy as np
+import pytest
+import trimesh
+
+from species.gltf import GlbError, read_glb_chunks, read_glb_json, tree_mesh_to_glb
+from species.mesh import build_mesh
+from species.tree_mesh import MeshError, MeshPart, TreeMesh
+from tests.gltf_validator import assert_valid_glb
+from tests.species.skeleton_factory import fork_with_leaves, random_tree, straight_trunk
+
+
+@pytest.fixture(scope="module")
+def fork_mesh():
+    return build_mesh(fork_with_leaves(), {"name": "fork"})
+
+
+@pytest.fixture(scope="module")
+def fork_glb(fork_mesh):
+    return fork_mesh.to_glb()
+
+
+def _accessor_array(document, binary, index):
+    accessor = document["accessors"][index]
+    view = document["bufferViews"][accessor["bufferView"]]
+    dtype = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}[accessor["componentType"]]
+    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[accessor["type"]]
+    data = np.frombuffer(binary, dtype, accessor["count"] * width, view["byteOffset"])
+    return data.reshape(accessor["count"], width) if width > 1 else data
+
+
+def test_fork_glb_passes_the_khronos_validator(fork_mesh, fork_glb, tmp_path):
+    report = assert_valid_glb(fork_glb, tmp_path)
+    assert report["info"]["totalTriangleCount"] == fork_mesh.n_faces and report["info"]["drawCallCount"] == 2
+
+
+def test_random_tree_glb_passes_the_khronos_validator_without_warnings(tmp_path):
+    mesh = build_mesh(random_tree(np.random.default_rng(1), n_nodes=800, n_leaves=1500))
+    report = assert_valid_glb(mesh.to_glb(), tmp_path)
+    assert report["issues"]["numWarnings"] == 0
+    assert report["info"]["totalTriangleCount"] == mesh.n_faces
+
+
+def test_leafless_tree_omits_the_leaves_mesh_and_stays_valid(tmp_path):
+    data = build_mesh(straight_trunk()).to_glb()
+    document = read_glb_json(data)
+    assert [m["name"] for m in document["meshes"]] == ["bark"]
+    assert_valid_glb(data, tmp_path)
+
+
+def test_same_tree_gives_identical_bytes():
+    skeleton = random_tree(np.random.default_rng(5), n_nodes=300, n_leaves=400)
+    assert build_mesh(skeleton).to_glb() == build_mesh(skeleton).to_glb()
+
+
+def test_scene_has_a_root_named_after_the_tree_with_bark_and_leaves(fork_glb):
+    document = read_glb_json(fork_glb)
+    root = document["nodes"][document["scenes"][document["scene"]]["nodes"][0]]
+    assert root["name"] == "fork"
+    assert [document["nodes"][i]["name"] for i in root["children"]] == ["bark", "leaves"]
+
+
+def test_materials_are_textured_pbr_with_masked_double_sided_leaves(fork_glb):
+    document = read_glb_json(fork_glb)
+    bark, leaves = document["materials"]
+    assert bark["pbrMetallicRoughness"]["metallicFactor"] == 0 and bark["pbrMetallicRoughness"]["roughnessFactor"] == 0.9
+    assert leaves["alphaMode"] == "MASK" and leaves["alphaCutoff"] == 0.5 and leaves["doubleSided"] is True
+    assert all(image["mimeType"] == "image/png" for image in document["images"])
+    bark_sampler = document["samplers"][document["textures"][bark["pbrMetallicRoughness"]["baseColorTexture"]["index"]]["sampler"]]
+    assert bark_sampler["wrapS"] == bark_sampler["wrapT"] == 10497  # REPEAT
+
+
+def test_chunks_and_buffer_views_are_four_byte_aligned(fork_glb):
+    document, binary = read_glb_chunks(fork_glb)
+    json_length = struct.unpack_from("<I", fork_glb, 12)[0]
+    assert len(fork_glb) % 4 == 0 and json_length % 4 == 0 and len(binary) % 4 == 0
+    assert all(view["byteOffset"] % 4 == 0 for view in document["bufferViews"])
+
+
+def test_world_z_becomes_gltf_y(fork_mesh, fork_glb):
+    document, binary = read_glb_chunks(fork_glb)
+    position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+    gltf = _accessor_array(document, binary, position)
+    world = fork_mesh.bark.vertices
+    np.testing.assert_array_equal(gltf[:, 1], world[:, 2])   # height h at world z is glTF y
+    np.testing.assert_array_equal(gltf[:, 2], -world[:, 1])
+    np.testing.assert_array_equal(gltf[:, 0], world[:, 0])
+
+
+def test_texture_v_is_flipped_for_gltf(fork_mesh, fork_glb):
+    document, binary = read_glb_chunks(fork_glb)
+    texcoord = document["meshes"][1]["primitives"][0]["attributes"]["TEXCOORD_0"]
+    np.testing.assert_allclose(_accessor_array(document, binary, texcoord)[:, 1], 1 - fork_mesh.leaves.uvs[:, 1])
+
+
+def test_trimesh_reads_back_the_same_counts_and_names(fork_mesh, fork_glb):
+    scene = trimesh.load(io.BytesIO(fork_glb), file_type="glb")
+    assert set(scene.geometry) == {"bark", "leaves"}
+    for name, part in (("bark", fork_mesh.bark), ("leaves", fork_mesh.leaves)):
+        assert len(scene.geometry[name].vertices) == part.n_vertices
+        assert len(scene.geometry[name].faces) == part.n_faces
+
+
+def test_large_meshes_use_32_bit_indices():
+    mesh = build_mesh(random_tree(np.random.default_rng(2), n_nodes=400, n_leaves=17000))
+    document = read_glb_json(mesh.to_glb())
+    leaves_indices = document["meshes"][1]["primitives"][0]["indices"]
+    assert mesh.leaves.n_vertices > 65535 and document["accessors"][leaves_indices]["componentType"] == 5125
+
+
+def test_a_mesh_part_with_out_of_range_faces_is_rejected():
+    with pytest.raises(MeshError, match="face indices"):
+        MeshPart(np.zeros((3, 3)), [[0, 1, 3]], np.tile([0, 0, 1.0], (3, 1)), np.zeros((3, 2)))
+
+
+def test_non_tree_mesh_input_is_rejected():
+    with pytest.raises(GlbError, match="TreeMesh"):
+        tree_mesh_to_glb(fork_with_leaves())
+
+
+def test_reading_bytes_that_are_not_glb_is_rejected(fork_glb):
+    with pytest.raises(GlbError, match="glTF 2.0"):
+        read_glb_json(b"PK\x03\x04" + fork_glb[4:])
+    with pytest.raises(GlbError, match="bytes"):
+        read_glb_json(fork_glb[:-4])
+
+
+def test_empty_tree_mesh_is_still_a_valid_file(tmp_path):
+    empty = TreeMesh(MeshPart.empty(), MeshPart.empty(), name="nothing")
+    assert_valid_glb(empty.to_glb(), tmp_path)
