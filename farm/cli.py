@@ -12,6 +12,11 @@ import sys
 COMMAND_MODULES = [
     "farm.commands.tree",
     "farm.commands.species",
+    "farm.commands.generate",
+    "farm.commands.status",
+    "farm.commands.validate",
+    "farm.commands.inspect",
+    "farm.commands.export",
 ]
 
 

@@ -1,0 +1,82 @@
+"""`farm inspect DIR`: a per-species summary table of a dataset and a contact sheet PNG of its first trees.
+
+The contact sheet has one row per tree (first view) and one column per stored output.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("inspect", help="summary table and contact sheet PNG of a dataset",
+                                   description=__doc__)
+    parser.add_argument("dir", help="dataset folder or URI")
+    parser.add_argument("--png", help="contact sheet path (default: DIR/contact_sheet.png, or ./ for a URI)")
+    parser.add_argument("--rows", type=int, default=8, help="trees on the contact sheet (default 8)")
+    parser.set_defaults(run=run)
+
+
+def summary_table(path: str) -> str:
+    """Per species: trees, failures, mean height and crown radius (m), nodes, leaves, triangles, views."""
+    from farm.dataset import duckdb_connect
+
+    rows = duckdb_connect(path).execute("""
+        SELECT species, count(*) AS trees, count(error) AS failed,
+               avg(height) AS height, avg(crown_radius) AS crown, avg(n_nodes) AS nodes,
+               avg(n_leaves) AS leaves, avg(bark_triangles + leaf_triangles) AS triangles, sum(n_views) AS views
+        FROM trees GROUP BY species ORDER BY species""").fetchall()
+    lines = [f"{'species':<24}{'trees':>6}{'failed':>7}{'height m':>10}{'crown m':>9}{'nodes':>8}{'leaves':>8}"
+             f"{'triangles':>11}{'views':>7}"]
+    for name, trees, failed, height, crown, nodes, leaves, triangles, views in rows:
+        def number(value, fmt):
+            return format(value, fmt) if value is not None else "-"
+        lines.append(f"{name:<24}{trees:>6}{failed:>7}{number(height, '>10.2f')}{number(crown, '>9.2f')}"
+                     f"{number(nodes, '>8.0f')}{number(leaves, '>8.0f')}{number(triangles, '>11.0f')}"
+                     f"{int(views or 0):>7}")
+    return "\n".join(lines)
+
+
+def contact_rows(path: str, n_rows: int) -> list:
+    """Contact-sheet rows: (tree id and species, [(output, decoded image of the tree's first view), ...])."""
+    import pyarrow as pa
+    import pyarrow.compute as pc
+
+    from farm.dataset import FLOAT_OUTPUTS, open as open_table, read_manifest
+    from farm.image_codec import METRIC_MAPS, decode_map
+
+    outputs = read_manifest(path)["job"]["render"]["outputs"]
+    trees = open_table(path, "trees").to_table(columns=["tree_id", "species", "error"])
+    good = trees.filter(pc.is_null(trees["error"])).slice(0, n_rows).to_pylist()
+    species = {row["tree_id"]: row["species"] for row in good}
+    views = open_table(path, "views").to_table(filter=pc.field("view") == 0)
+    views = views.filter(pc.is_in(views["tree_id"], value_set=pa.array(list(species), pa.string()))).to_pylist()
+    rows = []
+    for view in sorted(views, key=lambda v: v["index"]):
+        cells = []
+        for name in outputs:
+            scale = view.get(f"{name}_scale") if name in FLOAT_OUTPUTS else None
+            offset = view.get(f"{name}_offset") if name in FLOAT_OUTPUTS else None
+            image = decode_map(view[name], scale, offset, metric=name in METRIC_MAPS)
+            if name in METRIC_MAPS and image.max() > 0:  # metres to [0, 1] for display
+                image = image / image.max()
+            cells.append((name, image))
+        rows.append((f"{view['tree_id']} {species[view['tree_id']]}", cells))
+    return rows
+
+
+def run(args: argparse.Namespace) -> int:
+    from renderers import write_contact_sheet
+
+    from farm.storage import Location
+
+    print(summary_table(args.dir))
+    rows = contact_rows(args.dir, args.rows)
+    if not rows:
+        print("no successful trees with views: no contact sheet")
+        return 0
+    location = Location.resolve(args.dir)
+    png = Path(args.png) if args.png else (Path(location.root) if location.is_local else Path(".")) / "contact_sheet.png"
+    write_contact_sheet(png, rows)
+    print(f"contact sheet: {png}")
+    return 0

@@ -1,0 +1,130 @@
+"""The dataset format (schemas, part files) and its readers: pyarrow, pandas, DuckDB, Ray Data (torch: torch_dataset).
+
+Layout: manifest.json, trees/part-NNNNN.parquet, views/part-NNNNN.parquet (docs/dataset.md). Part files are
+serialized with fixed writer options, so the same rows give the same bytes on every worker.
+"""
+from __future__ import annotations
+
+import json
+from typing import Iterable, Sequence
+
+from .storage import Location
+
+__all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_schema", "part_name",
+           "serialize_table", "open", "to_pandas", "duckdb_connect", "to_ray", "part_files", "read_manifest",
+           "DatasetError"]
+
+SCHEMA_VERSION = 1
+TABLES = ("trees", "views")
+# Renderer outputs that are float maps, stored as 16-bit PNG with `<name>_scale` and `<name>_offset` columns.
+FLOAT_OUTPUTS = frozenset({"depth", "depth01", "silhouette", "depth_back", "trunk_depth"})
+# Fixed writer options: part files are compared byte for byte across runs.
+_PARQUET_OPTIONS = dict(compression="zstd", compression_level=3, row_group_size=4096, use_dictionary=True,
+                        write_statistics=True, data_page_version="2.0", version="2.6")
+
+
+class DatasetError(ValueError):
+    """A dataset folder is missing, incomplete or damaged; the message names the file."""
+
+
+def _pa():
+    import pyarrow
+
+    return pyarrow
+
+
+def trees_schema():
+    """One row per tree. Skeleton arrays are flattened lists (positions: n_nodes * 3, leaves: n_leaves * 16)."""
+    pa = _pa()
+    f32, i32 = pa.float32(), pa.int32()
+    return pa.schema([
+        ("tree_id", pa.string()), ("index", pa.int64()), ("shard", i32), ("species", pa.string()),
+        ("generator", pa.string()), ("seed", pa.int64()), ("params_json", pa.string()),
+        ("n_nodes", i32), ("positions", pa.list_(f32)), ("parent", pa.list_(i32)), ("radius", pa.list_(f32)),
+        ("order", pa.list_(pa.uint8())), ("leaves", pa.list_(f32)), ("leaf_node", pa.list_(i32)),
+        ("glb", pa.binary()),
+        ("height", f32), ("crown_radius", f32), ("n_branches", i32), ("n_leaves", i32),
+        ("bark_triangles", i32), ("leaf_triangles", i32), ("n_vertices", i32), ("n_views", i32),
+        ("error", pa.string()),
+    ], metadata={"treefarm.table": "trees", "treefarm.schema_version": str(SCHEMA_VERSION)})
+
+
+def views_schema(outputs: Sequence[str]):
+    """One row per (tree, view): camera JSON and one PNG column per output (plus scale/offset for float maps)."""
+    pa = _pa()
+    fields = [("tree_id", pa.string()), ("index", pa.int64()), ("shard", pa.int32()), ("view", pa.int32()),
+              ("view_name", pa.string()), ("camera_json", pa.string())]
+    for name in outputs:
+        fields.append((name, pa.binary()))
+        if name in FLOAT_OUTPUTS:
+            fields += [(f"{name}_scale", pa.float64()), (f"{name}_offset", pa.float64())]
+    return pa.schema(fields, metadata={"treefarm.table": "views", "treefarm.schema_version": str(SCHEMA_VERSION),
+                                       "treefarm.outputs": json.dumps(list(outputs))})
+
+
+def part_name(table: str, shard: int) -> str:
+    return f"{table}/part-{shard:05d}.parquet"
+
+
+def serialize_table(rows: list[dict], schema) -> bytes:
+    """Rows as the bytes of one Parquet file (fixed options, no pandas metadata, no timestamps)."""
+    import pyarrow.parquet as pq
+
+    table = _pa().Table.from_pylist(rows, schema=schema)
+    sink = _pa().BufferOutputStream()
+    pq.write_table(table, sink, **_PARQUET_OPTIONS)
+    return sink.getvalue().to_pybytes()
+
+
+# ---------------------------------------------------------------------- readers
+def read_manifest(path: str | Location) -> dict:
+    """The dataset's manifest.json as a dict (DatasetError if the folder has none: job unfinished?)."""
+    location = path if isinstance(path, Location) else Location.resolve(path)
+    if not location.exists("manifest.json"):
+        raise DatasetError(f"{location.uri} has no manifest.json: not a finished treefarm dataset "
+                           f"(run `farm status {location.uri}` to see an unfinished job)")
+    try:
+        return json.loads(location.read_bytes("manifest.json"))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{location.path('manifest.json')} is not valid JSON: {exc}") from None
+
+
+def part_files(path: str | Location, table: str = "trees") -> tuple[Location, list[str]]:
+    """The manifest's part files of one table, as paths on the location's filesystem."""
+    if table not in TABLES:
+        raise DatasetError(f"unknown table {table!r}; known: {', '.join(TABLES)}")
+    location = path if isinstance(path, Location) else Location.resolve(path)
+    manifest = read_manifest(location)
+    return location, [location.path(shard[table]["path"]) for shard in manifest["shards"]]
+
+
+def open(path: str, table: str = "trees"):  # noqa: A001 - the reader's natural name: farm.dataset.open
+    """A `pyarrow.dataset.Dataset` over one table (`trees` or `views`) of a finished dataset."""
+    import pyarrow.dataset as ds
+
+    location, files = part_files(path, table)
+    schema = trees_schema() if table == "trees" else views_schema(read_manifest(location)["job"]["render"]["outputs"])
+    return ds.dataset(files, schema=schema, format="parquet", filesystem=location.filesystem)
+
+
+def to_pandas(path: str, table: str = "trees", columns: Iterable[str] | None = None):
+    """One table as a pandas DataFrame (pass `columns` to skip the heavy binary ones)."""
+    return open(path, table).to_table(columns=list(columns) if columns is not None else None).to_pandas()
+
+
+def duckdb_connect(path: str):
+    """A DuckDB connection with the dataset's tables registered as `trees` and `views`."""
+    import duckdb
+
+    connection = duckdb.connect()
+    for table in TABLES:
+        connection.register(table, open(path, table))
+    return connection
+
+
+def to_ray(path: str, table: str = "views"):
+    """One table as a `ray.data.Dataset` (rows in part order); call after `ray.init()` or let Ray start one."""
+    import ray.data
+
+    location, files = part_files(path, table)
+    return ray.data.read_parquet(files, filesystem=location.filesystem)

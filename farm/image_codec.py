@@ -1,0 +1,90 @@
+"""PNG encoding of rendered maps for the views table: uint8 maps as 8-bit PNG, float maps as 16-bit PNG.
+
+A float map is stored as pixel values p (uint16) with per-image `scale` and `offset`: value = offset + scale * p.
+Encoding is deterministic (libpng via OpenCV, fixed compression level, no timestamps or text chunks).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["encode_map", "decode_map", "ImageCodecError", "METRIC_MAPS", "PNG_COMPRESSION"]
+
+PNG_COMPRESSION = 3
+# Float maps in metres: 0 means background and stays 0; the 16-bit range is fitted to each image's
+# foreground, so precision follows the tree's size. Every other float map lies in [0, 1].
+METRIC_MAPS = frozenset({"depth", "depth_back"})
+_UINT16_MAX = 65535
+
+
+class ImageCodecError(ValueError):
+    """A map has a dtype, shape or value range the views table cannot store."""
+
+
+def _cv2():
+    import cv2
+
+    return cv2
+
+
+def _png(pixels: np.ndarray) -> bytes:
+    # OpenCV writes 3-channel arrays as BGR; reverse so the file is RGB for every other reader.
+    if pixels.ndim == 3:
+        pixels = np.ascontiguousarray(pixels[..., ::-1])
+    ok, buffer = _cv2().imencode(".png", pixels, [_cv2().IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    if not ok:
+        raise ImageCodecError(f"PNG encoding failed for an array of shape {pixels.shape}, dtype {pixels.dtype}")
+    return buffer.tobytes()
+
+
+def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float | None]:
+    """One rendered map as (PNG bytes, scale, offset); scale and offset are None for uint8 maps.
+
+    image : (H, W) or (H, W, 3); uint8 (stored as is) or float32 (stored as 16-bit: metres for
+            METRIC_MAPS with 0 = background, otherwise values in [0, 1]).
+    """
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+        raise ImageCodecError(f"map {name!r} has shape {image.shape}; allowed (H, W) or (H, W, 3)")
+    if image.dtype == np.uint8:
+        return _png(image), None, None
+    if not np.issubdtype(image.dtype, np.floating):
+        raise ImageCodecError(f"map {name!r} has dtype {image.dtype}; allowed uint8 or float32")
+    if not np.all(np.isfinite(image)):
+        raise ImageCodecError(f"map {name!r} contains NaN or infinity")
+    values = image.astype(np.float64)
+    if name in METRIC_MAPS:
+        foreground = values > 0
+        if not foreground.any():
+            return _png(np.zeros(image.shape, np.uint16)), 1.0, 0.0
+        low, high = values[foreground].min(), values[foreground].max()
+        scale = max((high - low) / (_UINT16_MAX - 1), 1e-9)
+        offset = low - scale  # pixel 1 is the nearest foreground value; pixel 0 stays background
+        pixels = np.where(foreground, np.rint((values - offset) / scale), 0)
+        return _png(np.clip(pixels, 0, _UINT16_MAX).astype(np.uint16)), float(scale), float(offset)
+    if values.min() < -1e-6 or values.max() > 1 + 1e-6:
+        raise ImageCodecError(f"map {name!r} has values in [{values.min():.4g}, {values.max():.4g}]; "
+                              f"allowed [0, 1] for a non-metric float map")
+    pixels = np.rint(np.clip(values, 0, 1) * _UINT16_MAX).astype(np.uint16)
+    return _png(pixels), 1.0 / _UINT16_MAX, 0.0
+
+
+def decode_map(png: bytes, scale: float | None = None, offset: float | None = None,
+               metric: bool = False) -> np.ndarray:
+    """Inverse of `encode_map`: uint8 array for 8-bit PNGs, float32 (offset + scale * p) for 16-bit ones.
+
+    metric : keep pixel 0 as 0 (background of a METRIC_MAPS map).
+    """
+    cv2 = _cv2()
+    pixels = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
+    if pixels is None:
+        raise ImageCodecError("bytes are not a readable PNG image")
+    if pixels.ndim == 3:
+        pixels = pixels[..., ::-1]
+    if pixels.dtype == np.uint8:
+        return np.ascontiguousarray(pixels)
+    if scale is None or offset is None:
+        raise ImageCodecError("a 16-bit map needs its scale and offset to decode")
+    values = (offset + scale * pixels.astype(np.float64)).astype(np.float32)
+    if metric:
+        values[pixels == 0] = 0.0
+    return values

@@ -1,0 +1,270 @@
+"""Generation job specifications: a YAML file validated into a frozen `JobSpec`, and the built-in default job.
+
+Input: a YAML mapping (see `DEFAULT_SPEC_YAML` via `farm generate --print-spec`); output: `JobSpec`, or a
+`JobSpecError` naming the first bad field, its value and what is allowed.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from species.errors import TreefarmError
+
+__all__ = ["JobSpec", "RenderSpec", "JobSpecError", "load_spec", "parse_spec", "default_spec", "spec_to_yaml",
+           "species_of_trees"]
+
+_NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
+
+
+class JobSpecError(TreefarmError):
+    """A job specification has a missing, unknown or out-of-range field."""
+
+    def __init__(self, field_name: str, value: Any, allowed: str):
+        self.field, self.value, self.allowed = field_name, value, allowed
+        super().__init__(f"job spec field {field_name!r} = {value!r} is invalid: allowed {allowed}")
+
+
+@dataclass(frozen=True)
+class RenderSpec:
+    """How each tree is rendered.
+
+    rig     : view rig name (`tsn4`, `orbit:N`, `two-view`, each optionally `:jitter`).
+    size    : image width and height in pixels (16..4096).
+    outputs : the maps and sketch styles stored, one views-table column each (`renderers.OUTPUTS` names).
+    """
+
+    rig: str = "tsn4"
+    size: int = 256
+    outputs: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class JobSpec:
+    """One generation job.
+
+    name          : job name; tree ids are f"{name}-{index:08d}".
+    seed          : job seed; tree i draws from `numpy.random.SeedSequence(seed).spawn(n)[i]`.
+    species       : preset name -> weight (with `trees`) or number of trees (without it), in spec order.
+    trees         : total number of trees split over species by weight, or None to read counts per species.
+    render        : RenderSpec.
+    store_glb     : store each tree's GLB bytes in the trees table.
+    shard_size    : trees per shard (one trees and one views part file per shard).
+    output        : default output location (local path or pyarrow filesystem URI), or None.
+    resources     : Ray resources per worker actor (`num_cpus`, `num_gpus`).
+    """
+
+    name: str = "default"
+    seed: int = 0
+    species: dict[str, float] = field(default_factory=dict)
+    trees: int | None = None
+    render: RenderSpec = field(default_factory=RenderSpec)
+    store_glb: bool = True
+    shard_size: int = 8
+    output: str | None = None
+    resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
+
+    # ------------------------------------------------------------------ derived plan facts
+    @property
+    def species_counts(self) -> dict[str, int]:
+        """Trees per species: the weights as counts, or `trees` split by weight (largest remainder)."""
+        names = list(self.species)
+        weights = np.array([self.species[n] for n in names], float)
+        if self.trees is None:
+            return {n: int(w) for n, w in zip(names, weights)}
+        quota = self.trees * weights / weights.sum()
+        counts = np.floor(quota).astype(int)
+        # Ties broken by spec order, so the split is the same on every machine.
+        for i in np.argsort(-(quota - counts), kind="stable")[: self.trees - counts.sum()]:
+            counts[i] += 1
+        return {n: int(c) for n, c in zip(names, counts)}
+
+    @property
+    def n_trees(self) -> int:
+        return sum(self.species_counts.values())
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.n_trees // self.shard_size)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["render"]["outputs"] = list(self.render.outputs)
+        return out
+
+    def digest(self) -> str:
+        """sha256 of everything that decides the part files' bytes (not `output` or `resources`)."""
+        content = self.to_dict()
+        for key in ("output", "resources"):
+            content.pop(key)
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+
+    def with_trees(self, total: int) -> "JobSpec":
+        """The same job with `total` trees split over the species (`farm generate --trees N`)."""
+        _check_int("trees", total, 0)
+        weights = self.species if self.trees is not None else {n: 1.0 for n in self.species}
+        return parse_spec({**self.to_dict(), "species": weights, "trees": total})
+
+
+def species_of_trees(spec: JobSpec) -> list[str]:
+    """The species of every tree, index order: species interleaved evenly, so any shard mixes them."""
+    keys, names = [], []
+    for name, count in spec.species_counts.items():
+        keys.extend((k + 0.5) / count for k in range(count))
+        names.extend([name] * count)
+    order = np.argsort(np.array(keys, float), kind="stable")
+    return [names[i] for i in order]
+
+
+# ---------------------------------------------------------------------- parsing and validation
+_TOP_KEYS = {"name", "seed", "species", "trees", "render", "store_glb", "shard_size", "output", "resources"}
+_RENDER_KEYS = {"rig", "size", "outputs"}
+_RESOURCE_KEYS = {"num_cpus", "num_gpus"}
+
+
+def _check_keys(where: str, mapping: Any, allowed: set[str]) -> dict:
+    if not isinstance(mapping, dict):
+        raise JobSpecError(where or "spec", mapping, "a mapping")
+    for key in mapping:
+        if key not in allowed:
+            raise JobSpecError(f"{where}.{key}" if where else str(key), mapping[key],
+                               f"a known field: {', '.join(sorted(allowed))}")
+    return mapping
+
+
+def _check_int(name: str, value: Any, low: int, high: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise JobSpecError(name, value, f"an integer >= {low}")
+    if value < low or (high is not None and value > high):
+        raise JobSpecError(name, value, f"an integer in [{low}, {high}]" if high else f"an integer >= {low}")
+    return int(value)
+
+
+def _check_number(name: str, value: Any, low: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < low:
+        raise JobSpecError(name, value, f"a number >= {low}")
+    return float(value)
+
+
+def _known_species() -> list[str]:
+    import species
+
+    return [p.name for p in species.list_presets()]
+
+
+def _known_outputs() -> Sequence[str]:
+    import renderers
+
+    return renderers.OUTPUTS
+
+
+def _check_rig(rig: Any) -> None:
+    from renderers import CameraError, parse_rig
+
+    try:
+        parse_rig(rig)
+    except CameraError:
+        raise JobSpecError("render.rig", rig, "tsn4, orbit:N[:E1,E2], two-view, each optionally with :jitter") from None
+
+
+def _default_outputs() -> Sequence[str]:
+    import renderers
+
+    return renderers.DEFAULT_OUTPUTS
+
+
+def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
+               known_outputs: Sequence[str] | None = None) -> JobSpec:
+    """Validate a spec mapping (as loaded from YAML) into a JobSpec; the first bad field raises JobSpecError.
+
+    `known_species` / `known_outputs` default to `species.list_presets()` / `renderers.OUTPUTS`.
+    """
+    raw = _check_keys("", raw, _TOP_KEYS)
+    name = raw.get("name", "default")
+    if not isinstance(name, str) or not _NAME_PATTERN.match(name):
+        raise JobSpecError("name", name, "1-64 letters, digits, '_', '-' or '.', starting with a letter or digit")
+    seed = _check_int("seed", raw.get("seed", 0), 0, 2**63 - 1)
+
+    trees = raw.get("trees")
+    if trees is not None:
+        trees = _check_int("trees", trees, 0)
+    mix = raw.get("species")
+    if not isinstance(mix, dict) or not mix:
+        raise JobSpecError("species", mix, "a non-empty mapping of preset name -> count (or weight with `trees`)")
+    known = list(known_species) if known_species is not None else _known_species()
+    species_mix: dict[str, float] = {}
+    for preset, amount in mix.items():
+        if preset not in known:
+            raise JobSpecError(f"species.{preset}", preset, f"a known species: {', '.join(sorted(known))}")
+        if trees is None:
+            species_mix[preset] = float(_check_int(f"species.{preset}", amount, 0))
+        else:
+            species_mix[preset] = _check_number(f"species.{preset}", amount, 0.0)
+    if trees is not None and trees > 0 and sum(species_mix.values()) <= 0:
+        raise JobSpecError("species", mix, "at least one positive weight")
+
+    render_raw = _check_keys("render", raw.get("render", {}), _RENDER_KEYS)
+    rig = render_raw.get("rig", "tsn4")
+    _check_rig(rig)
+    size = _check_int("render.size", render_raw.get("size", 256), 16, 4096)
+    outputs_known = list(known_outputs) if known_outputs is not None else list(_known_outputs())
+    outputs = render_raw.get("outputs")
+    if outputs is None:
+        outputs = list(_default_outputs())
+    if not isinstance(outputs, (list, tuple)):
+        raise JobSpecError("render.outputs", outputs, f"a list of outputs from: {', '.join(outputs_known)}")
+    for output in outputs:
+        if output not in outputs_known:
+            raise JobSpecError("render.outputs", output, f"outputs from: {', '.join(outputs_known)}")
+    if len(set(outputs)) != len(outputs):
+        raise JobSpecError("render.outputs", list(outputs), "each output at most once")
+
+    store_glb = raw.get("store_glb", True)
+    if not isinstance(store_glb, bool):
+        raise JobSpecError("store_glb", store_glb, "true or false")
+    shard_size = _check_int("shard_size", raw.get("shard_size", 8), 1, 100_000)
+    output = raw.get("output")
+    if output is not None and (not isinstance(output, str) or not output):
+        raise JobSpecError("output", output, "a path or URI string")
+    res_raw = _check_keys("resources", raw.get("resources", {}), _RESOURCE_KEYS)
+    resources = {"num_cpus": _check_number("resources.num_cpus", res_raw.get("num_cpus", 1), 0.0),
+                 "num_gpus": _check_number("resources.num_gpus", res_raw.get("num_gpus", 0), 0.0)}
+    return JobSpec(name=name, seed=seed, species=species_mix, trees=trees,
+                   render=RenderSpec(rig=rig, size=size, outputs=tuple(outputs)), store_glb=store_glb,
+                   shard_size=shard_size, output=output, resources=resources)
+
+
+def load_spec(path: str | Path, **known) -> JobSpec:
+    """Read and validate a YAML job spec file."""
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise JobSpecError("spec file", str(path), "an existing YAML file")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise JobSpecError("spec file", str(path), f"valid YAML ({' '.join(str(exc).split())})") from None
+    return parse_spec(raw, **known)
+
+
+def default_spec() -> JobSpec:
+    """The built-in job: every preset, 2 trees each, default outputs, rig tsn4 at 256 px, shards of 8."""
+    return parse_spec({"name": "default", "seed": 0, "species": {name: 2 for name in _known_species()},
+                       "render": {"rig": "tsn4", "size": 256, "outputs": list(_default_outputs())},
+                       "shard_size": 8})
+
+
+def spec_to_yaml(spec: JobSpec) -> str:
+    """The spec as YAML that `load_spec` reads back to an equal JobSpec."""
+    import yaml
+
+    content = spec.to_dict()
+    if content["trees"] is None:
+        content["species"] = {k: int(v) for k, v in content["species"].items()}
+    return yaml.safe_dump(content, sort_keys=False)

@@ -1,0 +1,213 @@
+"""The generation pipeline: plan shards, run them on Ray actors (one renderer each), write the manifest last.
+
+Input: a JobSpec and an output location; output: trees/ and views/ part files, _shards/ records, manifest.json.
+Same spec and seed, same part-file bytes, whatever the number of workers or their finishing order.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+from species.errors import TreefarmError
+
+from .dataset import part_name, serialize_table, trees_schema, views_schema
+from .jobs import JobSpec, species_of_trees
+from .manifest import (SHARDS_FOLDER, build_manifest, file_entry, finished_shards, read_shard_record,
+                       write_job_record, write_manifest, write_shard_record)
+from .storage import Location
+from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
+                         view_rows)
+
+__all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORKER_ENV", "ACTOR_RETRIES"]
+
+# Worker processes render offscreen through EGL (no display on farm machines).
+WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
+# A worker that dies is restarted and its in-flight shard re-run this many times (Ray's own retries).
+ACTOR_RETRIES = 3
+
+
+class JobError(TreefarmError):
+    """A job cannot run as asked (an output folder of another job, a shard that keeps failing)."""
+
+
+@dataclass(frozen=True)
+class ShardPlan:
+    """Shard `shard` holds trees first_index .. first_index + n_trees - 1, of the given species."""
+
+    shard: int
+    first_index: int
+    species: tuple[str, ...]
+
+    @property
+    def n_trees(self) -> int:
+        return len(self.species)
+
+    @property
+    def indices(self) -> range:
+        return range(self.first_index, self.first_index + self.n_trees)
+
+
+def plan_shards(spec: JobSpec) -> list[ShardPlan]:
+    """Fixed ranges of `spec.shard_size` trees (the last shard may be shorter)."""
+    species = species_of_trees(spec)
+    size = spec.shard_size
+    return [ShardPlan(k, k * size, tuple(species[k * size:(k + 1) * size])) for k in range(spec.n_shards)]
+
+
+def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder) -> dict:
+    """Build every tree of a shard, write its two part files atomically, then its record; returns the record.
+
+    A tree whose build raises becomes a row with its error (and a failure entry); the shard goes on.
+    """
+    tree_rows, all_view_rows, failures, tree_timings = [], [], [], []
+    for index, species_name in zip(plan.indices, plan.species):
+        seed = tree_seed(spec.seed, index)
+        timer = StageTimer()
+        built = None
+        try:
+            built = builder(species_name, seed, timer)
+            with timer.stage("encode"):
+                row = tree_row(spec, index, plan.shard, species_name, seed, built)
+                rows = view_rows(spec, index, plan.shard, built.views)
+            tree_rows.append(row)
+            all_view_rows.extend(rows)
+        except Exception as exc:  # one bad tree is recorded (row + manifest failure) and the shard goes on
+            message = f"{type(exc).__name__}: {exc}"
+            params = getattr(built, "params", None)
+            tree_rows.append(failed_tree_row(spec, index, plan.shard, species_name, seed, params, message))
+            failures.append({"tree_id": tree_rows[-1]["tree_id"], "index": index, "species": species_name,
+                             "seed": seed, "stage": timer.current, "error": message})
+        tree_timings.append({"index": index, **timer.seconds})
+    start = time.perf_counter()
+    trees_bytes = serialize_table(tree_rows, trees_schema())
+    views_bytes = serialize_table(all_view_rows, views_schema(spec.render.outputs))
+    location.write_atomic(part_name("trees", plan.shard), trees_bytes)
+    location.write_atomic(part_name("views", plan.shard), views_bytes)
+    stages: dict[str, float] = {}
+    for timing in tree_timings:
+        for stage, seconds in timing.items():
+            if stage != "index":
+                stages[stage] = stages.get(stage, 0.0) + seconds
+    stages["write"] = time.perf_counter() - start
+    record = {"shard": plan.shard, "first_index": plan.first_index, "n_trees": plan.n_trees,
+              "spec_digest": spec.digest(),
+              "trees": file_entry("trees", plan.shard, trees_bytes, len(tree_rows)),
+              "views": file_entry("views", plan.shard, views_bytes, len(all_view_rows)),
+              "failures": failures, "timings": {"stages": stages, "trees": tree_timings},
+              "worker": {"pid": os.getpid(), "host": os.uname().nodename}}
+    write_shard_record(location, record)
+    return record
+
+
+class ShardWorker:
+    """A Ray actor: one tree builder (so one offscreen renderer) per process, taking shard tasks."""
+
+    def __init__(self, spec: JobSpec, uri: str, builder_factory: BuilderFactory):
+        self.spec, self.location = spec, Location.resolve(uri)
+        self.builder = builder_factory(spec)
+
+    def run(self, plan: ShardPlan) -> dict:
+        return run_shard(self.spec, plan, self.location, self.builder)
+
+    def pid(self) -> int:
+        return os.getpid()
+
+
+def _check_output_belongs_to(spec: JobSpec, location: Location, n_shards: int) -> None:
+    """Refuse to mix two jobs in one folder: every existing shard record must carry this spec's digest."""
+    digest = spec.digest()
+    for name in location.list(SHARDS_FOLDER):
+        if not name.startswith("part-"):
+            continue
+        record = read_shard_record(location, int(name[5:10]))
+        if record is not None and record.get("spec_digest") != digest:
+            raise JobError(f"{location.uri} holds shards of another job spec (digest "
+                           f"{record.get('spec_digest', '?')[:12]}); write this job to another --out")
+
+
+def _connect_ray(address: str | None, workers: int | None) -> bool:
+    """Start or join Ray unless this process already has; True if we started it (and must shut it down)."""
+    import ray
+
+    if ray.is_initialized():
+        return False
+    options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
+    if address is None:
+        options["num_cpus"] = max(os.cpu_count() or 1, workers or 1)
+    ray.init(address=address, **options)
+    return True
+
+
+def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | None = None,
+            builder_factory: BuilderFactory = SpeciesChain, progress: bool = True) -> dict:
+    """Run (or resume) a job into `out` and return its manifest.
+
+    workers : actors to start (default: as many as the cluster's CPUs allow with the spec's num_cpus each).
+    address : an existing Ray cluster (`ray://...` or `host:port`); default a local Ray started here.
+    builder_factory : called once per actor with the spec; returns `builder(species, seed, timer) -> BuiltTree`.
+    """
+    import ray
+    from tqdm import tqdm
+
+    if workers is not None and workers < 1:
+        raise JobError(f"--workers {workers} is invalid: allowed an integer >= 1")
+    location = Location.resolve(out)
+    plans = plan_shards(spec)
+    _check_output_belongs_to(spec, location, len(plans))
+    for folder in ("trees", "views", SHARDS_FOLDER):
+        location.remove_temporaries(folder)
+    records = finished_shards(location, spec.digest(), len(plans))
+    write_job_record(location, spec)
+    pending = [plan for plan in plans if plan.shard not in records]
+    started_ray = False
+    start = time.perf_counter()
+    bar = tqdm(total=spec.n_trees, initial=sum(records[k]["n_trees"] for k in records), unit="tree",
+               desc=f"farm {spec.name}", disable=not progress, dynamic_ncols=True, smoothing=0.1)
+    try:
+        if pending:
+            started_ray = _connect_ray(address, workers)
+            n_actors = workers or max(1, int(ray.cluster_resources().get("CPU", 1) // max(spec.resources["num_cpus"], 1e-3)))
+            worker_class = ray.remote(ShardWorker).options(
+                num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"],
+                max_restarts=ACTOR_RETRIES, max_task_retries=ACTOR_RETRIES,
+                runtime_env={"env_vars": WORKER_ENV})
+            actors = [worker_class.remote(spec, location.uri, builder_factory)
+                      for _ in range(min(n_actors, len(pending)))]
+            views_done = sum(records[k]["views"]["rows"] for k in records)
+            queue = list(reversed(pending))
+            in_flight = {}
+            for actor in actors:
+                if queue:
+                    plan = queue.pop()
+                    in_flight[actor.run.remote(plan)] = (actor, plan)
+            while in_flight:
+                ready, _ = ray.wait(list(in_flight), num_returns=1)
+                actor, plan = in_flight.pop(ready[0])
+                try:
+                    record = ray.get(ready[0])
+                except ray.exceptions.RayError as exc:
+                    raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
+                                   f"{' '.join(str(exc).split())[:300]}") from exc
+                records[plan.shard] = record
+                views_done += record["views"]["rows"]
+                bar.update(record["n_trees"])
+                bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
+                if queue:
+                    next_plan = queue.pop()
+                    in_flight[actor.run.remote(next_plan)] = (actor, next_plan)
+            for actor in actors:
+                ray.kill(actor)
+        manifest_exists = location.exists("manifest.json")
+        if pending or not manifest_exists:
+            manifest = build_manifest(spec, records, time.perf_counter() - start)
+            write_manifest(location, manifest)
+        else:
+            from .dataset import read_manifest
+
+            manifest = read_manifest(location)
+    finally:
+        bar.close()
+        if started_ray:
+            ray.shutdown()
+    return manifest

@@ -1,0 +1,91 @@
+"""Where a dataset lives: a local folder or any pyarrow filesystem URI (s3://, gs://, file://).
+
+`Location` resolves a path once and reads, lists and writes files under it; `write_atomic` writes a whole
+file under a hidden temporary name and renames it, so a crash never leaves a half file that looks finished.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import uuid
+from dataclasses import dataclass
+
+__all__ = ["Location", "sha256_hex", "TEMP_PREFIX"]
+
+# Readers (pyarrow dataset discovery, our manifest) ignore names starting with '.' or '_'.
+TEMP_PREFIX = ".tmp-"
+
+
+def sha256_hex(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
+
+
+@dataclass(frozen=True)
+class Location:
+    """A dataset root: `uri` as the user gave it, the pyarrow filesystem, and the root path on it."""
+
+    uri: str
+    root: str
+
+    @classmethod
+    def resolve(cls, uri: str) -> "Location":
+        if "://" not in uri:
+            uri = os.path.abspath(os.path.expanduser(uri))
+        return cls(uri=uri, root=_filesystem_and_path(uri)[1].rstrip("/"))
+
+    @property
+    def filesystem(self):
+        # Rebuilt on use (pickling a Location to Ray workers carries only strings).
+        return _filesystem_and_path(self.uri)[0]
+
+    @property
+    def is_local(self) -> bool:
+        from pyarrow.fs import LocalFileSystem
+
+        return isinstance(self.filesystem, LocalFileSystem)
+
+    def path(self, relative: str) -> str:
+        return f"{self.root}/{relative}"
+
+    def exists(self, relative: str) -> bool:
+        from pyarrow.fs import FileType
+
+        return self.filesystem.get_file_info(self.path(relative)).type == FileType.File
+
+    def read_bytes(self, relative: str) -> bytes:
+        with self.filesystem.open_input_stream(self.path(relative)) as stream:
+            return stream.read()
+
+    def list(self, folder: str) -> list[str]:
+        """Names of the files directly in `folder` (relative to the root), sorted; [] if it does not exist."""
+        from pyarrow.fs import FileSelector, FileType
+
+        infos = self.filesystem.get_file_info(FileSelector(self.path(folder), allow_not_found=True))
+        return sorted(info.base_name for info in infos if info.type == FileType.File)
+
+    def write_atomic(self, relative: str, data: bytes) -> None:
+        """Write `data` to a temporary sibling and rename it onto `relative` (a copy + delete on object stores)."""
+        fs = self.filesystem
+        final = self.path(relative)
+        folder, name = final.rsplit("/", 1)
+        fs.create_dir(folder, recursive=True)
+        temporary = f"{folder}/{TEMP_PREFIX}{uuid.uuid4().hex}-{name}"
+        with fs.open_output_stream(temporary) as stream:
+            stream.write(data)
+        fs.move(temporary, final)
+
+    def delete(self, relative: str) -> None:
+        self.filesystem.delete_file(self.path(relative))
+
+    def remove_temporaries(self, folder: str) -> int:
+        """Delete files a crashed writer left under temporary names; returns how many."""
+        names = [n for n in self.list(folder) if n.startswith(TEMP_PREFIX)]
+        for name in names:
+            self.delete(f"{folder}/{name}")
+        return len(names)
+
+
+def _filesystem_and_path(uri: str):
+    from pyarrow.fs import FileSystem
+
+    return FileSystem.from_uri(uri)

@@ -1,0 +1,81 @@
+"""A torch `Dataset` over a dataset's views table: one item per (tree, view), images decoded on access.
+
+PNG bytes stay in the (memory-mapped) Arrow table until an item is asked for; torch is imported here only.
+"""
+from __future__ import annotations
+
+import json
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .dataset import FLOAT_OUTPUTS, DatasetError, part_files, read_manifest
+from .image_codec import METRIC_MAPS, decode_map
+
+__all__ = ["ViewsDataset"]
+
+
+def _torch():
+    try:
+        import torch
+    except ImportError:
+        raise ImportError("farm.torch_dataset needs torch: pip install torch") from None
+    return torch
+
+
+class ViewsDataset(_torch().utils.data.Dataset):
+    """Views of a finished dataset as dicts of tensors.
+
+    path      : dataset folder or URI.
+    outputs   : the outputs to decode (default: every stored one).
+    with_params : add the tree's parameter dictionary (`params`, a dict) from the trees table.
+    transform : optional function applied to each item dict.
+
+    Item: `tree_id` str, `index` int, `view` int, `view_name` str, `camera` dict, and per output a tensor:
+    uint8 maps as uint8 (C, H, W), float maps as float32 (C, H, W) (metres for depth maps, else [0, 1]).
+    """
+
+    def __init__(self, path: str, outputs: Sequence[str] | None = None, with_params: bool = False,
+                 transform: Callable[[dict], dict] | None = None):
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        stored = read_manifest(path)["job"]["render"]["outputs"]
+        self.outputs = list(stored if outputs is None else outputs)
+        for name in self.outputs:
+            if name not in stored:
+                raise DatasetError(f"output {name!r} is not in this dataset: stored {', '.join(stored)}")
+        location, files = part_files(path, "views")
+        columns = ["tree_id", "index", "view", "view_name", "camera_json"]
+        for name in self.outputs:
+            columns += [name] + ([f"{name}_scale", f"{name}_offset"] if name in FLOAT_OUTPUTS else [])
+        tables = [pq.read_table(f, columns=columns, filesystem=location.filesystem, memory_map=location.is_local)
+                  for f in files]
+        self.table = pa.concat_tables(tables) if tables else None
+        self.params: dict[str, dict] | None = None
+        if with_params:
+            _, tree_files = part_files(path, "trees")
+            trees = pa.concat_tables([pq.read_table(f, columns=["tree_id", "params_json"],
+                                                    filesystem=location.filesystem) for f in tree_files])
+            self.params = {row["tree_id"]: json.loads(row["params_json"]) for row in trees.to_pylist()
+                           if row["params_json"] is not None}
+        self.transform = transform
+
+    def __len__(self) -> int:
+        return 0 if self.table is None else self.table.num_rows
+
+    def __getitem__(self, item: int) -> dict:
+        torch = _torch()
+        if not 0 <= item < len(self):
+            raise IndexError(f"view {item} out of range [0, {len(self)})")
+        row = self.table.slice(item, 1).to_pylist()[0]
+        out = {"tree_id": row["tree_id"], "index": row["index"], "view": row["view"],
+               "view_name": row["view_name"], "camera": json.loads(row["camera_json"])}
+        for name in self.outputs:
+            image = decode_map(row[name], row.get(f"{name}_scale"), row.get(f"{name}_offset"),
+                               metric=name in METRIC_MAPS)
+            image = image[None] if image.ndim == 2 else np.moveaxis(image, 2, 0)
+            out[name] = torch.from_numpy(np.ascontiguousarray(image))
+        if self.params is not None:
+            out["params"] = self.params[row["tree_id"]]
+        return self.transform(out) if self.transform else out

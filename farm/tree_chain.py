@@ -1,0 +1,184 @@
+"""One tree from species name and seed to table rows: sample -> grow -> mesh -> render -> encode.
+
+`SpeciesChain` is the default tree builder (the real species and renderers functions, one ViewRenderer per
+process); `tree_row` / `view_rows` turn its result into rows of the trees and views tables.
+"""
+from __future__ import annotations
+
+import json
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+from .dataset import FLOAT_OUTPUTS
+from .image_codec import encode_map
+
+__all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
+           "tree_row", "view_rows", "failed_tree_row", "to_json"]
+
+
+def tree_seed(job_seed: int, index: int) -> int:
+    """Tree `index`'s seed: 63 bits of `SeedSequence(job_seed).spawn(n)[index]` (the same for any n >= index+1)."""
+    child = np.random.SeedSequence(job_seed, spawn_key=(index,))
+    return int(child.generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+def stage_rngs(seed: int) -> tuple[np.random.Generator, np.random.Generator]:
+    """The sampler's and the renderer's generators of a tree seed (growth uses `species.rng_for(params)`)."""
+    sample_seq, render_seq = np.random.SeedSequence(seed).spawn(2)
+    return np.random.default_rng(sample_seq), np.random.default_rng(render_seq)
+
+
+def tree_id(job_name: str, index: int) -> str:
+    return f"{job_name}-{index:08d}"
+
+
+def to_json(value: Any) -> str:
+    """Canonical JSON (sorted keys, numpy values as plain numbers and lists): the same dict, the same text."""
+    def plain(item):
+        if isinstance(item, np.ndarray):
+            return item.tolist()
+        if isinstance(item, np.generic):
+            return item.item()
+        raise TypeError(f"{type(item).__name__} is not JSON-able")
+
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), default=plain)
+
+
+class StageTimer:
+    """Wall-clock seconds per pipeline stage; `current` names the stage an exception came from."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self.current = "start"
+
+    @contextmanager
+    def stage(self, name: str):
+        self.current = name
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
+
+
+@dataclass
+class BuiltTree:
+    """What a tree builder returns: the parameter dictionary, skeleton, mesh and rendered views.
+
+    views : list of `renderers.RenderedView` (index, name, camera with to_dict(), images by output name).
+    """
+
+    params: dict
+    skeleton: Any
+    mesh: Any
+    views: list = field(default_factory=list)
+
+
+class TreeBuilder(Protocol):
+    def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree: ...
+
+
+class SpeciesChain:
+    """The real chain: species.sample -> species.grow -> species.build_mesh -> ViewRenderer.render.
+
+    Made once per worker process (it holds the offscreen renderer); `spec` is the JobSpec.
+    """
+
+    def __init__(self, spec) -> None:
+        self.spec = spec
+        self._renderer = None
+
+    def renderer(self):
+        if self._renderer is None:
+            import renderers
+
+            self._renderer = renderers.ViewRenderer(size=self.spec.render.size)
+        return self._renderer
+
+    def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree:
+        import species
+
+        sample_rng, render_rng = stage_rngs(seed)
+        with timer.stage("sample"):
+            params = species.sample(species_name, sample_rng)
+        built = BuiltTree(params=params, skeleton=None, mesh=None)
+        with timer.stage("grow"):
+            built.skeleton = species.grow(params, species.rng_for(params))
+        with timer.stage("mesh"):
+            built.mesh = species.build_mesh(built.skeleton, params)
+        if self.spec.render.outputs:
+            with timer.stage("render"):
+                built.views = self.renderer().render(built.mesh, built.skeleton, self.spec.render.rig,
+                                                     self.spec.render.outputs, rng=render_rng)
+        return built
+
+
+BuilderFactory = Callable[[Any], TreeBuilder]
+
+
+# ---------------------------------------------------------------------- rows
+def _list(array, dtype) -> list:
+    return np.ascontiguousarray(array, dtype).ravel().tolist()
+
+
+def tree_row(spec, index: int, shard: int, species_name: str, seed: int, built: BuiltTree) -> dict:
+    """A trees-table row of a successfully built tree (GLB exported here if the spec stores it)."""
+    skeleton, mesh = built.skeleton, built.mesh
+    row = _base_row(spec, index, shard, species_name, seed, built.params)
+    row.update({
+        "n_nodes": int(skeleton.n_nodes), "positions": _list(skeleton.positions, np.float32),
+        "parent": _list(skeleton.parent, np.int32), "radius": _list(skeleton.radius, np.float32),
+        "order": _list(skeleton.order, np.uint8), "leaves": _list(skeleton.leaves, np.float32),
+        "leaf_node": _list(skeleton.leaf_node, np.int32),
+        "glb": mesh.to_glb() if (spec.store_glb and mesh is not None) else None,
+        "height": float(skeleton.height), "crown_radius": float(skeleton.crown_radius),
+        "n_branches": int(len(skeleton.branch_starts)), "n_leaves": int(skeleton.n_leaves),
+        "bark_triangles": int(mesh.bark.n_faces) if mesh is not None else None,
+        "leaf_triangles": int(mesh.leaves.n_faces) if mesh is not None else None,
+        "n_vertices": int(mesh.n_vertices) if mesh is not None else None,
+        "n_views": len(built.views),
+    })
+    return row
+
+
+def _base_row(spec, index, shard, species_name, seed, params) -> dict:
+    from .dataset import trees_schema
+
+    row = dict.fromkeys(trees_schema().names)
+    row.update({"tree_id": tree_id(spec.name, index), "index": index, "shard": shard, "species": species_name,
+                "seed": seed, "n_views": 0})
+    if params is not None:
+        row["generator"] = params.get("generator", "weber_penn")
+        row["params_json"] = to_json(params)
+    return row
+
+
+def failed_tree_row(spec, index: int, shard: int, species_name: str, seed: int, params: dict | None,
+                    error: str) -> dict:
+    """A trees-table row of a tree whose build raised: ids, seed, params if sampled, and the error."""
+    row = _base_row(spec, index, shard, species_name, seed, params)
+    row["error"] = error
+    return row
+
+
+def view_rows(spec, index: int, shard: int, views: list) -> list[dict]:
+    """Views-table rows of one tree: camera JSON and each output as PNG (16-bit with scale/offset for floats)."""
+    rows = []
+    for view in sorted(views, key=lambda v: v.index):
+        row = {"tree_id": tree_id(spec.name, index), "index": index, "shard": shard, "view": int(view.index),
+               "view_name": str(view.name), "camera_json": to_json(view.camera.to_dict())}
+        for name in spec.render.outputs:
+            image = np.asarray(view.images[name])
+            if (name in FLOAT_OUTPUTS) == (image.dtype == np.uint8):
+                raise TypeError(f"output {name!r} came back as {image.dtype}; the views schema stores it as "
+                                f"{'a float' if name in FLOAT_OUTPUTS else 'a uint8'} map")
+            png, scale, offset = encode_map(name, image)
+            row[name] = png
+            if name in FLOAT_OUTPUTS:
+                row[f"{name}_scale"], row[f"{name}_offset"] = scale, offset
+        rows.append(row)
+    return rows
