@@ -4,9 +4,9 @@ Job keys: glb (path). Result: the `scene.mesh_stats` dictionary.
 """
 from __future__ import annotations
 
-from scene import import_glb, mesh_stats, reset_scene
+from scene import import_glb, mesh_stats, require, reset_scene
 
 
 def run(job: dict, out_dir: str) -> dict:
     reset_scene()
-    return mesh_stats(import_glb(job["glb"]))
+    return mesh_stats(import_glb(require(job, "glb")))

@@ -9,7 +9,7 @@ import os
 import bpy
 from mathutils import Vector
 
-__all__ = ["JobError", "reset_scene", "import_glb", "mesh_objects", "mesh_stats", "part_of", "PART_INDEX"]
+__all__ = ["JobError", "require", "reset_scene", "import_glb", "mesh_objects", "mesh_stats", "part_of", "PART_INDEX"]
 
 # Mask values of the farm's renderers (renderers/maps.py): 0 background, 1 bark, 2 leaves.
 PART_INDEX = {"bark": 1, "leaves": 2}
@@ -17,6 +17,16 @@ PART_INDEX = {"bark": 1, "leaves": 2}
 
 class JobError(ValueError):
     """A job file asks for something impossible (unknown kind, missing file, bad value); exit code 2."""
+
+
+def require(job: dict, key: str, kind: type = str):
+    """job[key], checked for presence and type; a miss raises JobError naming the key."""
+    if key not in job:
+        raise JobError(f"job {job.get('kind')!r} lacks the key {key!r}")
+    value = job[key]
+    if not isinstance(value, kind):
+        raise JobError(f"job key {key!r} = {value!r} must be of type {kind.__name__}")
+    return value
 
 
 def reset_scene() -> bpy.types.Scene:
