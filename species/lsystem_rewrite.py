@@ -66,10 +66,15 @@ def _split_arguments(text: str) -> list[str]:
     return [p.strip() for p in parts]
 
 
-def parse_modules(text: str, key: str = "axiom") -> list[tuple[str, list[str]]]:
-    """Split a module string into (symbol, argument texts); raises GrammarError naming `key` and `text`."""
+def parse_modules(text: str, key: str = "axiom", whole: str | None = None) -> list[tuple[str, list[str]]]:
+    """Split a module string into (symbol, argument texts).
+
+    Raises GrammarError naming `key` and `whole` (the full rule this text is part of; default `text` itself).
+    """
     if not isinstance(text, str):
         raise GrammarError(key, str(text), "not a string")
+    where = "" if whole is None else f" in {text.strip()!r}"
+    text_named = text if whole is None else whole
     modules: list[tuple[str, list[str]]] = []
     i, n, depth = 0, len(text), 0
     while i < n:
@@ -78,8 +83,8 @@ def parse_modules(text: str, key: str = "axiom") -> list[tuple[str, list[str]]]:
             i += 1
             continue
         if not _is_symbol(char):
-            raise GrammarError(key, text, f"{char!r} at position {i} is not a module symbol (letters or "
-                                          f"{''.join(TURTLE_SYMBOLS)})")
+            raise GrammarError(key, text_named, f"{char!r} at position {i} is not a module symbol "
+                                                f"(letters or {''.join(TURTLE_SYMBOLS)}){where}")
         args: list[str] = []
         j = i + 1
         if j < n and text[j] == "(":
@@ -90,21 +95,21 @@ def parse_modules(text: str, key: str = "axiom") -> list[tuple[str, list[str]]]:
                     break
                 k += 1
             if k == n:
-                raise GrammarError(key, text, f"unclosed '(' after {char!r} at position {i}")
+                raise GrammarError(key, text_named, f"unclosed '(' after {char!r} at position {i}{where}")
             args = _split_arguments(text[j + 1:k])
             if any(a == "" for a in args):
-                raise GrammarError(key, text, f"empty argument in {text[i:k + 1]!r}")
+                raise GrammarError(key, text_named, f"empty argument in {text[i:k + 1]!r}{where}")
             j = k + 1
         if char in TURTLE_SYMBOLS and len(args) > TURTLE_SYMBOLS[char]:
-            raise GrammarError(key, text, f"{char!r} takes at most {TURTLE_SYMBOLS[char]} argument(s), "
-                                          f"got {len(args)}")
+            raise GrammarError(key, text_named, f"{char!r} takes at most {TURTLE_SYMBOLS[char]} "
+                                                f"argument(s), got {len(args)}{where}")
         depth += (char == "[") - (char == "]")
         if depth < 0:
-            raise GrammarError(key, text, f"']' at position {i} closes no '['")
+            raise GrammarError(key, text_named, f"']' at position {i} closes no '['{where}")
         modules.append((char, args))
         i = j
     if depth:
-        raise GrammarError(key, text, f"{depth} unclosed '['")
+        raise GrammarError(key, text_named, f"{depth} unclosed '['{where}")
     return modules
 
 
@@ -122,7 +127,8 @@ def _compile_expression(expression: str, names: set[str], key: str, text: str) -
                                           f"{', '.join(sorted(names)) or '(none)'} and {', '.join(_FUNCTIONS)}")
         if isinstance(node, ast.Call) and not (isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS
                                                and not node.keywords):
-            raise GrammarError(key, text, f"{expression!r} calls something other than {', '.join(_FUNCTIONS)}")
+            raise GrammarError(key, text, f"{expression!r} calls something other than "
+                                          f"{', '.join(k for k, v in _FUNCTIONS.items() if callable(v))}")
         if isinstance(node, ast.Constant) and (isinstance(node.value, bool)
                                                or not isinstance(node.value, (int, float))):
             raise GrammarError(key, text, f"{expression!r} holds {node.value!r}; only numbers are allowed")
@@ -167,7 +173,7 @@ def parse_rule(text: str, constants: dict[str, float] | None = None) -> Rule:
     left, right = text.split("->")
     pred_text, cond_text = _split_once(left, ":")
     succ_text, weight_text = _split_once(right, ":")
-    pred = parse_modules(pred_text, key) if pred_text.strip() else []
+    pred = parse_modules(pred_text, key, text) if pred_text.strip() else []
     if len(pred) != 1 or pred[0][0] in "[]":
         raise GrammarError(key, text, "the predecessor must be exactly one module other than '[' or ']'")
     symbol, formals = pred[0]
@@ -181,7 +187,7 @@ def parse_rule(text: str, constants: dict[str, float] | None = None) -> Rule:
         raise GrammarError(key, text, f"formal parameter(s) {sorted(clash)} shadow constants of the same name")
     names = set(formals) | set(constants)
 
-    successor_modules = parse_modules(succ_text, key)
+    successor_modules = parse_modules(succ_text, key, text)
     items = []
     for succ_symbol, args in successor_modules:
         sources = [_compile_expression(a, names, key, text) for a in args]
