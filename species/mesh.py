@@ -23,8 +23,10 @@ _MAX_SEGMENTS = 16
 _BARK_TILE_WIDTH = 0.25
 # The bark texture is twice as tall as wide; a tile spans this many tile widths along the branch.
 _BARK_TILE_ASPECT = 2.0
-# Points of a branch closer than this (metres) to the previous one are merged.
-_MERGE_DISTANCE = 1e-6
+# A point of a branch closer to the previous one than this (metres), or than this fraction of its radius,
+# is merged into it: such rings would be closer than float32 can separate at tree scale.
+_MERGE_DISTANCE = 2e-5
+_MERGE_RADIUS_FRACTION = 0.05
 # A tip cap is a cone whose apex lies this many tip radii beyond the last ring.
 _TIP_CAP_HEIGHT = 0.5
 
@@ -119,10 +121,18 @@ def _branch_polylines(skeleton: Skeleton):
     # (clamped to the parent's, so the first ring sits inside the parent tube and the joint has no gap).
     junction = skeleton.branch_id[nodes[first]] != np.arange(len(paths))
     junction &= sizes > 1
-    radius[first[junction]] = np.minimum(radius[first[junction] + 1], radius[first[junction]])
+    at, after = first[junction], first[junction] + 1
+    parent_radius = radius[at]
+    radius[at] = np.minimum(radius[after], parent_radius)
+    # Pull that ring back along the child's direction so its rim hides inside the parent: by half the parent
+    # radius at most, and never so far that the ring (radius r) leaves a parent tube of radius R (R - r).
+    direction = points[after] - points[at]
+    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])[:, None]
+    points[at] -= np.where(length > 0, pull * direction / np.maximum(length, 1e-30), 0.0)
     keep = np.ones(len(nodes), bool)
     step = np.linalg.norm(np.diff(points, axis=0), axis=1)
-    keep[1:] = step > _MERGE_DISTANCE
+    keep[1:] = step > np.maximum(_MERGE_DISTANCE, _MERGE_RADIUS_FRACTION * radius[1:])
     keep[first] = True
     counts = np.bincount(branch[keep], minlength=len(paths))
     keep &= (counts >= 2)[branch]

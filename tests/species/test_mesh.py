@@ -132,6 +132,9 @@ def test_child_tubes_start_inside_their_parent():
         ring = bark.vertices[first_ring:first_ring + 6]  # order-1 and 2 branches have 6 sides
         distance = np.linalg.norm(ring - skeleton.positions[path[0]], axis=1)
         assert np.all(distance <= skeleton.radius[path[0]] + 1e-6)
+        # ... and, thinner than the parent, it starts behind the junction along its own direction.
+        heading = skeleton.positions[path[1]] - skeleton.positions[path[0]]
+        assert np.dot(ring.mean(axis=0) - skeleton.positions[path[0]], heading) < 0
 
 
 def test_bark_attributes_name_order_and_branch(random_skeleton, random_mesh):
