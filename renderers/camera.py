@@ -294,7 +294,7 @@ def parse_rig(rig: str) -> RigSpec:
     jitter = parts[-1] == "jitter"
     if jitter:
         parts = parts[:-1]
-    kind = parts[0]
+    kind = parts[0] if parts else ""
     bad = CameraError(f"rig {rig!r} is unknown: allowed {', '.join(RIGS)} (optionally with ':jitter')")
     if kind == "tsn4" and len(parts) == 1:
         views = tuple((n, a, TSN_ELEVATION_DEG) for n, a in
@@ -309,7 +309,8 @@ def parse_rig(rig: str) -> RigSpec:
         except ValueError:
             raise bad from None
         if not 1 <= n <= 360 or any(not -89.0 <= e <= 89.0 for e in elevations):
-            raise CameraError(f"rig {rig!r}: orbit needs 1 <= N <= 360 views and elevations in [-89, 89] deg")
+            raise CameraError(f"rig {rig!r}: orbit needs 1 <= N <= 360 views and elevations in [-89, 89] deg "
+                              f"(allowed rigs: {', '.join(RIGS)})")
         views = tuple((f"az{round(a):03d}_el{round(e):+03d}", a, e)
                       for e in elevations for a in np.arange(n) * 360.0 / n)
         return RigSpec(kind, "perspective", views, jitter)

@@ -6,7 +6,9 @@ Every map comes from depth-only passes (measured: a depth-only pass costs about 
 Mesa's CPU rasterizer, and needs no anti-aliased colour that would blur ids). Each part of the tree (bark of each
 branch order, leaves) is drawn alone; the nearest part wins per pixel, which gives depth, mask and order ids
 exactly. The back surface for the silhouette comes from one more pass with the depth row of the projection
-negated: the same rays and pixels, but the depth test keeps the farthest surface, so no mirroring is needed.
+negated (the depth test then keeps the farthest surface) and x mirrored (so back-face culling, which pyrender
+forces in depth-only passes, drops the near walls instead of the far ones); the image is mirrored back into the
+front frame, pixel for pixel, as seed 000 mirrors its back camera.
 """
 from __future__ import annotations
 
@@ -129,6 +131,8 @@ class DepthRenderer:
 
         self._pyrender = pyrender
         self._renderer = pyrender.OffscreenRenderer(size, size)
+        # Swap in a renderer without multisampling (see _single_sample_renderer_class).
+        self._renderer._renderer = _single_sample_renderer_class()(size, size)
         self._scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0])
         self._camera_node = None
         self._mesh_nodes: dict[str, object] = {}
@@ -143,10 +147,13 @@ class DepthRenderer:
             self._renderer.delete()
             self._renderer = None
 
-    def _mesh(self, vertices: np.ndarray, faces: np.ndarray):
+    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool):
+        # pyrender culls back faces in depth-only passes whatever the material says: leaf cards go in twice,
+        # once per winding; bark is closed and wound outward (TreeMesh contract), so culling is correct for it.
         pr = self._pyrender
-        material = pr.MetallicRoughnessMaterial(doubleSided=True)
-        return pr.Mesh([pr.Primitive(positions=vertices, indices=faces, material=material)])
+        if double_sided:
+            faces = np.concatenate([faces, faces[:, ::-1]])
+        return pr.Mesh([pr.Primitive(positions=vertices, indices=faces)])
 
     def load(self, tree: TreeMesh) -> None:
         """Put a tree's bark (one mesh per branch order, from the bark `order` attribute) and leaves in the scene."""
@@ -162,13 +169,19 @@ class DepthRenderer:
                           else np.asarray(order)[bark.faces[:, 0]])
             for value in np.unique(face_order):
                 faces = bark.faces[face_order == value]
-                self._mesh_nodes[_bark_part(int(value))] = self._scene.add(self._mesh(bark.vertices, faces))
+                self._mesh_nodes[_bark_part(int(value))] = self._scene.add(self._mesh(bark.vertices, faces, False))
         if tree.leaves.n_faces:
-            self._mesh_nodes[LEAVES] = self._scene.add(self._mesh(tree.leaves.vertices, tree.leaves.faces))
+            self._mesh_nodes[LEAVES] = self._scene.add(
+                self._mesh(tree.leaves.vertices, tree.leaves.faces, True))
         self._tree = tree
 
     def _set_camera(self, camera: Camera, reverse_depth: bool) -> None:
-        gl_camera = _matrix_camera_class()(camera.opengl_projection(reverse_depth))
+        projection = camera.opengl_projection(reverse_depth)
+        if reverse_depth:
+            # Mirror x as well: the screen winding flips, so culling keeps the faces turned away from the
+            # camera (the far walls of the bark); `_pass` mirrors the image back.
+            projection[0] = -projection[0]
+        gl_camera = _matrix_camera_class()(projection)
         if self._camera_node is None:
             self._camera_node = self._scene.add(gl_camera, pose=camera.opengl_pose())
         else:
@@ -185,6 +198,8 @@ class DepthRenderer:
         self._set_camera(camera, reverse_depth)
         flags = self._pyrender.RenderFlags.DEPTH_ONLY | self._pyrender.RenderFlags.SKIP_CULL_FACES
         linear = self._renderer.render(self._scene, flags=flags)
+        if reverse_depth:
+            linear = linear[:, ::-1]
         # pyrender linearised the window depth with the dummy planes near 1, far 2: undo, then use ours.
         hit = linear > 0
         window = np.where(hit, 2.0 - 2.0 / np.where(hit, linear, 1.0), 1.0)
@@ -208,9 +223,38 @@ class DepthRenderer:
             depths[LEAVES] = np.zeros((camera.height, camera.width), np.float32)
         return PartDepths(depths)
 
-    def back_depth(self, camera: Camera) -> np.ndarray:
-        """(H, W) float32 metres, the farthest surface of the whole tree along each pixel's ray (0 = none)."""
-        return self._pass(camera, set(self.part_names), reverse_depth=True)
+    def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
+        """(H, W) float32 metres, the farthest surface of the whole tree along each pixel's ray, given the
+        front depth (H, W) float32 metres of the same camera: never nearer than the front (a ray through an open
+        tube end or the edge of a leaf, sampled a hair apart in the mirrored pass, may find no far wall); 0 where
+        the front is empty."""
+        back = self._pass(camera, set(self.part_names), reverse_depth=True)
+        return np.where(front > 0, np.maximum(back, front), 0.0).astype(np.float32)
+
+
+@functools.cache
+def _single_sample_renderer_class():
+    """pyrender's Renderer with its 4x multisampled framebuffer made single-sample.
+
+    Why: pyrender resolves depth from the 4x buffer by taking one sample, which sits off the pixel centre, so
+    masks came out shifted by a fraction of a pixel; and llvmpipe shades every sample, so 4x costs up to 4x.
+    With one sample, a pixel is covered exactly when a triangle covers its centre. Relies on pyrender 0.1.45
+    internals (pinned in pyproject.toml).
+    """
+    from OpenGL import GL
+    from pyrender.renderer import Renderer
+
+    class SingleSampleRenderer(Renderer):
+        def _configure_main_framebuffer(self):
+            super()._configure_main_framebuffer()
+            if getattr(self, "_single_sample_dims", None) != self._main_fb_dims:
+                w, h = self._main_fb_dims
+                for buffer, fmt in ((self._main_cb_ms, GL.GL_RGBA), (self._main_db_ms, GL.GL_DEPTH_COMPONENT24)):
+                    GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, buffer)
+                    GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, 0, fmt, w, h)
+                self._single_sample_dims = self._main_fb_dims
+
+    return SingleSampleRenderer
 
 
 @functools.cache

@@ -173,7 +173,7 @@ def _hand_stroke(points: np.ndarray, weight: float, scale: float, rng: np.random
 
 def sketch_hand(camera: Camera, skeleton: Skeleton, region: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """A drawn look (our style): main branches and the crown outline (region (H, W) bool) as wobbly pen strokes
-    with varying pressure, small gaps and over-shoot, anti-aliased; the rng decides every wobble."""
+    with varying pressure, small gaps and over-shoot (binary, like the other styles); the rng decides every wobble."""
     h, w = camera.height, camera.width
     scale = _scale(h)
     image = np.full((h, w), 255, np.uint8)
@@ -201,5 +201,5 @@ def sketch_hand(camera: Camera, skeleton: Skeleton, region: np.ndarray, rng: np.
             ends.append(b)
             widths.append(t)
     if starts:
-        _draw_segments(image, np.concatenate(starts), np.concatenate(ends), np.concatenate(widths), cv2.LINE_AA)
+        _draw_segments(image, np.concatenate(starts), np.concatenate(ends), np.concatenate(widths))
     return image

@@ -53,7 +53,7 @@ class _ViewFrame:
 
     @cached_property
     def back(self) -> np.ndarray:
-        return self.gl.back_depth(self.camera)
+        return self.gl.back_depth(self.camera, self.visible[0])
 
     @cached_property
     def normals(self) -> np.ndarray:
@@ -78,7 +78,7 @@ OUTPUTS: dict[str, Callable[[_ViewFrame], np.ndarray]] = {
     "order": lambda f: f.visible[2],
     "normals": lambda f: f.normals,
     "silhouette": lambda f: silhouette_map(f.camera, f.visible[0], f.back),
-    "depth_back": lambda f: np.where(f.visible[0] > 0, f.back, 0.0).astype(np.float32),
+    "depth_back": lambda f: f.back,
     "trunk_strokes": lambda f: f.trunk[0],
     "trunk_depth": lambda f: f.trunk[1],
     "sketch_tsn": lambda f: sketch.sketch_tsn(f.parts.bark > 0, f.parts.leaves > 0),

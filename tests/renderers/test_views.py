@@ -1,0 +1,76 @@
+"""ViewRenderer: the output contract, determinism, renderer reuse and rejection of bad names."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from renderers import DEFAULT_OUTPUTS, OUTPUTS, CameraError, OutputError, write_contact_sheet
+
+CONTRACT = {
+    "depth": ((), np.float32), "depth01": ((), np.float32), "mask": ((), np.uint8), "order": ((), np.uint8),
+    "normals": ((3,), np.uint8), "silhouette": ((3,), np.float32), "trunk_strokes": ((3,), np.uint8),
+    "trunk_depth": ((), np.float32), "sketch_tsn": ((), np.uint8), "sketch_edges": ((), np.uint8),
+    "sketch_strokes": ((), np.uint8), "sketch_strokes_brush": ((), np.uint8), "sketch_crown": ((), np.uint8),
+    "sketch_hand": ((), np.uint8),
+}
+
+
+def test_every_contract_output_has_its_shape_and_dtype(all_outputs):
+    assert set(CONTRACT) <= set(OUTPUTS) and set(DEFAULT_OUTPUTS) <= set(OUTPUTS)
+    for view in all_outputs["tsn4"]:
+        h, w = view.camera.height, view.camera.width
+        for name, (tail, dtype) in CONTRACT.items():
+            assert view.images[name].shape == (h, w) + tail, name
+            assert view.images[name].dtype == dtype, name
+
+
+def test_views_carry_index_name_and_json_camera(all_outputs):
+    views = all_outputs["tsn4"]
+    assert [v.index for v in views] == [0, 1, 2, 3]
+    assert [v.name for v in views] == ["front", "right", "back", "left"]
+    data = json.loads(json.dumps(views[0].camera.to_dict()))
+    assert data["projection"] == "perspective" and len(data["world_to_camera"]) == 4
+
+
+def test_same_inputs_give_identical_arrays(view_renderer, tree, all_outputs):
+    mesh, skeleton = tree
+    again = view_renderer.render(mesh, skeleton, "tsn4", list(OUTPUTS), np.random.default_rng(3))
+    for first, second in zip(all_outputs["tsn4"], again):
+        for name in OUTPUTS:
+            np.testing.assert_array_equal(first.images[name], second.images[name], err_msg=name)
+
+
+def test_renderer_follows_a_size_change_and_back(view_renderer, tree):
+    mesh, skeleton = tree
+    size = view_renderer.size
+    try:
+        view_renderer.size = 96
+        small = view_renderer.render(mesh, skeleton, "two-view", ["mask"], np.random.default_rng(0))[0]
+    finally:
+        view_renderer.size = size
+    big = view_renderer.render(mesh, skeleton, "two-view", ["mask"], np.random.default_rng(0))[0]
+    assert small.images["mask"].shape == (96, 96) and big.images["mask"].shape == (size, size)
+    assert abs((small.images["mask"] > 0).mean() - (big.images["mask"] > 0).mean()) < 0.02
+
+
+def test_unknown_output_is_rejected_with_the_allowed_names(view_renderer, tree):
+    mesh, skeleton = tree
+    with pytest.raises(OutputError, match="sketch_tsn"):
+        view_renderer.render(mesh, skeleton, "tsn4", ["depth", "sketch_fancy"], np.random.default_rng(0))
+
+
+def test_unknown_rig_is_rejected(view_renderer, tree):
+    mesh, skeleton = tree
+    with pytest.raises(CameraError, match="two-view"):
+        view_renderer.render(mesh, skeleton, "six-view", ["depth"], np.random.default_rng(0))
+
+
+def test_contact_sheet_is_a_grid_of_rows_and_columns(tmp_path, all_outputs):
+    import cv2
+
+    rows = [(rig, [(name, views[0].images[name]) for name in DEFAULT_OUTPUTS]) for rig, views in all_outputs.items()]
+    path = write_contact_sheet(tmp_path / "sheet.png", rows, cell=64)
+    sheet = cv2.imread(str(path))
+    assert sheet.shape[0] > 2 * 64 and sheet.shape[1] >= len(DEFAULT_OUTPUTS) * 64
