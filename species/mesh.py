@@ -128,7 +128,8 @@ def _branch_polylines(skeleton: Skeleton):
     # radius at most, and never so far that the ring (radius r) leaves a parent tube of radius R (R - r).
     direction = points[after] - points[at]
     length = np.linalg.norm(direction, axis=1, keepdims=True)
-    pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])[:, None]
+    pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])
+    pull = np.where(nodes[at] == 0, 0.0, pull)[:, None]  # at the root that would go below the ground
     points[at] -= np.where(length > 0, pull * direction / np.maximum(length, 1e-30), 0.0)
     keep = np.ones(len(nodes), bool)
     step = np.linalg.norm(np.diff(points, axis=0), axis=1)
