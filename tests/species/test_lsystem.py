@@ -102,3 +102,9 @@ def test_every_preset_grows_a_valid_skeleton_with_two_seeds(preset):
 def test_presets_are_registered_with_generator_lsystem():
     names = {p.name for p in PRESETS}
     assert len(names) == len(PRESETS) >= 5 and all(p.generator == "lsystem" for p in PRESETS)
+
+
+@pytest.mark.parametrize("preset", PRESETS, ids=lambda p: p.name)
+def test_every_preset_typical_member_grows(preset):
+    params = preset.base_params()
+    assert len(grow(params, species.rng_for(params))) > 100
