@@ -8,7 +8,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -108,7 +108,9 @@ class JobSpec:
         """The same job with `total` trees split over the species (`farm generate --trees N`)."""
         _check_int("trees", total, 0)
         weights = self.species if self.trees is not None else {n: 1.0 for n in self.species}
-        return parse_spec({**self.to_dict(), "species": weights, "trees": total})
+        if total > 0 and sum(weights.values()) <= 0:
+            raise JobSpecError("species", weights, "at least one positive weight")
+        return replace(self, species=dict(weights), trees=total)
 
 
 def species_of_trees(spec: JobSpec) -> list[str]:

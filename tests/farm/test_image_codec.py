@@ -1,0 +1,50 @@
+"""PNG codec of the views table: exact uint8 round trips, 16-bit float maps within one step, deterministic bytes."""
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from farm.image_codec import ImageCodecError, decode_map, encode_map
+
+
+def test_uint8_rgb_map_round_trips_exactly_in_rgb_order():
+    image = np.random.default_rng(0).integers(0, 256, (20, 30, 3), dtype=np.uint8)
+    png, scale, offset = encode_map("trunk_strokes", image)
+    assert scale is None and offset is None
+    np.testing.assert_array_equal(decode_map(png), image)
+    np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(png))), image)  # any PNG reader agrees
+
+
+def test_metric_depth_round_trips_within_one_step_and_keeps_background_zero():
+    depth = np.random.default_rng(1).uniform(3.0, 9.0, (16, 16)).astype(np.float32)
+    depth[:4] = 0.0
+    png, scale, offset = encode_map("depth", depth)
+    assert Image.open(io.BytesIO(png)).mode.startswith("I;16")
+    back = decode_map(png, scale, offset, metric=True)
+    assert np.all(back[:4] == 0)
+    assert np.max(np.abs(back[4:] - depth[4:])) <= scale
+
+
+def test_unit_range_float_map_round_trips_within_one_sixteen_bit_step():
+    image = np.random.default_rng(2).uniform(0, 1, (8, 8, 3)).astype(np.float32)
+    png, scale, offset = encode_map("silhouette", image)
+    assert np.max(np.abs(decode_map(png, scale, offset) - image)) <= 1 / 65535
+
+
+def test_encoding_is_deterministic():
+    image = np.random.default_rng(3).uniform(0, 1, (8, 8)).astype(np.float32)
+    assert encode_map("trunk_depth", image) == encode_map("trunk_depth", image.copy())
+
+
+@pytest.mark.parametrize("name, image", [
+    ("trunk_depth", np.full((4, 4), 1.5, np.float32)),
+    ("mask", np.zeros((4, 4, 2), np.uint8)),
+    ("mask", np.zeros((4, 4), np.int64)),
+    ("depth", np.full((4, 4), np.nan, np.float32)),
+])
+def test_unstorable_map_is_rejected(name, image):
+    with pytest.raises(ImageCodecError, match=name):
+        encode_map(name, image)

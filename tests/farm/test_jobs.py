@@ -1,0 +1,78 @@
+"""Job specs: YAML round trip, one clear error per bad field, species split and interleaving."""
+from __future__ import annotations
+
+import pytest
+import yaml
+
+from farm.jobs import JobSpecError, load_spec, parse_spec, species_of_trees, spec_to_yaml
+from farm_standins import OUTPUTS, SPECIES, standin_spec
+
+KNOWN = dict(known_species=SPECIES, known_outputs=OUTPUTS)
+
+
+def test_spec_round_trips_through_yaml(tmp_path):
+    spec = standin_spec()
+    path = tmp_path / "job.yaml"
+    path.write_text(spec_to_yaml(spec))
+    assert load_spec(path, **KNOWN) == spec
+
+
+@pytest.mark.parametrize("field, value, named", [
+    ("species", {"no_such_tree": 2}, "species.no_such_tree"),
+    ("species", {"standin_a": -1}, "species.standin_a"),
+    ("seed", -3, "seed"),
+    ("shard_size", 0, "shard_size"),
+    ("trees", "many", "trees"),
+    ("render", {"outputs": ["oil_painting"]}, "render.outputs"),
+    ("render", {"rig": "circle"}, "render.rig"),
+    ("render", {"size": 3}, "render.size"),
+    ("colour", "red", "colour"),
+])
+def test_bad_field_raises_one_error_naming_it(field, value, named):
+    with pytest.raises(JobSpecError) as info:
+        standin_spec(**{field: value})
+    assert info.value.field == named
+    assert len(str(info.value).splitlines()) == 1
+
+
+def test_total_trees_are_split_by_weight_and_sum_to_total():
+    spec = standin_spec(species={"standin_a": 2.0, "standin_b": 1.0}, trees=10)
+    assert spec.species_counts == {"standin_a": 7, "standin_b": 3}
+    assert spec.n_trees == 10
+
+
+def test_with_trees_overrides_the_total_evenly():
+    spec = standin_spec().with_trees(4)
+    assert spec.species_counts == {"standin_a": 2, "standin_b": 2}
+
+
+def test_species_are_interleaved_over_the_index_range():
+    spec = standin_spec(species={"standin_a": 4, "standin_b": 4})
+    species = species_of_trees(spec)
+    assert sorted(species) == ["standin_a"] * 4 + ["standin_b"] * 4
+    assert all(species[i] != species[i + 1] for i in range(len(species) - 1))
+
+
+def test_digest_ignores_output_location_and_resources_only():
+    spec = standin_spec()
+    assert standin_spec(output="/elsewhere", resources={"num_cpus": 2}).digest() == spec.digest()
+    assert standin_spec(seed=8).digest() != spec.digest()
+
+
+def test_invalid_yaml_file_is_a_spec_error(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("species: [unclosed\n")
+    with pytest.raises(JobSpecError, match="valid YAML"):
+        load_spec(path, **KNOWN)
+
+
+def test_default_spec_has_every_preset_and_the_default_outputs():
+    species = pytest.importorskip("species")
+    import renderers
+    from farm.jobs import default_spec
+
+    spec = default_spec()
+    assert list(spec.species) == [p.name for p in species.list_presets()]
+    assert spec.render.outputs == tuple(renderers.DEFAULT_OUTPUTS)
+    assert (spec.render.rig, spec.render.size) == ("tsn4", 256)
+    assert yaml.safe_load(spec_to_yaml(spec))["shard_size"] == 8

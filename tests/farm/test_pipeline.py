@@ -1,0 +1,115 @@
+"""The pipeline with stand-in builders: seeds, plan, shard writing, determinism across workers, resume, repair."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import farm.dataset as dataset
+from farm.manifest import validate_dataset
+from farm.pipeline import JobError, plan_shards, run_job, run_shard
+from farm.storage import Location
+from farm.tree_chain import tree_seed
+from farm_standins import StandinChain, standin_spec
+
+
+def part_bytes(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.glob("*/part-*.parquet"))}
+
+
+def test_tree_seed_comes_from_the_spawned_seed_sequence_and_not_from_the_job_size():
+    children = np.random.SeedSequence(11).spawn(5)
+    expected = [int(c.generate_state(1, np.uint64)[0] >> np.uint64(1)) for c in children]
+    assert [tree_seed(11, i) for i in range(5)] == expected
+    assert len(set(expected)) == 5
+
+
+def test_shards_hold_fixed_ranges_covering_every_tree_once():
+    spec = standin_spec(species={"standin_a": 4, "standin_b": 3}, shard_size=3)
+    plans = plan_shards(spec)
+    assert [p.n_trees for p in plans] == [3, 3, 1]
+    assert [i for p in plans for i in p.indices] == list(range(7))
+
+
+def test_run_shard_writes_both_parts_and_a_record_with_checksums(tmp_path):
+    spec = standin_spec()
+    record = run_shard(spec, plan_shards(spec)[1], Location.resolve(str(tmp_path)), StandinChain(spec))
+    trees = pq.read_table(tmp_path / "trees/part-00001.parquet")
+    views = pq.read_table(tmp_path / "views/part-00001.parquet")
+    assert trees["index"].to_pylist() == [2, 3]
+    assert trees["tree_id"].to_pylist() == ["standin-00000002", "standin-00000003"]
+    assert views.num_rows == 4 and record["views"]["rows"] == 4
+    assert json.loads((tmp_path / "_shards/part-00001.json").read_text())["trees"]["sha256"] == record["trees"]["sha256"]
+    assert not [p for p in tmp_path.rglob(".tmp-*")]
+
+
+def test_failed_tree_is_recorded_with_seed_and_message_and_the_shard_goes_on(tmp_path):
+    spec = standin_spec(species={"standin_a": 1, "broken": 1})
+    record = run_shard(spec, plan_shards(spec)[0], Location.resolve(str(tmp_path)), StandinChain(spec))
+    (failure,) = record["failures"]
+    assert failure["seed"] == tree_seed(spec.seed, failure["index"])
+    assert failure["stage"] == "grow" and "refuses species 'broken'" in failure["error"]
+    trees = pq.read_table(tmp_path / "trees/part-00000.parquet").to_pylist()
+    assert [t["error"] is None for t in trees].count(True) == 1
+    assert record["views"]["rows"] == 2
+
+
+def test_one_and_two_workers_write_byte_identical_parts(tmp_path, ray_session):
+    spec = standin_spec()
+    run_job(spec, str(tmp_path / "one"), workers=1, builder_factory=StandinChain, progress=False)
+    run_job(spec, str(tmp_path / "two"), workers=2, builder_factory=StandinChain, progress=False)
+    one, two = part_bytes(tmp_path / "one"), part_bytes(tmp_path / "two")
+    assert len(one) == 2 * spec.n_shards and one == two
+
+
+def test_rerun_skips_finished_shards(tmp_path, ray_session):
+    spec = standin_spec()
+    run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
+    stamps = {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/part-*")}
+    manifest = run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
+    assert {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/part-*")} == stamps
+    assert manifest["counts"]["trees"] == spec.n_trees
+
+
+@pytest.mark.parametrize("damage", ["corrupt", "truncate", "delete"])
+def test_damaged_part_is_named_by_validate_and_regenerated_by_the_next_run(tmp_path, ray_session, damage):
+    spec = standin_spec()
+    run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
+    original = part_bytes(tmp_path)
+    victim = tmp_path / "views/part-00001.parquet"
+    data = victim.read_bytes()
+    if damage == "corrupt":
+        victim.write_bytes(data[:100] + bytes([data[100] ^ 0xFF]) + data[101:])
+    elif damage == "truncate":
+        victim.write_bytes(data[: len(data) // 2])
+    else:
+        victim.unlink()
+    problems = validate_dataset(str(tmp_path))
+    assert [p.path for p in problems] == [str(victim)]
+    run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
+    assert validate_dataset(str(tmp_path)) == []
+    assert part_bytes(tmp_path) == original
+
+
+def test_output_folder_of_another_spec_is_refused(tmp_path, ray_session):
+    run_job(standin_spec(), str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+    with pytest.raises(JobError, match="another job spec"):
+        run_job(standin_spec(seed=99), str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+
+
+def test_killed_worker_shard_is_retried_and_every_tree_is_present_once(tmp_path, ray_session):
+    from functools import partial
+
+    from farm_standins import KillOnce
+
+    spec = standin_spec()
+    flag = tmp_path / "killed"
+    factory = partial(KillOnce, inner_factory=StandinChain, flag=str(flag), at_index=3)
+    manifest = run_job(spec, str(tmp_path / "out"), workers=2, builder_factory=factory, progress=False)
+    assert flag.exists()  # a worker process really died mid-shard
+    ids = dataset.to_pandas(str(tmp_path / "out"), columns=["index"])["index"].tolist()
+    assert sorted(ids) == list(range(spec.n_trees))
+    assert manifest["counts"]["failed"] == 0

@@ -1,0 +1,75 @@
+"""Readers of a finished dataset: pyarrow, pandas, DuckDB, Ray Data and the torch Dataset see the same rows."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import farm.dataset as dataset
+from farm.pipeline import run_job
+from farm_standins import SIZE, StandinChain, standin_spec
+
+
+@pytest.fixture(scope="module")
+def standin_dataset(tmp_path_factory, ray_session):
+    spec = standin_spec(species={"standin_a": 3, "standin_b": 2, "broken": 1})
+    path = str(tmp_path_factory.mktemp("readers"))
+    run_job(spec, path, workers=2, builder_factory=StandinChain, progress=False)
+    return spec, path
+
+
+def test_pyarrow_dataset_has_one_row_per_tree_with_the_trees_schema(standin_dataset):
+    spec, path = standin_dataset
+    table = dataset.open(path).to_table()
+    assert table.schema.equals(dataset.trees_schema(), check_metadata=False)
+    assert sorted(table["index"].to_pylist()) == list(range(spec.n_trees))
+
+
+def test_pandas_skeleton_columns_rebuild_the_node_arrays(standin_dataset):
+    _, path = standin_dataset
+    frame = dataset.to_pandas(path, columns=["n_nodes", "positions", "parent", "error"])
+    good = frame[frame["error"].isna()]
+    for n_nodes, positions, parent in zip(good["n_nodes"], good["positions"], good["parent"]):
+        assert np.reshape(positions, (-1, 3)).shape == (n_nodes, 3)
+        assert parent[0] == -1 and np.all(np.asarray(parent[1:]) < np.arange(1, n_nodes))
+
+
+def test_duckdb_joins_trees_and_views(standin_dataset):
+    spec, path = standin_dataset
+    rows = dataset.duckdb_connect(path).execute(
+        "SELECT t.species, count(*) FROM views v JOIN trees t USING (tree_id) GROUP BY t.species ORDER BY 1"
+    ).fetchall()
+    assert rows == [("standin_a", 6), ("standin_b", 4)]  # 2 views per good tree; the broken tree has none
+
+
+def test_ray_data_reads_every_view(standin_dataset, ray_session):
+    _, path = standin_dataset
+    views = dataset.to_ray(path, "views")
+    assert views.count() == 10
+    assert set(views.take(1)[0]) >= {"tree_id", "camera_json", "depth", "depth_scale"}
+
+
+def test_torch_dataset_decodes_images_lazily_to_channel_first_tensors(standin_dataset):
+    torch = pytest.importorskip("torch")
+    from farm.torch_dataset import ViewsDataset
+
+    _, path = standin_dataset
+    views = ViewsDataset(path, with_params=True)
+    item = views[3]
+    assert len(views) == 10
+    assert item["depth"].dtype == torch.float32 and item["depth"].shape == (1, SIZE, SIZE)
+    assert item["silhouette"].shape == (3, SIZE, SIZE) and float(item["silhouette"].max()) <= 1.0
+    assert item["mask"].dtype == torch.uint8 and int(item["mask"].max()) <= 2
+    assert item["params"]["species"] in ("standin_a", "standin_b")
+    loader = torch.utils.data.DataLoader(ViewsDataset(path, outputs=["sketch_tsn"]), batch_size=4)
+    assert next(iter(loader))["sketch_tsn"].shape == (4, 1, SIZE, SIZE)
+
+
+def test_manifest_counts_failures_and_checksums_every_part(standin_dataset):
+    spec, path = standin_dataset
+    manifest = dataset.read_manifest(path)
+    assert manifest["counts"] == {"trees": 6, "views": 10, "failed": 1, "shards": spec.n_shards}
+    assert manifest["failures"][0]["species"] == "broken"
+    assert all(len(s[t]["sha256"]) == 64 for s in manifest["shards"] for t in ("trees", "views"))
+    assert json.loads(json.dumps(manifest)) == manifest
