@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import TreefarmError
+
 __all__ = ["Skeleton", "SkeletonError", "LEAF_CARD_CORNERS"]
 
 # The unit leaf card in its own frame: width along x (centred), length along z from the stem, normal +y.
@@ -19,7 +21,7 @@ LEAF_CARD_CORNERS = np.array(
 )
 
 
-class SkeletonError(ValueError):
+class SkeletonError(TreefarmError):
     """A skeleton's arrays are inconsistent (shape, dtype, topology or values)."""
 
 

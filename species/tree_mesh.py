@@ -9,10 +9,12 @@ from functools import cached_property
 
 import numpy as np
 
+from .errors import TreefarmError
+
 __all__ = ["MeshPart", "TreeMesh", "MeshError"]
 
 
-class MeshError(ValueError):
+class MeshError(TreefarmError):
     """A mesh's arrays are inconsistent (shape, index range, NaN)."""
 
 
