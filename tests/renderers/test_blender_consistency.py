@@ -31,7 +31,7 @@ def _figures(ours: dict, blender: dict) -> dict:
     a, b = ours["mask"] > 0, blender["mask"] > 0
     both = a & b
     relative = np.abs(blender["depth"][both] - ours["depth"][both]) / ours["depth"][both]
-    return {"iou": (both.sum() / (a | b).sum()), "median_depth_error": float(np.median(relative)),
+    return {"iou": float(both.sum() / (a | b).sum()), "median_depth_error": float(np.median(relative)),
             "p90_depth_error": float(np.percentile(relative, 90)),
             "part_agreement": float((blender["mask"][both] == ours["mask"][both]).mean()),
             "pixels": (int(a.sum()), int(b.sum()))}
