@@ -30,7 +30,7 @@ class Uniform:
 
     def draw(self, rng: np.random.Generator) -> Any:
         lo, hi = np.asarray(self.low, float), np.asarray(self.high, float)
-        value = rng.uniform(lo, hi)
+        value = np.asarray(rng.uniform(lo, hi))
         return value.tolist() if value.ndim else float(value)
 
 

@@ -56,3 +56,15 @@ def test_dictionary_alone_rebuilds_the_tree_byte_identically():
 def test_unknown_preset_lists_the_known_ones():
     with pytest.raises(species.PresetError, match="known: .*maple"):
         species.sample("baobab", np.random.default_rng(0))
+
+
+def test_range_specs_draw_scalars_and_lists():
+    from species.presets import Choice, IntRange, Jitter, Uniform
+
+    rng = np.random.default_rng(0)
+    assert isinstance(Uniform(1.0, 2.0).draw(rng), float)
+    assert len(Uniform([0, 0], [1, 2]).draw(rng)) == 2
+    assert 3 <= IntRange(3, 5).draw(rng) <= 5
+    assert Choice(("a", "b")).draw(rng) in ("a", "b")
+    drawn = Jitter([10, 0], rel=0.25, integer=True).draw(rng)
+    assert 7 <= drawn[0] <= 13 and drawn[1] == 0
