@@ -17,6 +17,7 @@ COMMAND_MODULES = [
     "farm.commands.validate",
     "farm.commands.inspect",
     "farm.commands.export",
+    "farm.commands.render",
 ]
 
 

@@ -1,0 +1,132 @@
+"""`farm render`: grow one tree and write its views (maps and sketch styles) as PNGs with a cameras.json.
+
+  farm render --species NAME --seed N [--params DICT.json] --rig tsn4|orbit:N|two-view[:jitter]
+              --styles depth,mask,sketch_tsn,... --size PX [--backend pyrender|blender] --out DIR
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+BACKENDS = ("pyrender", "blender")
+# Float maps in [0, 1] are written as 16-bit PNGs: value = round(x * 65535).
+UNIT_SCALE = 1.0 / 65535.0
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("render", help="render one tree's views, maps and sketches as PNGs",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--species", help="preset name (see `farm species`); needed unless --params is given")
+    parser.add_argument("--seed", type=int, default=0, help="seed for sampling the preset and the views (default 0)")
+    parser.add_argument("--params", metavar="DICT.json", help="a parameter dictionary to grow instead of sampling")
+    parser.add_argument("--rig", default="tsn4", help="tsn4, orbit:N[:E1,E2], two-view, optionally :jitter")
+    parser.add_argument("--styles", default=None,
+                        help="comma-separated outputs (maps and sketch styles); default the farm's default set")
+    parser.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")
+    parser.add_argument("--backend", choices=BACKENDS, default="pyrender",
+                        help="pyrender (maps and sketches) or blender (Cycles photos)")
+    parser.add_argument("--samples", type=int, default=16, help="Cycles samples per pixel (blender backend)")
+    parser.add_argument("--out", required=True, help="output folder")
+    parser.set_defaults(run=run)
+
+
+def _tree_params(args: argparse.Namespace) -> dict:
+    import species
+
+    if args.params:
+        from farm.commands.tree import load_params
+
+        return load_params(args.params)
+    if not args.species:
+        raise species.TreefarmError("give --species NAME (see `farm species`) or --params DICT.json")
+    return species.sample(args.species, np.random.default_rng(args.seed))
+
+
+def encode_image(name: str, image: np.ndarray, camera) -> tuple[np.ndarray, dict]:
+    """An output array as a PNG-ready array and its decoding note: metric depth becomes uint16 with a metres
+    scale (0 = background), [0, 1] floats become uint16 / 65535, masks and ids stay uint8 values."""
+    if name in ("depth", "depth_back"):
+        scale = max(float(camera.far), 1e-6) / 65535.0
+        return np.round(image / scale).astype(np.uint16), {"scale": scale, "unit": "metres", "background": 0}
+    if image.dtype == np.float32 or image.dtype == np.float64:
+        return np.round(np.clip(image, 0.0, 1.0) * 65535).astype(np.uint16), {"scale": UNIT_SCALE, "unit": "1"}
+    return image, {"scale": 1, "unit": "label" if name in ("mask", "order") else "8-bit"}
+
+
+def _write_png(path: Path, image: np.ndarray) -> None:
+    import cv2
+
+    data = cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image
+    if not cv2.imwrite(str(path), data):
+        raise OSError(f"could not write {path}")
+
+
+def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
+    from renderers import ViewRenderer
+
+    renderer = ViewRenderer(args.size)
+    start = time.perf_counter()
+    views = renderer.render(mesh, skeleton, args.rig, outputs, np.random.default_rng(args.seed))
+    per_view = (time.perf_counter() - start) / len(views)
+    records = []
+    for view in views:
+        files = {}
+        for name, image in view.images.items():
+            data, note = encode_image(name, image, view.camera)
+            filename = f"view{view.index:02d}_{view.name}_{name}.png"
+            _write_png(out / filename, data)
+            files[name] = {"file": filename, **note}
+        records.append({"index": view.index, **view.camera.to_dict(), "images": files})
+        print(f"view {view.index} {view.name:>12}: {per_view * 1000:.0f} ms (pyrender, {len(outputs)} outputs)")
+    renderer.close()
+    return records
+
+
+def _render_blender(args, mesh, out: Path) -> list[dict]:
+    try:
+        from renderers import blender
+    except ImportError as exc:
+        raise OSError(f"the blender backend is unavailable ({exc}); run `make env` to build .venv-blender") from None
+    if not hasattr(blender, "render_photos"):
+        raise OSError("renderers.blender has no render_photos(); the blender backend is not installed in this tree")
+    from renderers import make_rig
+
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    cameras = make_rig(args.rig, points, args.size, np.random.default_rng(args.seed))
+    photos = blender.render_photos(mesh.to_glb(), cameras, out, samples=args.samples)
+    for camera, seconds in zip(cameras, photos.render_seconds):
+        print(f"view {camera.name:>12}: {seconds * 1000:.0f} ms (blender cycles, {args.samples} samples)")
+    return json.loads(photos.cameras_json.read_text())["views"]
+
+
+def run(args: argparse.Namespace) -> int:
+    import species
+    from renderers import DEFAULT_OUTPUTS, check_outputs, parse_rig
+
+    outputs = check_outputs(DEFAULT_OUTPUTS if args.styles is None
+                            else [s.strip() for s in args.styles.split(",") if s.strip()])
+    parse_rig(args.rig)
+    if args.size < 8:
+        raise species.TreefarmError(f"--size {args.size} is too small: allowed 8 pixels or more")
+    params = _tree_params(args)
+    start = time.perf_counter()
+    skeleton = species.grow(params, species.rng_for(params))
+    mesh = species.build_mesh(skeleton, params)
+    print(f"tree: {len(skeleton)} nodes, {mesh.n_faces} triangles, grown and meshed in "
+          f"{time.perf_counter() - start:.2f} s")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.backend == "blender":
+        records = _render_blender(args, mesh, out)
+    else:
+        records = _render_pyrender(args, mesh, skeleton, outputs, out)
+    (out / "cameras.json").write_text(json.dumps({
+        "convention": "opencv: x right, y down, z forward; world Z up, metres; pixel centres at integers",
+        "backend": args.backend, "rig": args.rig, "size": args.size, "species": args.species,
+        "seed": args.seed, "params": params, "views": records}, indent=1, default=float))
+    print(f"wrote {len(records)} views to {out}")
+    return 0
