@@ -21,7 +21,7 @@ __all__ = [
 ]
 
 # Each generator's presets live in its own module and load on first use.
-for _module in ("species.weber_penn_presets", "species.lsystem_presets"):
+for _module in ("species.weber_penn_presets", "species.lsystem_presets", "species.colonization_presets"):
     register_presets(lambda _m=_module: importlib.import_module(_m).PRESETS)
 
 

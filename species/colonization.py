@@ -117,8 +117,8 @@ class Colonizer:
     def _remove_markers(self, centres: np.ndarray, radius: float) -> None:
         if not len(centres):
             return
-        pairs = self._marker_tree.sparse_distance_matrix(cKDTree(centres), radius, output_type="ndarray")
-        self.marker_alive[pairs["i"]] = False
+        taken = self._marker_tree.query_ball_point(centres, radius, return_sorted=False)
+        self.marker_alive[np.concatenate(taken).astype(np.int64)] = False
 
     @property
     def markers_alive(self) -> np.ndarray:
@@ -264,12 +264,13 @@ class Colonizer:
         self.buds = {name: value[keep] for name, value in buds.items()}
 
     def _shed(self, p: dict, tables, subtree_light: np.ndarray, n: int) -> None:
-        """Palubicki's shedding: a branch whose light per internode stays below shed_ratio falls off."""
+        """Palubicki's shedding: a branch whose light per internode stays below shed_ratio times the whole
+        tree's falls off. Relative to the tree, so a crown that has used up its space does not shed itself."""
         size = subtree_sums(tables, self.alive[:n].astype(np.float64))
         ratio = subtree_light / np.maximum(size, 1.0)
         branch = self.lateral[:n] & ~self.guide[:n] & self.alive[:n]
         branch[0] = False
-        low = branch & (ratio < p["shed_ratio"])
+        low = branch & (ratio < p["shed_ratio"] * ratio[0])
         self.low_light[:n] = np.where(low, self.low_light[:n] + 1, 0)
         falling = self.low_light[:n] >= p["shed_patience"]
         if not falling.any():

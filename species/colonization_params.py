@@ -98,7 +98,8 @@ SCHEMA: dict[str, Field] = {
     # bud fate and shedding
     "bud_lifetime": Field("int", 3, 1, 1000, doc="steps a bud may stay without growing before it dies"),
     "apical_abort": Field("float", 0.0, 0.0, 1.0, doc="chance an apical bud dies after it grows (sympodial)"),
-    "shed_ratio": Field("float", 0.0, 0.0, 10.0, doc="shed a branch whose Q per internode stays below; 0 = off"),
+    "shed_ratio": Field("float", 0.0, 0.0, 1.0,
+                        doc="shed a branch whose Q per internode stays below this times the tree's; 0 = off"),
     "shed_patience": Field("int", 2, 1, 100, doc="steps the ratio must stay low before the branch falls"),
     # stems from the base
     "stems": Field("int", 1, 1, 8),
@@ -120,6 +121,8 @@ SCHEDULABLE = frozenset({
 })
 
 _META = ("generator", "species", "seed", "schedule")
+# Keys other stages read (the mesher: species.mesh.build_mesh); passed through untouched.
+_PASSED_THROUGH = ("bark_color", "leaf_color", "mesh_radial_segments", "mesh_min_segments", "name")
 
 
 def _check_schedule(schedule: Any) -> list:
@@ -149,14 +152,20 @@ def validate(params: dict) -> dict:
     if params.get("generator", "colonization") != "colonization":
         raise ParameterError("generator", params.get("generator"), "'colonization'")
     for key in params:
-        if key not in SCHEMA and key not in _META:
-            raise ParameterError(key, params[key], f"a known key: {', '.join(sorted(list(SCHEMA) + list(_META)))}")
+        if key not in SCHEMA and key not in _META and key not in _PASSED_THROUGH:
+            known = sorted(list(SCHEMA) + list(_META) + list(_PASSED_THROUGH))
+            raise ParameterError(key, params[key], f"a known key: {', '.join(known)}")
     out = {key: field.check(key, params[key]) if key in params else field.default for key, field in SCHEMA.items()}
     out["generator"] = "colonization"
     out["species"] = params.get("species", "")
     if not isinstance(out["species"], str):
         raise ParameterError("species", out["species"], "a string")
     out["schedule"] = _check_schedule(params.get("schedule", []))
+    seed = params.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ParameterError("seed", seed, "a non-negative integer")
+    out["seed"] = seed
+    out.update({key: params[key] for key in _PASSED_THROUGH if key in params})
     if out["perception_radius"] <= out["occupancy_radius"]:
         raise ParameterError("perception_radius", out["perception_radius"],
                              f"a radius larger than occupancy_radius = {out['occupancy_radius']}")
@@ -164,9 +173,15 @@ def validate(params: dict) -> dict:
 
 
 def at_iteration(params: dict, iteration: int) -> dict:
-    """The parameters in force at `iteration`: the base values with every schedule entry up to it applied."""
+    """The parameters in force at `iteration`.
+
+    The schedule is a list of phases: entry [start, overrides] holds from `start` until the next entry's
+    start, and means the base values with its overrides; an empty dict returns to the base values.
+    """
     current = dict(params)
+    phase = {}
     for start, overrides in params["schedule"]:
         if start <= iteration:
-            current.update(overrides)
+            phase = overrides
+    current.update(phase)
     return current
