@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "track_frames", "tilt_frames", "declination", "apply",
+__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "declination", "apply",
            "euler_xyz", "from_euler_xyz"]
 
 
@@ -65,19 +65,39 @@ def track_frames(directions: np.ndarray) -> np.ndarray:
 
     This is Blender's `Vector.to_track_quat('Z', 'Y')`, which Sapling uses to orient stems: the shortest
     rotation taking +z to the direction, followed by a roll about the direction of -atan2(-dx, -dy).
+    Built in closed form (no batched matrix products): it runs once per stem step and per leaf.
     """
     d = np.atleast_2d(np.asarray(directions, np.float64))
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    axis = np.stack([-d[:, 1], d[:, 0], np.zeros(len(d))], axis=1)
-    norm = np.linalg.norm(axis, axis=1)
-    flat = norm < 1e-12
-    axis[flat] = (1.0, 0.0, 0.0)  # parallel to z: any horizontal axis; the angle is 0 or pi
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    first = rot_axis(axis, np.arccos(np.clip(d[:, 2], -1, 1)))
-    roll = -np.arctan2(-d[:, 0], -d[:, 1])
+    dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
+    down = dz < -1 + 1e-12  # the shortest arc is undefined: turn by pi about x, as Blender does
+    k = 1.0 / np.where(down, 1.0, 1.0 + dz)
+    x1 = np.stack([1 - dx * dx * k, -dx * dy * k, -dx], axis=1)
+    y1 = np.stack([-dx * dy * k, 1 - dy * dy * k, -dy], axis=1)
+    x1[down], y1[down] = (1.0, 0.0, 0.0), (0.0, -1.0, 0.0)
+    vertical = (np.abs(dx) < 1e-12) & (np.abs(dy) < 1e-12) & (dz > 0)
     # atan2(-0.0, -0.0) is -pi in C; keep Blender's choice for exactly vertical stems.
-    roll[flat & (d[:, 2] > 0)] = np.pi
-    return rot_axis(d, roll) @ first
+    roll = np.where(vertical, np.pi, -np.arctan2(-dx, -dy))[:, None]
+    c, s = np.cos(roll), np.sin(roll)
+    frames = np.empty((len(d), 3, 3))
+    frames[:, :, 0] = c * x1 + s * y1
+    frames[:, :, 1] = c * y1 - s * x1
+    frames[:, :, 2] = d
+    return frames
+
+
+def premul(axis: str, angle, matrices: np.ndarray) -> np.ndarray:
+    """R_axis(angle) @ matrices, for (N, 3, 3) or (N, 3) inputs, by elementwise row mixing (no matmul)."""
+    a = np.asarray(angle, np.float64)
+    c, s = np.cos(a), np.sin(a)
+    m = np.asarray(matrices, np.float64)
+    if m.ndim == 3:
+        c, s = np.reshape(c, (-1, 1)), np.reshape(s, (-1, 1))
+    i, j = {"x": (1, 2), "y": (2, 0), "z": (0, 1)}[axis]
+    out = m.copy()
+    out[:, i] = c * m[:, i] - s * m[:, j]
+    out[:, j] = s * m[:, i] + c * m[:, j]
+    return out
 
 
 def tilt_frames(directions: np.ndarray) -> np.ndarray:

@@ -20,55 +20,51 @@ def leaf_transforms(cp, p, draws, rng) -> tuple[np.ndarray, np.ndarray]:
         pick = np.repeat(np.arange(len(cp)), fan)
         g = np.tile(np.arange(fan), len(cp))
         m = len(pick)
+        step = rotate / (fan - 1) if fan > 1 else 0.0
         if rotate < 0:
             mags = np.abs(rotate + (rng.uniform(-abs(rotate_v), abs(rotate_v), m) if rotate_v else 0.0))
             before = np.where(g == 0, -rotate / 2, mags * np.where(g % 2 == 1, -1.0, 1.0))
             after = -np.copysign(mags, before)
-            turn = rot.rot_y(before)
+            fan_turn = before
         elif fan == 1:
-            before = np.full(m, -rotate / 2)
-            after = before
-            turn = rot.rot_y(np.zeros(m))
+            before = after = np.full(m, -rotate / 2)
+            fan_turn = np.zeros(m)
         else:
-            step = rotate / (fan - 1)
             before = -rotate / 2 + g * step
             after = before + step
-            turn = rot.rot_y(before)
+            fan_turn = before
         f = 1 - np.abs((after - step) / (rotate / 2)) if (fan > 1 and rotate > 0) else cp.offset[pick]
-        down_m = np.broadcast_to(np.eye(3), (m, 3, 3))
-        horizontal = np.broadcast_to(np.eye(3), (m, 3, 3))
+        frames = rot.track_frames(cp.tangent)[pick]
     else:
         pick = np.arange(len(cp))
         m = len(pick)
         draws_rot = rng.uniform(-abs(rotate_v), abs(rotate_v), m) if rotate_v else np.zeros(m)
         if rotate < 0:
-            mags = np.abs(rotate + draws_rot)
-            after = mags * np.where(np.arange(m) % 2 == 0, -1.0, 1.0)
-            before = np.concatenate([[0.0], after[:-1]])
+            after = np.abs(rotate + draws_rot) * np.where(np.arange(m) % 2 == 0, -1.0, 1.0)
         else:
             after = np.cumsum(rotate + draws_rot)
-            before = np.concatenate([[0.0], after[:-1]])
-        turn = rot.rot_z(before)
+        before = np.concatenate([[0.0], after[:-1]])
         if down_v > 0:
             dv = -down_v * cp.offset
         else:
             dv = rng.uniform(down_v, -down_v, m) if down_v else np.zeros(m)
-        down_m = rot.rot_x(down + dv)
-        if rotate > 0 and p["horzLeaves"]:
-            horizontal = rot.rot_z(-after + rotate)
-        else:
-            horizontal = np.broadcast_to(np.eye(3), (m, 3, 3))
         f = cp.offset
+        frames = rot.track_frames(cp.tangent)
+    # Sapling turns the card 180 degrees about z and tilts it by -leafangle, then orients it step by step.
+    rotation = np.broadcast_to(rot.rot_x(np.radians(-p["leafangle"]))[0] @ rot.rot_z(np.pi)[0], (m, 3, 3))
+    if rotate < 0:
+        rotation = rot.premul("z", np.where(after < 0, 1.5 * np.pi, 0.5 * np.pi), rotation)
+    if leaves < 0:
+        rotation = rot.premul("y", fan_turn, rotation)
+    else:
+        if rotate > 0 and p["horzLeaves"]:
+            rotation = rot.premul("z", -after + rotate, rotation)
+        rotation = rot.premul("x", down + dv, rotation)
+        rotation = rot.premul("z", before, rotation)
+    rotation = np.einsum("nij,njk->nik", frames, rotation)
     taper = p["leafScaleT"]
     size = p["leafScale"] * ((1 - (1 - f) * -taper) if taper < 0 else (1 - f * taper)) * draws["leafScaleV"]
     size = np.abs(size)
-    flip = np.broadcast_to(np.eye(3), (m, 3, 3))
-    if rotate < 0:
-        flip = rot.rot_z(np.full(m, np.pi / 2))
-        flip = np.where((after < 0)[:, None, None], rot.rot_z(np.full(m, np.pi)) @ flip, flip)
-    base = rot.rot_x(np.full(m, np.radians(-p["leafangle"]))) @ rot.rot_z(np.full(m, np.pi))
-    frames = rot.track_frames(cp.tangent[pick])
-    rotation = frames @ turn @ down_m @ horizontal @ flip @ base
     scale = np.stack([size * p["leafScaleX"], size, size], axis=1)
     mats = np.zeros((m, 4, 4))
     mats[:, :3, :3] = rotation * scale[:, None, :]

@@ -93,7 +93,10 @@ def _append(level: Level, new: dict) -> Level:
 
 
 def _up_curve(v: np.ndarray, attract: float, seg_max: int) -> np.ndarray:
-    """Sapling's vertical attraction: turn each direction toward (or, if negative, away from) world up."""
+    """Sapling's vertical attraction: turn each unit direction toward (or, if negative, away from) world up.
+
+    The turn is about the direction's tracking-frame x axis, which moves the direction toward the frame's y.
+    """
     if attract == 0:
         return v
     frames = rot.track_frames(v)
@@ -101,7 +104,13 @@ def _up_curve(v: np.ndarray, attract: float, seg_max: int) -> np.ndarray:
     angle = attract * dec * np.abs(frames[:, 2, 1]) / seg_max
     angle = np.where(-dec + angle < -np.pi, -np.pi + dec, angle)
     angle = np.where(dec - angle < 0, dec, angle)
-    return rot.apply(rot.rot_axis(frames[:, :, 0], -angle), v)
+    return np.cos(angle)[:, None] * frames[:, :, 2] + np.sin(angle)[:, None] * frames[:, :, 1]
+
+
+def _bent(bend: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """(N, 3) = Ry(across) @ Rx(bend) @ z: a stem's next direction in its own frame."""
+    cb = np.cos(bend)
+    return np.stack([cb * np.sin(across), -np.sin(bend), cb * np.cos(across)], axis=1)
 
 
 def _unit(v):
@@ -170,13 +179,13 @@ def _grow_once(stems: Level, p, draws, n, scale_val, close_tip, scale, rng) -> L
             r_last[fresh] = draws["rLastAng"][n]
             turn[splitting] = r_last[splitting] + branch_turn
             r_last[splitting] = turn[splitting]
-        # The continuing stem of every spline.
-        local = rot.rot_y(bend_across) @ rot.rot_x(np.where(splitting, -angle, 0.0) + bend)
+        # The continuing stem of every spline (turn and spread are 0 where it does not split).
+        local = _bent(np.where(splitting, -angle, 0.0) + bend, np.broadcast_to(bend_across, (s,)))
         if n == 0:
-            local = np.where(splitting[:, None, None], rot.rot_z(turn) @ local, local)
+            local = rot.premul("z", turn, local)
         else:
-            local = np.where(splitting[:, None, None], rot.rot_y(-np.where(splitting, spread, 0.0)) @ local, local)
-        grow_dir = _unit(_up_curve(rot.apply(frames @ local, np.tile(Z_AXIS, (s, 1))), p["attractUp"][n], k_max))
+            local = rot.premul("y", -np.where(splitting, spread, 0.0), local)
+        grow_dir = _unit(_up_curve(rot.apply(frames, local), p["attractUp"][n], k_max))
         new_pos = pos + grow_dir * (level.seg_len * tf)[:, None]
         radius = level.rad_s * (1 - (k + 1) / k_max) + level.rad_e * ((k + 1) / k_max)
         if close_tip and k == k_max - 1:
@@ -229,14 +238,13 @@ def _clones(level, rows, n_split, k, n, frames, bend, bend_across, angle, spread
     lv = p["lengthV"][n]
     len_var = rng.uniform(1 - lv, 1 + lv, len(parent)) if lv else np.ones(len(parent))
     b_scale = np.minimum(len_var * tf[parent], 1.0)
-    local = rot.rot_y(bend_across[parent]) @ rot.rot_x(angle[parent] + bend[parent])
+    local = _bent(angle[parent] + bend[parent], np.broadcast_to(bend_across, bend.shape)[parent])
     if n == 0:
         around = np.pi - (TAU / (m[np.searchsorted(rows, parent)] + 1)) * (i + 1)
-        local = rot.rot_z(around) @ rot.rot_z(turn[parent]) @ local
+        local = rot.premul("z", around + turn[parent], local)
     else:
-        local = rot.rot_y(np.full(len(parent), spread)) @ local
-    v = rot.apply(frames[parent] @ local, np.tile(Z_AXIS, (len(parent), 1)))
-    v = _unit(_up_curve(v, p["attractUp"][n], level.seg_max))
+        local = rot.premul("y", np.full(len(parent), spread), local)
+    v = _unit(_up_curve(rot.apply(frames[parent], local), p["attractUp"][n], level.seg_max))
     seg_len = seg_family[parent] * len_var
     end = pos[parent] + v * (seg_len * tf[parent])[:, None]
     k_max = level.seg_max
