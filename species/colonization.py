@@ -135,12 +135,16 @@ class Colonizer:
         buds = len(bud_positions)
         light = np.zeros(buds)
         optimal = np.zeros((buds, 3))
-        alive = np.flatnonzero(self.marker_alive)
+        reach = p["perception_radius"] * self.il
+        # Only markers in the buds' bounding box grown by the perception radius can be perceived; early
+        # on, when the crown is a sapling, that skips most of the tree query.
+        low, high = bud_positions.min(axis=0) - reach, bud_positions.max(axis=0) + reach
+        near_box = self.marker_alive & np.all((self.markers >= low) & (self.markers <= high), axis=1)
+        alive = np.flatnonzero(near_box)
         if not buds or not len(alive):
             return light, optimal, None
         k = min(_CANDIDATE_BUDS, buds)
-        distance, nearest = cKDTree(bud_positions).query(self.markers[alive], k=k,
-                                                          distance_upper_bound=p["perception_radius"] * self.il)
+        distance, nearest = cKDTree(bud_positions).query(self.markers[alive], k=k, distance_upper_bound=reach)
         distance, nearest = distance.reshape(len(alive), k), nearest.reshape(len(alive), k)
         seen = nearest[:, 0] < buds  # markers with any bud in reach: the only ones worth the cone test
         alive, distance, nearest = alive[seen], distance[seen], nearest[seen]
