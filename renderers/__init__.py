@@ -11,9 +11,10 @@ mask); "depth_back" (H, W) float32 metres of the farthest surface; "trunk_stroke
 from __future__ import annotations
 
 from .camera import RIGS, Camera, CameraError, make_rig, parse_rig
-from .contact_sheet import write_contact_sheet
+from .contact_sheet import views_sheet_rows, viewable, write_contact_sheet
 from .strokes import PALETTE, main_branches
 from .views import DEFAULT_OUTPUTS, OUTPUTS, OutputError, RenderedView, ViewRenderer, check_outputs
 
 __all__ = ["ViewRenderer", "RenderedView", "Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "OUTPUTS",
-           "DEFAULT_OUTPUTS", "OutputError", "check_outputs", "PALETTE", "main_branches", "write_contact_sheet"]
+           "DEFAULT_OUTPUTS", "OutputError", "check_outputs", "PALETTE", "main_branches", "write_contact_sheet",
+           "viewable", "views_sheet_rows"]

@@ -19,7 +19,7 @@ from species.errors import TreefarmError
 from .blender_worker import WORKER_SCRIPT
 from .camera import Camera
 
-__all__ = ["BlenderError", "BlenderPhotos", "blender_python", "run_job", "render_photos", "glb_info",
+__all__ = ["BlenderError", "BlenderPhotos", "blender_python", "run_job", "run_jobs", "render_photos", "glb_info",
            "load_view", "resize_camera", "time_cycles_view", "BLENDER_PYTHON_ENV"]
 
 BLENDER_PYTHON_ENV = "TREEFARM_BLENDER_PYTHON"
@@ -53,27 +53,48 @@ def run_job(kind: str, job: dict, out_dir: str | Path, timeout: float = DEFAULT_
     Writes out_dir/job.json, runs the worker, keeps its output in out_dir/blender.log, and reads
     out_dir/result.json. A failure raises BlenderError with the tail of Blender's log.
     """
-    out_dir = Path(out_dir).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    job_path = out_dir / "job.json"
-    job_path.write_text(json.dumps({**job, "kind": kind, "out_dir": str(out_dir)}, indent=1))
-    result_path = out_dir / "result.json"
-    result_path.unlink(missing_ok=True)
-    command = [str(blender_python()), str(WORKER_SCRIPT), str(job_path)]
+    return run_jobs([(kind, job, out_dir)], timeout)[0]
+
+
+def run_jobs(jobs: Sequence[tuple[str, dict, str | Path]], timeout: float = DEFAULT_TIMEOUT_S) -> list[dict]:
+    """Run several (kind, job, out_dir) jobs in one Blender process (one start-up), in order.
+
+    Each out_dir gets its job.json and result.json; the log of the whole run goes to the first out_dir's
+    blender.log. Returns the result dictionaries; the first failure raises BlenderError (later jobs do not run).
+    """
+    if not jobs:
+        raise BlenderError("run_jobs needs at least one (kind, job, out_dir) job; got none")
+    paths = []
+    for kind, job, out_dir in jobs:
+        out_dir = Path(out_dir).resolve()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "result.json").unlink(missing_ok=True)
+        job_path = out_dir / "job.json"
+        job_path.write_text(json.dumps({**job, "kind": kind, "out_dir": str(out_dir)}, indent=1))
+        paths.append((kind, out_dir, job_path))
+    log_path = paths[0][1] / "blender.log"
+    command = [str(blender_python()), str(WORKER_SCRIPT)] + [str(p) for _, _, p in paths]
     try:
-        proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=out_dir)
+        proc = subprocess.run(command, capture_output=True, text=True, timeout=timeout, cwd=paths[0][1])
     except subprocess.TimeoutExpired as exc:
-        log = (exc.stdout or b"").decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
-        (out_dir / "blender.log").write_text(log)
-        raise BlenderError(f"Blender job {kind!r} in {out_dir} ran past its {timeout:.0f} s timeout; "
-                           f"last lines of its log:\n{_tail(log)}") from None
+        log = "".join(_text(part) for part in (exc.stdout, exc.stderr))
+        log_path.write_text(log)
+        raise BlenderError(f"Blender jobs in {paths[0][1]} ran past their {timeout:.0f} s timeout; "
+                           f"last lines of the log:\n{_tail(log)}") from None
     log = proc.stdout + proc.stderr
-    (out_dir / "blender.log").write_text(log)
-    if proc.returncode != 0 or not result_path.is_file():
-        what = "was invalid" if proc.returncode == 2 else f"failed (exit status {proc.returncode})"
-        raise BlenderError(f"Blender job {kind!r} in {out_dir} {what}; last lines of its log:\n{_tail(log)}")
-    record = json.loads(result_path.read_text())
-    return record["result"]
+    log_path.write_text(log)
+    results = []
+    for kind, out_dir, _ in paths:
+        record = json.loads((out_dir / "result.json").read_text()) if (out_dir / "result.json").is_file() else {}
+        if not record.get("ok"):
+            what = "was invalid" if proc.returncode == 2 else f"failed (exit status {proc.returncode})"
+            raise BlenderError(f"Blender job {kind!r} in {out_dir} {what}; last lines of its log:\n{_tail(log)}")
+        results.append(record["result"])
+    return results
+
+
+def _text(output) -> str:
+    return output.decode(errors="replace") if isinstance(output, bytes) else (output or "")
 
 
 def _glb_path(glb: bytes | str | Path, folder: Path) -> Path:

@@ -10,7 +10,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-__all__ = ["to_rgb8", "contact_sheet", "write_contact_sheet"]
+__all__ = ["to_rgb8", "viewable", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
 
 LABEL_PX = 18
 
@@ -25,6 +25,29 @@ def to_rgb8(image: np.ndarray) -> np.ndarray:
     if img.ndim != 3 or img.shape[2] != 3:
         raise ValueError(f"a contact sheet cell must be (H, W) or (H, W, 3); got shape {img.shape}")
     return img
+
+
+def viewable(name: str, image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 picture of a renderer output by its name: metric depth scaled to its own range (near
+    bright, background black), label maps (mask, order) spread over grey levels, the rest as `to_rgb8`."""
+    img = np.asarray(image)
+    if name in ("depth", "depth_back"):
+        hit = img > 0
+        if hit.any():
+            lo, hi = float(img[hit].min()), float(img[hit].max())
+            grey = np.where(hit, 1.0 - 0.8 * (img - lo) / max(hi - lo, 1e-9), 0.0)
+        else:
+            grey = np.zeros(img.shape, np.float32)
+        return to_rgb8(grey.astype(np.float32))
+    if name in ("mask", "order"):
+        return to_rgb8((np.minimum(img.astype(np.int32) * 80, 255)).astype(np.uint8))
+    return to_rgb8(img)
+
+
+def views_sheet_rows(views, prefix: str = "") -> list:
+    """Contact sheet rows for a list of RenderedView: one row per view, one column per output."""
+    return [(f"{prefix}{view.name}", [(name, viewable(name, image)) for name, image in view.images.items()])
+            for view in views]
 
 
 def _label(text: str, width: int) -> np.ndarray:

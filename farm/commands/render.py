@@ -1,4 +1,5 @@
-"""`farm render`: grow one tree and write its views (maps and sketch styles) as PNGs with a cameras.json.
+"""`farm render`: grow one tree and write its views (maps and sketch styles) as PNGs with a cameras.json,
+plus a contact_sheet.png of views x outputs to look at.
 
   farm render --species NAME --seed N [--params DICT.json] --rig tsn4|orbit:N|two-view[:jitter]
               --styles depth,mask,sketch_tsn,... --size PX [--backend pyrender|blender] --out DIR
@@ -66,7 +67,7 @@ def _write_png(path: Path, image: np.ndarray) -> None:
 
 
 def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
-    from renderers import ViewRenderer
+    from renderers import ViewRenderer, views_sheet_rows, write_contact_sheet
 
     renderer = ViewRenderer(args.size)
     start = time.perf_counter()
@@ -83,6 +84,7 @@ def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
         records.append({"index": view.index, **view.camera.to_dict(), "images": files})
         print(f"view {view.index} {view.name:>12}: {per_view * 1000:.0f} ms (pyrender, {len(outputs)} outputs)")
     renderer.close()
+    write_contact_sheet(out / "contact_sheet.png", views_sheet_rows(views), cell=min(args.size, 256))
     return records
 
 

@@ -114,3 +114,21 @@ def test_normals_face_the_camera(all_outputs):
     assert normals.dtype == np.uint8 and normals.shape == mask.shape + (3,)
     assert np.all(normals[mask][:, 2] <= 128)  # z forward: a normal facing the camera has z <= 0
     assert np.all(normals[~mask] == 0)
+
+
+def test_a_real_meshed_tree_renders_its_projection_with_outward_bark(view_renderer):
+    # The bark pass relies on the mesher winding triangles outward (back faces are culled in depth-only
+    # passes): then the far wall of every bark tube lies behind its near wall.
+    import species
+
+    params = species.sample("maple", np.random.default_rng(0))
+    skeleton = species.grow(params, species.rng_for(params))
+    mesh = species.build_mesh(skeleton, params)
+    view = view_renderer.render(mesh, skeleton, "two-view", ["mask", "depth", "depth_back"],
+                                np.random.default_rng(0))[0]
+    bark = _raster(view.camera, mesh.bark.vertices, mesh.bark.faces)
+    leaves = _raster(view.camera, mesh.leaves.vertices, mesh.leaves.faces)
+    assert _iou(view.images["mask"] > 0, bark | leaves) > 0.95
+    on_bark = view.images["mask"] == 1
+    gap = view.images["depth_back"][on_bark] - view.images["depth"][on_bark]
+    assert np.mean(gap > 1e-4) > 0.95

@@ -1,0 +1,124 @@
+"""Job kinds `fbx` (GLB files to FBX files for Unity/Unreal, many in one job) and `fbx_info` (read an FBX back).
+
+`fbx` keys: exports, a list of {glb, fbx, name (optional), node (optional: keep that glTF node's subtree)}.
+Result: per export the FBX path, its objects (name, part, vertices, triangles), bounds and seconds.
+"""
+from __future__ import annotations
+
+import os
+import time
+
+import bpy
+
+from scene import JobError, import_glb, mesh_stats, require, reset_scene
+
+GLB_MAGIC = b"glTF"
+
+# What Unity and Unreal expect: Y up, -Z forward, 1 unit = 1 m (UnitScaleFactor 100 cm), transforms baked
+# into the vertices (no -90 degree X rotation on every object), no leaf bones, no animation, textures
+# embedded in the file so one .fbx is the whole asset.
+FBX_SETTINGS = dict(
+    object_types={"MESH", "EMPTY"}, apply_unit_scale=True, apply_scale_options="FBX_SCALE_UNITS",
+    global_scale=1.0, axis_forward="-Z", axis_up="Y", bake_space_transform=True, use_mesh_modifiers=True,
+    mesh_smooth_type="FACE", use_triangles=False, add_leaf_bones=False, bake_anim=False,
+    path_mode="COPY", embed_textures=True, use_custom_props=True,
+)
+
+
+def check_glb(path: str) -> None:
+    """Raise JobError unless `path` is a file that starts with the GLB magic bytes."""
+    if not os.path.isfile(path):
+        raise JobError(f"glb {path!r} does not exist")
+    with open(path, "rb") as f:
+        magic = f.read(4)
+    if magic != GLB_MAGIC:
+        raise JobError(f"{path!r} is not a GLB file: it starts with {magic!r}, a binary glTF starts with b'glTF'")
+
+
+def load_glb(path: str) -> list:
+    """A fresh scene with the GLB imported (checked first); returns the new objects."""
+    check_glb(path)
+    reset_scene()
+    return import_glb(path)
+
+
+def subtree(objects: list, node: str | None) -> list:
+    """The objects of the glTF node named `node` and everything under it; all objects when node is None."""
+    if node is None:
+        return list(objects)
+    roots = [obj for obj in objects if obj.name == node]
+    if not roots:
+        raise JobError(f"node {node!r} is not in the GLB: it has {sorted(obj.name for obj in objects)}")
+    return [roots[0]] + list(roots[0].children_recursive)
+
+
+def rename(objects: list, name: str) -> None:
+    """The top object of `objects` becomes `name`, the others `name_<old name>` (FBX node names)."""
+    chosen = set(objects)
+    for obj in objects:
+        obj.name = name if obj.parent not in chosen else f"{name}_{obj.name}"
+        if obj.type == "MESH":
+            obj.data.name = obj.name
+
+
+def name_textures() -> None:
+    """Give packed images a file name with an extension, so the embedded FBX texture is `<name>.png`."""
+    for image in bpy.data.images:
+        if image.packed_file is not None and not os.path.splitext(image.filepath_raw)[1]:
+            extension = {"JPEG": ".jpg"}.get(image.file_format, ".png")
+            image.filepath_raw = image.name + extension
+
+
+def export_fbx(objects: list, path: str) -> None:
+    bpy.ops.object.select_all(action="DESELECT")
+    for obj in objects:
+        obj.select_set(True)
+    os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
+    tmp = path + ".tmp.fbx"
+    result = bpy.ops.export_scene.fbx(filepath=tmp, use_selection=True, **FBX_SETTINGS)
+    if "FINISHED" not in result or not os.path.isfile(tmp):
+        raise RuntimeError(f"Blender's FBX exporter did not write {path!r} ({result})")
+    os.replace(tmp, path)  # whole files only: a killed job never leaves half an FBX
+
+
+def run(job: dict, out_dir: str) -> dict:
+    exports = require(job, "exports", list)
+    if not exports:
+        raise JobError("fbx job has an empty 'exports' list: give at least one {glb, fbx}")
+    rows, loaded, objects = [], None, []
+    for i, item in enumerate(exports):
+        if not isinstance(item, dict):
+            raise JobError(f"exports[{i}] = {item!r} must be an object with keys glb, fbx")
+        start = time.perf_counter()
+        glb, fbx = require(item, "glb"), require(item, "fbx")
+        if glb != loaded:  # several LODs of one GLB: import it once
+            objects, loaded = load_glb(glb), glb
+            name_textures()
+        chosen = subtree(objects, item.get("node"))
+        if item.get("name"):
+            rename(chosen, str(item["name"]))
+        export_fbx(chosen, fbx)
+        stats = mesh_stats(chosen)
+        rows.append({"glb": glb, "fbx": fbx, "objects": stats["objects"], "triangles": stats["triangles"],
+                     "bounds": stats["bounds"], "bytes": os.path.getsize(fbx),
+                     "seconds": time.perf_counter() - start})
+        print(f"treefarm-blender: fbx {i + 1}/{len(exports)} {os.path.basename(fbx)} "
+              f"{stats['triangles']} triangles in {rows[-1]['seconds']:.2f} s", flush=True)
+    return {"exports": rows, "blender_version": bpy.app.version_string}
+
+
+def info(job: dict, out_dir: str) -> dict:
+    """Job kind `fbx_info`: import an FBX with Blender's default settings; the `scene.mesh_stats` dictionary."""
+    path = require(job, "fbx")
+    if not os.path.isfile(path):
+        raise JobError(f"fbx {path!r} does not exist")
+    reset_scene()
+    before = set(bpy.data.objects)
+    result = bpy.ops.import_scene.fbx(filepath=path)
+    if "FINISHED" not in result:
+        raise JobError(f"Blender's FBX importer could not read {path!r} ({result})")
+    objects = [obj for obj in bpy.data.objects if obj not in before]
+    stats = mesh_stats(objects)
+    stats["textures"] = sorted(image.name for image in bpy.data.images if image.has_data or image.packed_file)
+    stats["unit_scale"] = bpy.context.scene.unit_settings.scale_length
+    return stats
