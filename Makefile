@@ -37,7 +37,7 @@ node-env: $(NODE_STAMP)
 env: $(STAMP) blender-env node-env
 
 run: env
-	$(VENV)/bin/farm trees --out out/trees
+	$(VENV)/bin/farm generate --out out/dataset
 
 test: env
 	$(PY) -m pytest -q
