@@ -181,7 +181,8 @@ class Colonizer:
         else:
             light = self.shadow.light(bud_positions)
             optimal = self.shadow.best_directions(bud_positions, buds["direction"],
-                                                  np.cos(np.radians(p["perception_angle"]) / 2))
+                                                  np.cos(np.radians(p["perception_angle"]) / 2),
+                                                  p["shadow_direction"])
             steer = None
         n = self.n_nodes
         tables = jump_tables(self.parent[:n])

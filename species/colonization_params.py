@@ -82,6 +82,8 @@ SCHEMA: dict[str, Field] = {
     "shadow_b": Field("float", 2.0, 1.01, 10.0),
     "shadow_depth": Field("int", 6, 1, 20),
     "shadow_exposure": Field("float", 3.0, 0.01, 20.0, doc="C, full exposure (Q is divided by C)"),
+    "shadow_direction": Field("choice", "least_shaded", options=("least_shaded", "gradient"),
+                              doc="V_opt toward the least shaded neighbour voxel, or along -grad(s)"),
     # allocation (digest 1.5, 1.6)
     "allocation": Field("choice", "borchert_honda", options=("borchert_honda", "priority")),
     "alpha": Field("float", 2.0, 0.01, 20.0, doc="root pool = alpha * Q_base"),

@@ -339,6 +339,18 @@ class DepthMapCrown(GrowthSpace):
         self.bounds = np.array([[x0, near + self.front[self.foreground].min() * (far - near), z0],
                                 [x1, near + self.back[self.foreground].max() * (far - near), z1]])
 
+    @classmethod
+    def from_silhouette(cls, silhouette: np.ndarray, extent, depth_range) -> "DepthMapCrown":
+        """From a silhouette image (H, W, 3) float in [0, 1]: R front depth, G front-to-back gap, B mask
+        (the renderers' "silhouette" output and the sketch cGAN's prediction); B < 0.5 is background."""
+        silhouette = np.asarray(silhouette, np.float64)
+        if silhouette.ndim != 3 or silhouette.shape[2] < 3:
+            raise GrowthSpaceError(f"a silhouette must be (H, W, 3); got {silhouette.shape}")
+        foreground = silhouette[..., 2] >= 0.5
+        front = np.where(foreground, silhouette[..., 0], 1.0)
+        back = np.where(foreground, np.minimum(silhouette[..., 0] + silhouette[..., 1], 1.0 - 1e-6), 1.0)
+        return cls(front, back, extent, depth_range)
+
     def _contains(self, points: np.ndarray) -> np.ndarray:
         height, width = self.front.shape
         x0, x1, z0, z1 = self.extent

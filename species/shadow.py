@@ -73,8 +73,25 @@ class ShadowGrid:
         flat = self._cells(positions) @ self._strides
         return np.maximum(self.exposure - self.shadow[flat] + self.a, 0.0) / self.exposure
 
-    def best_directions(self, positions: np.ndarray, directions: np.ndarray, cos_half_angle: float) -> np.ndarray:
-        """(P, 3) unit vectors to the least shaded of the 26 neighbour voxels inside each bud's cone, or 0."""
+    def best_directions(self, positions: np.ndarray, directions: np.ndarray, cos_half_angle: float,
+                        rule: str = "least_shaded") -> np.ndarray:
+        """(P, 3) unit optimal directions, 0 where none: rule "least_shaded" points to the least shaded of the
+        26 neighbour voxels in each bud's cone; "gradient" takes -grad(s) where it lies in the cone and is
+        not flat, and the least shaded neighbour elsewhere."""
+        least = self._least_shaded(positions, directions, cos_half_angle)
+        if rule == "least_shaded":
+            return least
+        cells = np.clip(self._cells(positions)[:, None, :] + np.vstack([np.eye(3, dtype=np.int64),
+                                                                          -np.eye(3, dtype=np.int64)])[None],
+                        0, np.array(self.shape) - 1)
+        shade = self.shadow[cells @ self._strides]  # (P, 6): +x +y +z -x -y -z
+        downhill = (shade[:, 3:] - shade[:, :3]) / 2
+        norm = np.linalg.norm(downhill, axis=1)
+        unit = downhill / np.maximum(norm, 1e-12)[:, None]
+        usable = (norm > 1e-6) & (np.einsum("pd,pd->p", unit, directions) >= cos_half_angle)
+        return np.where(usable[:, None], unit, least)
+
+    def _least_shaded(self, positions: np.ndarray, directions: np.ndarray, cos_half_angle: float) -> np.ndarray:
         cells = self._cells(positions)[:, None, :] + self._neighbours[None]
         cells = np.clip(cells, 0, np.array(self.shape) - 1)
         flat = cells @ self._strides

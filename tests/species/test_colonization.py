@@ -88,6 +88,14 @@ def test_mesh_space_agrees_with_the_analytic_lobe_it_was_made_from():
     assert agreement > 0.97
 
 
+def test_depth_map_crown_from_a_silhouette_holds_the_points_between_front_and_back():
+    silhouette = np.zeros((4, 4, 3))
+    silhouette[1:3, 1:3] = (0.25, 0.5, 1.0)  # front at 0.25, gap 0.5: y from -0.5 to 0.5 for depth range (-1, 1)
+    crown = DepthMapCrown.from_silhouette(silhouette, extent=(-2, 2, 0, 4), depth_range=(-1, 1))
+    inside = crown.contains(np.array([[0.0, 0.0, 2.0], [0.0, 0.45, 2.0], [0.0, 0.6, 2.0], [1.5, 0.0, 2.0]]))
+    assert inside.tolist() == [True, True, False, False]
+
+
 def test_open_mesh_is_rejected_as_a_growth_space():
     mesh = _sphere_space().to_mesh(2)
     with pytest.raises(species.TreefarmError, match="not closed"):
