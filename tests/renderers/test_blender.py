@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from renderers.blender import BlenderError, blender_python, glb_info, load_view, render_photos, resize_camera, \
-    run_job
+    run_job, run_jobs
 from renderers.blender_worker.cameras import CameraConversionError, blender_camera_settings
 from renderers.camera import Camera, look_at, make_rig
 
@@ -176,3 +176,11 @@ def test_unknown_job_kind_fails_naming_the_known_kinds(tmp_path):
 def test_missing_glb_file_is_rejected_before_blender_starts(tmp_path):
     with pytest.raises(BlenderError, match="does not exist"):
         render_photos(tmp_path / "missing.glb", [_camera()], tmp_path)
+
+
+def test_several_jobs_run_in_one_blender_process(tree_glb, tmp_path):
+    glb = tmp_path / "tree.glb"
+    glb.write_bytes(tree_glb)
+    results = run_jobs([("info", {"glb": str(glb)}, tmp_path / "a"), ("info", {"glb": str(glb)}, tmp_path / "b")])
+    assert len(results) == 2 and results[0] == results[1]
+    assert (tmp_path / "a" / "result.json").is_file() and (tmp_path / "b" / "result.json").is_file()
