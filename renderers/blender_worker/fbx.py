@@ -5,6 +5,8 @@ Result: per export the FBX path, its objects (name, part, vertices, triangles), 
 """
 from __future__ import annotations
 
+import datetime
+import hashlib
 import os
 import time
 
@@ -69,7 +71,48 @@ def name_textures() -> None:
             image.filepath_raw = image.name + extension
 
 
+class _EpochClock:
+    """Stands in for `datetime` in the FBX exporter: files carry a fixed creation time, not the clock's."""
+
+    class datetime(datetime.datetime):
+        @classmethod
+        def now(cls, tz=None):
+            return cls(2000, 1, 1)
+
+
+def _stable_uuid(uuids, key):
+    """The exporter's uid of a key from a content hash: Python's `hash()` of a str changes every process."""
+    from io_scene_fbx import fbx_utils
+
+    if isinstance(key, int) and 0 <= key < 2**63:
+        return fbx_utils.UUID(key)
+    uuid = int.from_bytes(hashlib.blake2b(repr(key).encode(), digest_size=8).digest(), "little") % int(1e9)
+    while uuid in uuids:  # the exporter's own rule for a collision: the next free number
+        uuid += 1
+    return fbx_utils.UUID(uuid)
+
+
+def _embedded_texture_path(image, scene_data) -> tuple[str, str]:
+    """(absolute, relative) texture path written in the FBX: the bare file name for both, since the pixels are
+    embedded; the exporter's own choice holds the output folder's absolute path, so bytes would depend on it."""
+    name = os.path.basename(image.filepath_raw) or image.name
+    return name, name
+
+
+def _deterministic_exporter() -> None:
+    """Same scene, same FBX bytes wherever it is written: pin the time stamp, hash keys by content, forget the
+    previous file's ids, write texture names without folders."""
+    from io_scene_fbx import export_fbx_bin, fbx_utils
+
+    export_fbx_bin.datetime = _EpochClock
+    export_fbx_bin._gen_vid_path = _embedded_texture_path
+    fbx_utils._key_to_uuid = _stable_uuid
+    fbx_utils._keys_to_uuids.clear()
+    fbx_utils._uuids_to_keys.clear()
+
+
 def export_fbx(objects: list, path: str) -> None:
+    _deterministic_exporter()
     bpy.ops.object.select_all(action="DESELECT")
     for obj in objects:
         obj.select_set(True)

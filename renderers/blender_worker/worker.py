@@ -23,6 +23,8 @@ from scene import JobError  # noqa: E402  (needs the path above)
 JOBS = {
     "info": "info:run",
     "photos": "photos:run",
+    "fbx": "fbx:run", "fbx_info": "fbx:info",
+    "asset_library": "asset_library:run", "blend_info": "asset_library:info",
 }
 
 
