@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "declination", "apply",
+__all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
            "euler_xyz", "from_euler_xyz"]
 
 
@@ -63,26 +63,24 @@ def apply(rotations: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 def track_frames(directions: np.ndarray) -> np.ndarray:
     """(N, 3, 3) frames whose z axis is each direction and whose y axis leans toward world up.
 
-    This is Blender's `Vector.to_track_quat('Z', 'Y')`, which Sapling uses to orient stems: the shortest
-    rotation taking +z to the direction, followed by a roll about the direction of -atan2(-dx, -dy).
-    Built in closed form (no batched matrix products): it runs once per stem step and per leaf.
+    This is Blender's `Vector.to_track_quat('Z', 'Y')`, which Sapling uses to orient stems (the shortest rotation
+    taking +z to the direction, then a roll of -atan2(-dx, -dy) about it). That frame works out to: y = world up
+    projected off the direction, x = the horizontal normal (-dy, dx, 0) / |(dx, dy)|. Closed form, because it
+    runs once per stem step and per leaf.
     """
     d = np.atleast_2d(np.asarray(directions, np.float64))
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
     dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
-    down = dz < -1 + 1e-12  # the shortest arc is undefined: turn by pi about x, as Blender does
-    k = 1.0 / np.where(down, 1.0, 1.0 + dz)
-    x1 = np.stack([1 - dx * dx * k, -dx * dy * k, -dx], axis=1)
-    y1 = np.stack([-dx * dy * k, 1 - dy * dy * k, -dy], axis=1)
-    x1[down], y1[down] = (1.0, 0.0, 0.0), (0.0, -1.0, 0.0)
-    vertical = (np.abs(dx) < 1e-12) & (np.abs(dy) < 1e-12) & (dz > 0)
-    # atan2(-0.0, -0.0) is -pi in C; keep Blender's choice for exactly vertical stems.
-    roll = np.where(vertical, np.pi, -np.arctan2(-dx, -dy))[:, None]
-    c, s = np.cos(roll), np.sin(roll)
+    s = np.hypot(dx, dy)
+    vertical = s < 1e-12
+    inv = 1.0 / np.where(vertical, 1.0, s)
     frames = np.empty((len(d), 3, 3))
-    frames[:, :, 0] = c * x1 + s * y1
-    frames[:, :, 1] = c * y1 - s * x1
+    frames[:, 0, 0], frames[:, 1, 0], frames[:, 2, 0] = -dy * inv, dx * inv, 0.0
+    frames[:, 0, 1], frames[:, 1, 1], frames[:, 2, 1] = -dz * dx * inv, -dz * dy * inv, s
     frames[:, :, 2] = d
+    if vertical.any():  # Blender's choice for a stem straight up or down (a roll of pi)
+        frames[vertical, :, 0] = (-1.0, 0.0, 0.0)
+        frames[vertical, :, 1] = np.where(dz[vertical, None] > 0, (0.0, -1.0, 0.0), (0.0, 1.0, 0.0))
     return frames
 
 
@@ -104,12 +102,30 @@ def tilt_frames(directions: np.ndarray) -> np.ndarray:
     """(N, 3, 3) frames with z along each direction built as Euler XYZ (-rx, ry, 0): no roll about z.
 
     Sapling orients trunk segments this way, so trunk curvature bends in a fixed world plane.
+    Closed form of Ry(ry) @ Rx(-rx).
     """
     d = np.atleast_2d(np.asarray(directions, np.float64))
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
     ry = np.arctan2(d[:, 0], d[:, 2])
     rx = np.arctan2(d[:, 1], np.hypot(d[:, 0], d[:, 2]))
-    return rot_y(ry) @ rot_x(-rx)
+    cy, sy, cx, sx = np.cos(ry), np.sin(ry), np.cos(rx), np.sin(rx)
+    frames = np.empty((len(d), 3, 3))
+    frames[:, 0, 0], frames[:, 1, 0], frames[:, 2, 0] = cy, 0.0, -sy
+    frames[:, 0, 1], frames[:, 1, 1], frames[:, 2, 1] = -sx * sy, cx, -sx * cy
+    frames[:, :, 2] = d
+    return frames
+
+
+def zxz(alpha, beta, gamma) -> np.ndarray:
+    """(N, 3, 3) = Rz(alpha) @ Rx(beta) @ Rz(gamma), in closed form."""
+    ca, sa, cb, sb, cg, sg = (np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta), np.cos(gamma),
+                              np.sin(gamma))
+    ca, sa, cb, sb, cg, sg = np.broadcast_arrays(ca, sa, cb, sb, cg, sg)
+    m = np.empty(ca.shape + (3, 3))
+    m[..., 0, 0], m[..., 0, 1], m[..., 0, 2] = ca * cg - sa * cb * sg, -ca * sg - sa * cb * cg, sa * sb
+    m[..., 1, 0], m[..., 1, 1], m[..., 1, 2] = sa * cg + ca * cb * sg, -sa * sg + ca * cb * cg, -ca * sb
+    m[..., 2, 0], m[..., 2, 1], m[..., 2, 2] = sb * sg, sb * cg, cb
+    return m
 
 
 def declination(directions: np.ndarray) -> np.ndarray:
@@ -138,6 +154,12 @@ def euler_xyz(frames: np.ndarray, reference_z: np.ndarray) -> np.ndarray:
 
 
 def from_euler_xyz(angles: np.ndarray) -> np.ndarray:
-    """(N, 3, 3) = Rz(z) @ Ry(y) @ Rx(x)."""
+    """(N, 3, 3) = Rz(z) @ Ry(y) @ Rx(x), in closed form."""
     a = np.atleast_2d(angles)
-    return rot_z(a[:, 2]) @ rot_y(a[:, 1]) @ rot_x(a[:, 0])
+    cx, sx, cy, sy, cz, sz = (np.cos(a[:, 0]), np.sin(a[:, 0]), np.cos(a[:, 1]), np.sin(a[:, 1]),
+                              np.cos(a[:, 2]), np.sin(a[:, 2]))
+    m = np.empty((len(a), 3, 3))
+    m[:, 0, 0], m[:, 0, 1], m[:, 0, 2] = cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx
+    m[:, 1, 0], m[:, 1, 1], m[:, 1, 2] = sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx
+    m[:, 2, 0], m[:, 2, 1], m[:, 2, 2] = -sy, cy * sx, cy * cx
+    return m

@@ -51,17 +51,15 @@ def leaf_transforms(cp, p, draws, rng) -> tuple[np.ndarray, np.ndarray]:
         f = cp.offset
         frames = rot.track_frames(cp.tangent)
     # Sapling turns the card 180 degrees about z and tilts it by -leafangle, then orients it step by step.
-    rotation = np.broadcast_to(rot.rot_x(np.radians(-p["leafangle"]))[0] @ rot.rot_z(np.pi)[0], (m, 3, 3))
+    card = rot.rot_x(np.radians(-p["leafangle"]))[0] @ rot.rot_z(np.pi)[0]
     if rotate < 0:
-        rotation = rot.premul("z", np.where(after < 0, 1.5 * np.pi, 0.5 * np.pi), rotation)
+        card = np.where((after < 0)[:, None, None], rot.rot_z(1.5 * np.pi)[0] @ card, rot.rot_z(0.5 * np.pi)[0] @ card)
     if leaves < 0:
-        rotation = rot.premul("y", fan_turn, rotation)
+        orient = rot.rot_y(fan_turn)
     else:
-        if rotate > 0 and p["horzLeaves"]:
-            rotation = rot.premul("z", -after + rotate, rotation)
-        rotation = rot.premul("x", down + dv, rotation)
-        rotation = rot.premul("z", before, rotation)
-    rotation = np.einsum("nij,njk->nik", frames, rotation)
+        horizontal = -after + rotate if (rotate > 0 and p["horzLeaves"]) else np.zeros(m)
+        orient = rot.zxz(before, down + dv, horizontal)
+    rotation = np.einsum("nij,njk->nik", frames, orient) @ card
     taper = p["leafScaleT"]
     size = p["leafScale"] * ((1 - (1 - f) * -taper) if taper < 0 else (1 - f * taper)) * draws["leafScaleV"]
     size = np.abs(size)

@@ -95,16 +95,21 @@ def _append(level: Level, new: dict) -> Level:
 def _up_curve(v: np.ndarray, attract: float, seg_max: int) -> np.ndarray:
     """Sapling's vertical attraction: turn each unit direction toward (or, if negative, away from) world up.
 
-    The turn is about the direction's tracking-frame x axis, which moves the direction toward the frame's y.
+    Sapling turns about the tracking frame's x axis, by attractUp * declination * |frame y . up| / curveRes;
+    that frame's y is world up projected off the direction, so the turn is in the vertical plane.
     """
     if attract == 0:
         return v
-    frames = rot.track_frames(v)
-    dec = rot.declination(v)
-    angle = attract * dec * np.abs(frames[:, 2, 1]) / seg_max
+    dz = np.clip(v[:, 2], -1.0, 1.0)
+    sin_dec = np.sqrt(1.0 - dz * dz)
+    dec = np.arccos(dz)
+    angle = attract * dec * sin_dec / seg_max
     angle = np.where(-dec + angle < -np.pi, -np.pi + dec, angle)
     angle = np.where(dec - angle < 0, dec, angle)
-    return np.cos(angle)[:, None] * frames[:, :, 2] + np.sin(angle)[:, None] * frames[:, :, 1]
+    up = -dz[:, None] * v
+    up[:, 2] += 1.0
+    up /= np.where(sin_dec > 1e-12, sin_dec, 1.0)[:, None]
+    return np.cos(angle)[:, None] * v + np.sin(angle)[:, None] * up
 
 
 def _bent(bend: np.ndarray, across: np.ndarray) -> np.ndarray:
