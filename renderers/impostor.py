@@ -1,0 +1,236 @@
+"""Far-distance impostors and LOD silhouettes: a crossed-plane billboard whose albedo/normal/alpha atlas is rendered
+with the farm's depth renderer, and silhouette coverage (GL for meshes, ray casting for the alpha-tested impostor).
+
+In: TreeMesh (LOD0) and a tile size; out: `ImpostorAtlas` (atlas images, plane geometry, a MeshPart of <= 16
+triangles), and (H, W) bool coverage masks and IoU figures at a given screen size.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from species.errors import TreefarmError
+from species.textures import linear_to_srgb
+from species.tree_mesh import MeshPart, TreeMesh
+
+from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
+from .maps import DepthRenderer, combine_parts, normals_from_depth
+
+__all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
+           "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
+           "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS"]
+
+# Switch sizes are pixels of tree height on a reference screen this tall with this vertical field of view.
+REFERENCE_SCREEN_PX = 1080
+REFERENCE_FOV_DEG = 60.0
+# Silhouettes are compared after closing gaps of about this radius (pixels at the switch size): leaves smaller
+# than a pixel make a speckle whose exact pixels no simplification can (or should) reproduce.
+SILHOUETTE_CLOSING_PX = 2
+# Vertical planes crossed at 180 / IMPOSTOR_PLANES degrees, two triangles each (8 triangles for 4).
+IMPOSTOR_PLANES = 4
+# Silhouettes are compared from these azimuths (degrees): 8 views, half of them between the impostor's planes.
+QUALITY_AZIMUTHS = tuple(float(a) for a in np.arange(8) * 45.0 + 22.5)
+# The planes' square spans the tree's horizontal radius and half height about the box centre, plus this margin.
+_PLANE_MARGIN = 1.02
+# Alpha of the impostor is grown by this many texels: views between planes see each plane foreshortened, and
+# a slightly fuller silhouette keeps the far tree from thinning (measured: IoU at 64 px rises by ~0.02).
+_ALPHA_DILATE_TEXELS = 1
+
+
+class ImpostorError(TreefarmError):
+    """An impostor cannot be made (empty tree, tile size out of range)."""
+
+
+@dataclass(frozen=True, eq=False)
+class ImpostorAtlas:
+    """A crossed-plane impostor.
+
+    albedo  : (2T, 2T, 4) uint8 sRGB + alpha (alpha 255 where the tree covers the texel), tiles in a 2x2 grid.
+    normal  : (2T, 2T, 3) uint8 tangent-space normals (+x along u, +y image up, +z toward the viewer).
+    centre  : (3,) float64 metres, where the planes cross (the tree's box centre).
+    half    : metres, half side of every plane's square.
+    azimuths: (P,) float64 degrees, each plane faces the camera of that azimuth.
+    tile    : T, pixels per tile side.
+    """
+
+    albedo: np.ndarray
+    normal: np.ndarray
+    centre: np.ndarray
+    half: float
+    azimuths: np.ndarray
+    tile: int
+
+    def plane_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P, 3) right vectors (image u) and (P, 3) normals toward each plane's camera, float64."""
+        directions = np.stack([view_direction(a, 0.0) for a in self.azimuths])
+        right = np.cross(-directions, np.array([0.0, 0.0, 1.0]))
+        right /= np.linalg.norm(right, axis=1, keepdims=True)
+        return right, directions
+
+    def tile_origin(self, plane: int) -> tuple[int, int]:
+        """(row, column) of the top-left texel of a plane's tile in the atlas."""
+        return (plane // 2) * self.tile, (plane % 2) * self.tile
+
+    def mesh(self) -> MeshPart:
+        """The billboard: one two-triangle square per plane (single-sided geometry; the material is double-sided),
+        UVs into its tile (v up, OBJ convention), normals toward each plane's camera."""
+        right, normal = self.plane_axes()
+        up = np.array([0.0, 0.0, 1.0])
+        h = self.half
+        corners_local = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])  # (x along right, y up)
+        vertices = (self.centre[None, None, :] + corners_local[None, :, 0, None] * right[:, None, :]
+                    + corners_local[None, :, 1, None] * up[None, None, :])
+        size = 2 * self.tile
+        uvs = []
+        for plane in range(len(self.azimuths)):
+            row, col = self.tile_origin(plane)
+            u0, u1 = col / size, (col + self.tile) / size
+            v1, v0 = 1.0 - row / size, 1.0 - (row + self.tile) / size  # image rows run down, v runs up
+            uvs.append([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
+        faces = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(len(self.azimuths))[:, None, None])
+        return MeshPart(vertices.reshape(-1, 3), faces.reshape(-1, 3), np.repeat(normal, 4, axis=0),
+                        np.asarray(uvs, np.float64).reshape(-1, 2))
+
+
+class CoverageRenderer(DepthRenderer):
+    """The farm's depth renderer with one more pass: the whole tree's coverage in a single depth-only draw."""
+
+    def coverage(self, tree: TreeMesh, camera: Camera) -> np.ndarray:
+        """(H, W) bool, pixels whose centre a triangle of `tree` covers (leaf cards as opaque quads)."""
+        self.load(tree)
+        return self._pass(camera, set(self.part_names)) > 0
+
+
+def switch_camera(points: np.ndarray, azimuth_deg: float, screen_px: int) -> Camera:
+    """The camera through which the tree (points (N, 3) metres) appears `screen_px` pixels tall (or wide, if
+    wider) on the reference screen (REFERENCE_SCREEN_PX tall, REFERENCE_FOV_DEG vertical field of view): the
+    crop of that screen around the tree, screen_px / 0.9 pixels square, perspective, elevation 0. Small trees
+    on screen are far away, so their views come out nearly orthographic, as in a game."""
+    size = int(np.ceil(screen_px / TSN_FILL))
+    half_tan = np.tan(np.radians(REFERENCE_FOV_DEG) / 2) * size / REFERENCE_SCREEN_PX
+    fov = float(np.degrees(2 * np.arctan(half_tan)))
+    return perspective_camera(points, azimuth_deg, 0.0, size, fov_deg=fov,
+                              name=f"az{azimuth_deg:05.1f}_{screen_px}px")
+
+
+def closed_silhouette(coverage: np.ndarray, radius_px: int = SILHOUETTE_CLOSING_PX) -> np.ndarray:
+    """(H, W) bool: a coverage mask with gaps narrower than about 2 radius_px pixels closed (dilate, then erode,
+    with a (2r+1)-pixel ellipse): the outline a viewer sees of a crown of sub-pixel leaves."""
+    import cv2
+
+    if radius_px <= 0:
+        return np.asarray(coverage, bool)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
+    pad = radius_px + 1  # so the closing is not clipped at the image border
+    padded = np.pad(np.asarray(coverage, np.uint8), pad)
+    return cv2.morphologyEx(padded, cv2.MORPH_CLOSE, kernel)[pad:-pad, pad:-pad] > 0
+
+
+def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two (H, W) bool masks (1.0 when both are empty)."""
+    union = np.logical_or(a, b).sum()
+    return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
+
+
+def _plane_frame(tree: TreeMesh) -> tuple[np.ndarray, float, float]:
+    points = np.concatenate([tree.bark.vertices, tree.leaves.vertices]).astype(np.float64)
+    if len(points) == 0:
+        raise ImpostorError(f"tree {tree.name!r} has no vertices to make an impostor from")
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    rel = points - centre
+    radius_xy = float(np.sqrt((rel[:, :2] ** 2).sum(axis=1)).max())
+    half = max(radius_xy, 0.5 * float(hi[2] - lo[2])) * _PLANE_MARGIN
+    reach = float(np.linalg.norm(rel, axis=1).max())
+    return centre, max(half, 1e-3), max(reach, 1e-3)
+
+
+def _plane_camera(centre: np.ndarray, half: float, reach: float, azimuth: float, tile: int) -> Camera:
+    direction = view_direction(azimuth, 0.0)
+    distance = 2.0 * reach + 1.0
+    E = look_at(centre + distance * direction, centre)
+    s = tile / (2 * half)
+    K = np.array([[s, 0, (tile - 1) / 2], [0, s, (tile - 1) / 2], [0, 0, 1]])
+    return Camera(tile, tile, K, E, "orthographic", distance - reach * 1.01, distance + reach * 1.01, half, half,
+                  name=f"impostor_az{azimuth:05.1f}")
+
+
+def _dilate(mask: np.ndarray, texels: int) -> np.ndarray:
+    out = mask.copy()
+    for _ in range(texels):
+        grown = out.copy()
+        grown[1:] |= out[:-1]
+        grown[:-1] |= out[1:]
+        grown[:, 1:] |= out[:, :-1]
+        grown[:, :-1] |= out[:, 1:]
+        out = grown
+    return out
+
+
+def render_impostor(renderer: DepthRenderer, tree: TreeMesh, tile: int = 128,
+                    planes: int = IMPOSTOR_PLANES) -> ImpostorAtlas:
+    """Render a tree's impostor atlas: for each plane an orthographic view along its normal, giving albedo
+    (bark or leaf colour by the rendered mask, sRGB), alpha (coverage, grown by one texel) and tangent-space
+    normals (from the rendered depth). `renderer` is the process's DepthRenderer (or a subclass)."""
+    if not 8 <= tile <= 2048:
+        raise ImpostorError(f"impostor tile {tile} px is invalid: allowed 8..2048")
+    if not 1 <= planes <= 4:
+        raise ImpostorError(f"impostor planes {planes} is invalid: allowed 1..4 (a 2x2 atlas)")
+    centre, half, reach = _plane_frame(tree)
+    azimuths = np.arange(planes) * (180.0 / planes)
+    albedo = np.zeros((2 * tile, 2 * tile, 4), np.uint8)
+    normal = np.zeros((2 * tile, 2 * tile, 3), np.uint8)
+    normal[...] = (128, 128, 255)
+    bark_rgb = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
+    leaf_rgb = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
+    renderer.load(tree)
+    for plane, azimuth in enumerate(azimuths):
+        camera = _plane_camera(centre, half, reach, float(azimuth), tile)
+        depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
+        camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
+        tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
+        covered = mask > 0
+        tile_albedo = np.zeros((tile, tile, 4), np.uint8)
+        tile_albedo[mask == 1, :3] = bark_rgb
+        tile_albedo[mask == 2, :3] = leaf_rgb
+        # Grown texels take the colour of a covered neighbour's kind: leaves, the usual outer layer.
+        grown = _dilate(covered, _ALPHA_DILATE_TEXELS)
+        tile_albedo[grown & ~covered, :3] = leaf_rgb if (mask == 2).any() else bark_rgb
+        tile_albedo[grown, 3] = 255
+        tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
+        row, col = (plane // 2) * tile, (plane % 2) * tile
+        albedo[row:row + tile, col:col + tile] = tile_albedo
+        normal[row:row + tile, col:col + tile] = np.clip(tile_normal, 0, 255).astype(np.uint8)
+    return ImpostorAtlas(albedo, normal, centre, half, azimuths.astype(np.float64), tile)
+
+
+def impostor_coverage(atlas: ImpostorAtlas, camera: Camera) -> np.ndarray:
+    """(H, W) bool, pixels whose ray hits an opaque texel (alpha >= 128) of any impostor plane: the silhouette
+    an alpha-tested, double-sided billboard shows, cast exactly per pixel centre (nearest texel)."""
+    h, w = camera.height, camera.width
+    rows, cols = np.mgrid[0:h, 0:w]
+    pixels = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)
+    near_points = camera.unproject(pixels, np.full(len(pixels), 1.0))
+    far_points = camera.unproject(pixels, np.full(len(pixels), 2.0))
+    direction = far_points - near_points
+    origin = near_points
+    right, normal = atlas.plane_axes()
+    up = np.array([0.0, 0.0, 1.0])
+    s = atlas.tile / (2 * atlas.half)
+    covered = np.zeros(len(pixels), bool)
+    alpha = atlas.albedo[..., 3] >= 128
+    for plane in range(len(atlas.azimuths)):
+        denom = direction @ normal[plane]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((atlas.centre - origin) @ normal[plane]) / denom
+        hit = origin + t[:, None] * direction - atlas.centre
+        x, y = hit @ right[plane], hit @ up
+        col = np.floor(x * s + atlas.tile / 2).astype(np.int64)
+        row = np.floor(-y * s + atlas.tile / 2).astype(np.int64)
+        inside = np.isfinite(t) & (np.abs(denom) > 1e-12) & (col >= 0) & (col < atlas.tile) & (row >= 0) & (row < atlas.tile)
+        r0, c0 = atlas.tile_origin(plane)
+        hits = np.zeros(len(pixels), bool)
+        hits[inside] = alpha[r0 + row[inside], c0 + col[inside]]
+        covered |= hits
+    return covered.reshape(h, w)

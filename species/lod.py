@@ -1,0 +1,266 @@
+"""Levels of detail built from the skeleton, as a tree artist would: fewer sides, fewer rings, short twigs
+dropped (their leaves handed to the parent branch), leaves merged into larger crossed cluster cards.
+
+In: a Skeleton, its LOD0 TreeMesh and a triangle budget (fraction of LOD0). Out: a `LodLevel` (simplified
+skeleton whose `leaves` are the cluster cards, its TreeMesh, and which original node each kept node was).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import TreefarmError
+from .mesh import bark_part, leaf_part
+from .skeleton import LEAF_CARD_CORNERS, Skeleton
+from .tree_mesh import TreeMesh
+
+__all__ = ["LodLevel", "LodBudgetError", "build_lod", "simplify_skeleton", "cluster_leaves",
+           "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "CARDS_PER_CLUSTER"]
+
+# Tube sides by branch order at each level (index = level - 1): the trunk keeps the most.
+LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
+# Keep every n-th node along a branch (first node, junctions and tips always kept), by level; raised further
+# when the bark alone is over budget.
+LOD_NODE_STEPS = (2, 3, 4)
+_MAX_NODE_STEP = 32
+# A cluster is drawn as one card (2 triangles).
+CARDS_PER_CLUSTER = 1
+# Shares of the longest branch below which branches are dropped, tried in turn until the bark fits its budget.
+_PRUNE_LADDER = (0.0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.85, 1.01)
+# The budget is filled to this fraction at most: merging of close rings can only lower counts, never raise.
+_BUDGET_MARGIN = 0.97
+
+class LodBudgetError(TreefarmError):
+    """A level of detail cannot meet its triangle budget (the budget is too small for this tree)."""
+
+
+@dataclass(frozen=True)
+class LodLevel:
+    """One level of detail.
+
+    level         : 1, 2, 3, ...
+    skeleton      : the simplified skeleton; its leaves are the cluster cards (CARDS_PER_CLUSTER per cluster).
+    mesh          : its TreeMesh (bark with `order`/`branch`, cards with `node` attributes).
+    original_node : (N',) int32, the LOD0 node each kept node is.
+    n_clusters    : leaf clusters (cards / CARDS_PER_CLUSTER).
+    """
+
+    level: int
+    skeleton: Skeleton
+    mesh: TreeMesh
+    original_node: np.ndarray
+    n_clusters: int
+
+    @property
+    def n_triangles(self) -> int:
+        return self.mesh.n_faces
+
+
+def nearest_kept_ancestor(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """(N,) int64: for each node, itself if kept, else its nearest kept ancestor (-1 if none).
+
+    parent : (N,) int, -1 at the root; keep : (N,) bool. Pointer jumping, vectorised.
+    """
+    parent = np.asarray(parent, np.int64)
+    anchor = np.where(keep, np.arange(len(parent)), parent)
+    while True:
+        unresolved = (anchor >= 0) & ~keep[np.maximum(anchor, 0)]
+        if not unresolved.any():
+            return anchor
+        anchor = np.where(unresolved, parent[np.maximum(anchor, 0)], anchor)
+
+
+def _branch_lengths(skeleton: Skeleton) -> np.ndarray:
+    """(B,) float64 metres of each branch (its own segments, the one from its junction included)."""
+    return np.bincount(skeleton.branch_id, weights=skeleton.segment_lengths.astype(np.float64),
+                       minlength=skeleton.n_branches)
+
+
+def _branch_parent(skeleton: Skeleton) -> np.ndarray:
+    """(B,) int64, the branch each branch grows from (-1 for the trunk)."""
+    starts = skeleton.branch_starts
+    junction = skeleton.parent[starts]
+    return np.where(junction >= 0, skeleton.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
+
+
+def _dropped_branches(skeleton: Skeleton, share: float) -> np.ndarray:
+    """(B,) bool: branches shorter than `share` of the longest non-trunk branch, and everything on them."""
+    lengths = _branch_lengths(skeleton)
+    order = skeleton.order[skeleton.branch_starts]
+    longest = lengths[order > 0].max() if (order > 0).any() else 0.0
+    drop = (order > 0) & (lengths < share * longest)
+    parent = _branch_parent(skeleton)
+    while True:
+        inherited = drop | ((parent >= 0) & drop[np.maximum(parent, 0)])
+        if np.array_equal(inherited, drop):
+            return drop
+        drop = inherited
+
+
+def _keep_mask(skeleton: Skeleton, share: float, node_step: int) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) bool nodes kept and (B,) bool branches dropped, for a pruning share and node step."""
+    bid = skeleton.branch_id
+    drop = _dropped_branches(skeleton, share)
+    alive = ~drop[bid]
+    starts = skeleton.branch_starts
+    along = skeleton.depth - skeleton.depth[starts][bid]
+    keep = alive & ((along % node_step == 0) | (skeleton.continuation < 0))  # every n-th node and the tip
+    keep[starts[~drop]] = True
+    junctions = skeleton.parent[starts[~drop]]
+    keep[junctions[junctions >= 0]] = True  # where a kept branch attaches
+    keep &= alive
+    keep[0] = True
+    return keep, drop
+
+
+def simplify_skeleton(skeleton: Skeleton, share: float, node_step: int) -> tuple[Skeleton, np.ndarray, np.ndarray]:
+    """Drop branches shorter than `share` of the longest branch and keep every `node_step`-th node.
+
+    Returns (skeleton without leaves, original_node (N',) int64, leaf_anchor (M,) int64 new node index of each
+    original leaf's nearest kept ancestor). Branch first nodes, tips and junctions of kept branches stay.
+    """
+    keep, _ = _keep_mask(skeleton, share, node_step)
+    return _skeleton_from_mask(skeleton, keep)
+
+
+def _skeleton_from_mask(skeleton: Skeleton, keep: np.ndarray) -> tuple[Skeleton, np.ndarray, np.ndarray]:
+    anchor = nearest_kept_ancestor(skeleton.parent, keep)
+    original = np.flatnonzero(keep)
+    new_index = np.full(len(skeleton), -1, np.int64)
+    new_index[original] = np.arange(len(original))
+    parent = np.full(len(original), -1, np.int64)
+    parent[1:] = new_index[anchor[np.maximum(skeleton.parent[original[1:]], 0)]]
+    simplified = Skeleton(skeleton.positions[original], parent, skeleton.radius[original],
+                          skeleton.order[original])
+    leaf_anchor = new_index[anchor[skeleton.leaf_node]] if skeleton.n_leaves else np.zeros(0, np.int64)
+    return simplified, original.astype(np.int64), leaf_anchor
+
+
+def _bark_triangle_estimate(skeleton: Skeleton, keep: np.ndarray, drop: np.ndarray, sides_by_order) -> int:
+    """Upper bound of `bark_part` triangles of the kept nodes: 2 S per ring gap, S per tip cone, S for the
+    root disc (branch ids of the original skeleton; kept branches keep their identity)."""
+    counts = np.bincount(skeleton.branch_id[keep], minlength=skeleton.n_branches) + 1  # + junction point
+    counts[0] -= 1  # the trunk has no junction
+    order = skeleton.order[skeleton.branch_starts]
+    table = np.asarray(sides_by_order, np.int64)
+    sides = table[np.minimum(order, len(table) - 1)]
+    meshed = (counts >= 2) & ~drop
+    return int((sides * (2 * (counts - 1) + 1))[meshed].sum() + sides[0])
+
+
+def cluster_leaves(leaves: np.ndarray, anchor: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    """Merge leaves into at most `n_clusters` larger cards on a voxel grid (one card per occupied cell).
+
+    leaves : (M, 4, 4) float, each leaf's transform of the unit card; anchor : (M,) int, node of each leaf.
+    Returns (transforms (C, 4, 4) float32, card_node (C,) int32). A cluster's card takes the orientation and
+    node of its leaf nearest the cluster centre, is centred on the cluster, and is scaled so its area is the
+    area the members cover together: sum of areas x (1 - exp(-d)) / d, with d their projected area (half
+    their area, random orientation) over the cell's face. A cluster of one leaf is that leaf.
+    """
+    leaves = np.asarray(leaves, np.float64)
+    m = len(leaves)
+    if m == 0 or n_clusters <= 0:
+        return np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32)
+    homo = np.concatenate([LEAF_CARD_CORNERS, np.ones((4, 1), np.float32)], axis=1).astype(np.float64)
+    corners = np.einsum("mij,kj->mki", leaves, homo)[..., :3]
+    centres = corners.mean(axis=1)
+    labels, cell = _grid_labels(centres, min(n_clusters, m))
+    n = int(labels.max()) + 1
+    count = np.bincount(labels, minlength=n)
+    mid = np.stack([np.bincount(labels, weights=centres[:, k], minlength=n) for k in range(3)], axis=1)
+    mid /= count[:, None]
+    # Representative: the member nearest its cluster centre (lowest index on ties).
+    distance = np.linalg.norm(centres - mid[labels], axis=1)
+    order = np.lexsort((np.arange(m), distance, labels))
+    first = np.ones(m, bool)
+    first[1:] = labels[order][1:] != labels[order][:-1]
+    representative = order[first]
+    areas = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1)
+    total = np.bincount(labels, weights=areas, minlength=n)
+    d = 0.5 * total / (cell * cell)
+    covered = np.where(count > 1, total * -np.expm1(-d) / np.maximum(d, 1e-12), total)
+    scale = np.sqrt(covered / np.maximum(areas[representative], 1e-12))
+    cards = leaves[representative].copy()
+    cards[:, :3, :3] *= scale[:, None, None]
+    # Centre the scaled card on the cluster: the card's centre is its origin + half its length axis.
+    cards[:, :3, 3] = mid - 0.5 * cards[:, :3, 2]
+    card_node = np.asarray(anchor)[representative]
+    return cards.astype(np.float32), card_node.astype(np.int32)
+
+
+def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
+    """(M,) int64 cluster label per point (occupied cells of the finest cubic grid with at most `target` cells,
+    by bisection on the cell size, numbered in sorted cell order) and the cell size in metres."""
+    lo = points.min(axis=0)
+    span = float(np.max(points.max(axis=0) - lo)) + 1e-9
+    sample = points if len(points) <= 20000 else points[:: len(points) // 20000 + 1]
+
+    def cell_count(size: float, pts: np.ndarray) -> int:
+        keys = np.floor((pts - lo) / size).astype(np.int64)
+        return len(np.unique(keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]))
+
+    small, large = span / 4096, span * 1.01
+    for _ in range(24):
+        size = np.sqrt(small * large)
+        if cell_count(size, sample) >= target:
+            small = size
+        else:
+            large = size
+        if large / small < 1.02:
+            break
+    size = large  # the finest grid with at most `target` cells (on the sample; checked on all points)
+    while True:
+        keys = np.floor((points - lo) / size).astype(np.int64)
+        flat = keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]
+        cells, labels = np.unique(flat, return_inverse=True)
+        if len(cells) <= target:
+            return labels.astype(np.int64), size
+        size *= 1.05
+
+
+def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> LodLevel:
+    """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles).
+
+    The bark keeps its LOD0 share of the budget: the coarsest pruning share of the ladder that fits is the
+    smallest that does, and the node step grows when even the trunk alone does not fit. The leaves get the
+    rest of the budget as crossed cluster cards. Raises LodBudgetError when nothing fits.
+    """
+    if not 1 <= level <= len(LOD_SIDES):
+        raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
+    if not 0.0 < budget <= 1.0:
+        raise LodBudgetError(f"budget {budget!r} for LOD{level} is invalid: allowed a fraction in (0, 1]")
+    total0 = lod0.n_faces
+    target = int(np.floor(_BUDGET_MARGIN * budget * total0))
+    bark_share = lod0.bark.n_faces / max(total0, 1)
+    sides = LOD_SIDES[level - 1]
+    leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
+    min_leaf_tris = leaf_tris_per_cluster if skeleton.n_leaves else 0
+    bark_target = max(int(target * bark_share), 0)
+    if skeleton.n_leaves:
+        bark_target = min(bark_target, target - min_leaf_tris)
+    chosen = None
+    step = LOD_NODE_STEPS[level - 1]
+    while chosen is None and step <= _MAX_NODE_STEP:
+        for share in _PRUNE_LADDER:
+            keep, drop = _keep_mask(skeleton, share, step)
+            if _bark_triangle_estimate(skeleton, keep, drop, sides) <= bark_target:
+                chosen = _skeleton_from_mask(skeleton, keep)
+                break
+        step *= 2
+    if chosen is None:
+        raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
+                             f"room for the trunk alone; raise the LOD{level} budget")
+    simplified, original, leaf_anchor = chosen
+    bark = bark_part(simplified, sides, 3, thick_more=False)
+    leaf_budget = target - bark.n_faces
+    n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
+    if skeleton.n_leaves and n_clusters < 1:
+        raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
+                             f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
+    cards, card_node = cluster_leaves(skeleton.leaves, leaf_anchor, int(n_clusters))
+    lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
+                            leaves=cards, leaf_node=card_node)
+    mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,
+                    leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
+    return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
