@@ -124,7 +124,10 @@ def _dress_tree(objects, alpha_cutout: bool) -> None:
             if material is None or material.name in done or not material.node_tree:
                 continue
             done.add(material.name)
-            _dress_leaf(material, alpha_cutout) if part == "leaves" else _dress_bark(material)
+            if part == "leaves":
+                _dress_leaf(material, alpha_cutout)
+            else:
+                _dress_bark(material)
 
 
 # ---------------------------------------------------------------------------------------- world
@@ -143,7 +146,7 @@ def _add_sky_and_sun(scene, s: dict) -> None:
     sky.sky_type = "MULTIPLE_SCATTERING"
     sky.sun_disc = False  # the sun lamp below gives the direct light and crisp shadows
     sky.sun_elevation = math.radians(s["sun_elevation_deg"])
-    # Blender's sky rotation is measured from +Y counter-clockwise seen from above... toward the sun.
+    # Blender puts the sky's sun toward (sin r, cos r, .) for sun_rotation r; ours is (sin a, -cos a, .).
     sky.sun_rotation = math.radians(-s["sun_azimuth_deg"] + 180.0)
     background = nodes.new("ShaderNodeBackground")
     background.inputs["Strength"].default_value = s["sky_strength"]
