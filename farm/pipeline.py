@@ -55,9 +55,10 @@ def plan_shards(spec: JobSpec) -> list[ShardPlan]:
     return [ShardPlan(k, k * size, tuple(species[k * size:(k + 1) * size])) for k in range(spec.n_shards)]
 
 
-def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder) -> dict:
+def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worker: dict | None = None) -> dict:
     """Build every tree of a shard, write its two part files atomically, then its record; returns the record.
 
+    worker : facts about the process to note in the record (the Ray node id).
     A tree whose build raises becomes a row with its error (and a failure entry); the shard goes on.
     """
     tree_rows, all_view_rows, failures, tree_timings = [], [], [], []
@@ -95,7 +96,7 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder) -> di
               "trees": file_entry("trees", plan.shard, trees_bytes, len(tree_rows)),
               "views": file_entry("views", plan.shard, views_bytes, len(all_view_rows)),
               "failures": failures, "timings": {"stages": stages, "trees": tree_timings},
-              "worker": {"pid": os.getpid(), "host": os.uname().nodename}}
+              "worker": {"pid": os.getpid(), "host": os.uname().nodename, **(worker or {})}}
     write_shard_record(location, record)
     return record
 
@@ -108,7 +109,10 @@ class ShardWorker:
         self.builder = builder_factory(spec)
 
     def run(self, plan: ShardPlan) -> dict:
-        return run_shard(self.spec, plan, self.location, self.builder)
+        import ray
+
+        return run_shard(self.spec, plan, self.location, self.builder,
+                         worker={"node": ray.get_runtime_context().get_node_id()})
 
     def pid(self) -> int:
         return os.getpid()

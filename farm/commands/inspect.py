@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("inspect", help="summary table and contact sheet PNG of a dataset",
@@ -37,6 +39,10 @@ def summary_table(path: str) -> str:
     return "\n".join(lines)
 
 
+# uint8 maps holding class labels rather than grey levels.
+LABEL_MAPS = ("mask", "order")
+
+
 def contact_rows(path: str, n_rows: int) -> list:
     """Contact-sheet rows: (tree id and species, [(output, decoded image of the tree's first view), ...])."""
     import pyarrow as pa
@@ -60,8 +66,10 @@ def contact_rows(path: str, n_rows: int) -> list:
             image = decode_map(view[name], scale, offset, metric=name in METRIC_MAPS)
             if name in METRIC_MAPS and image.max() > 0:  # metres to [0, 1] for display
                 image = image / image.max()
+            elif name in LABEL_MAPS:  # small class labels (0, 1, 2, ...) spread over the grey range
+                image = (image * (255 // max(1, int(image.max())))).astype(np.uint8)
             cells.append((name, image))
-        rows.append((f"{view['tree_id']} {species[view['tree_id']]}", cells))
+        rows.append((f"{view['index']} {species[view['tree_id']]}", cells))
     return rows
 
 
