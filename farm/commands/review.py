@@ -1,0 +1,52 @@
+"""`farm review DIR [--port P] [--host H] [--token T]`: serve a dataset to reviewers (desktop browser or VR).
+
+`farm review export DIR`: write the stored verdicts to DIR/reviews/part-00000.parquet (joinable by tree_id).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("review", help="review a dataset in a browser or VR headset; `review export DIR`",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("target", metavar="DIR", help="dataset folder (or `export` followed by the folder)")
+    parser.add_argument("export_dir", nargs="?", metavar="EXPORT_DIR", help=argparse.SUPPRESS)
+    parser.add_argument("--port", type=int, default=8765, help="port to listen on (default 8765; 0 picks a free one)")
+    parser.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)")
+    parser.add_argument("--token", help="access token (default: a new random one)")
+    parser.add_argument("--db", help="reviews database (default: DIR/reviews.sqlite)")
+    parser.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from farm.review.service import default_db_path
+    from farm.review.store import ReviewError, ReviewStore
+
+    if args.export_dir is not None:
+        if args.target != "export":
+            raise ReviewError(f"unexpected argument {args.export_dir!r}: use `farm review DIR` or "
+                              f"`farm review export DIR`")
+        from farm.review.export import export_reviews
+
+        path, rows = export_reviews(args.export_dir, ReviewStore(args.db or default_db_path(args.export_dir)))
+        print(f"{rows} verdicts -> {path}")
+        return 0
+    return serve(args)
+
+
+def serve(args: argparse.Namespace) -> int:
+    from farm.review.server import ReviewServer, check_token, create_app, new_token
+    from farm.review.service import ReviewService
+
+    token = check_token(args.token) if args.token else new_token()
+    service = ReviewService(args.target, args.db, progress=True)
+    server = ReviewServer(create_app(service, token), args.host, args.port)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(f"warning: listening on {args.host}: anyone who can reach it and has the token can review",
+              file=sys.stderr)
+    print(f"reviewing {service.index.name}: {len(service.index.trees)} trees, {len(service.qa)} with QA flags")
+    print(f"open {server.url(token)}", flush=True)
+    server.run()
+    return 0

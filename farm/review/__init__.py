@@ -1,0 +1,1 @@
+"""The review client: a token-guarded ASGI server over a dataset's Parquet shards, verdicts in SQLite, QA flags."""
