@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test env blender-env node-env bench clean
+.PHONY: run test env blender-env node-env browser-env bench clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -34,7 +34,11 @@ $(NODE_STAMP): package.json package-lock.json
 
 node-env: $(NODE_STAMP)
 
-env: $(STAMP) blender-env node-env
+# Debian's Chromium drives the review client's browser tests (playwright's own browser download cannot run here).
+browser-env:
+	command -v chromium >/dev/null || (apt-get update -q && apt-get install -y -q chromium)
+
+env: $(STAMP) blender-env node-env browser-env
 
 run: env
 	$(VENV)/bin/farm generate --out out/dataset

@@ -18,6 +18,7 @@ COMMAND_MODULES = [
     "farm.commands.inspect",
     "farm.commands.export",
     "farm.commands.render",
+    "farm.commands.review",
 ]
 
 
