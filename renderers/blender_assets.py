@@ -213,11 +213,13 @@ def write_asset_library(assets: Sequence[Mapping], out_blend_path: str | Path, c
         raise BlenderError(f"asset ids must be unique in one library; repeated: "
                            f"{sorted({i for i in ids if ids.count(i) > 1})}")
     out = out.resolve()
-    catalogs = write_catalog_file(out.parent, [item["catalog_path"] for item in items])
+    known = read_catalog_file(out.parent)
     for item in items:
-        item["catalog_id"] = catalogs[item["catalog_path"]]
+        item["catalog_id"] = known.get(item["catalog_path"]) or catalog_uuid(item["catalog_path"])
     with tempfile.TemporaryDirectory(prefix="treefarm-blend-") as tmp:
         result = run_job("asset_library", {"blend": str(out), "assets": items}, tmp, timeout)
+    # Written after the .blend, so a failed job leaves the folder as it was.
+    catalogs = write_catalog_file(out.parent, [item["catalog_path"] for item in items])
     rows = [{**row, "catalog_path": item["catalog_path"], "catalog_id": item["catalog_id"]}
             for item, row in zip(items, result["assets"])]
     return {"blend": str(out), "bytes": result["bytes"], "catalogs": catalogs, "assets": rows,
@@ -226,8 +228,9 @@ def write_asset_library(assets: Sequence[Mapping], out_blend_path: str | Path, c
 
 def inspect_blend(path: str | Path, timeout: float = 300.0) -> dict:
     """The assets of a .blend as Blender reads them: per asset name, type ("collections", "objects", ...),
-    catalog_id, catalog_path (from the cats file beside it; None when not listed), tags, description,
-    preview_size, has_preview (a preview with visible pixels), objects, triangles and bounds."""
+    catalog_id, catalog_path (from the cats file beside it; None when not listed), tags, description, author,
+    properties (custom properties), preview_size, has_preview (a preview with visible pixels),
+    preview_mean_rgba (values in [0, 1]), objects, triangles and bounds ((2, 3) metres, as an instance places them)."""
     path = Path(path)
     if not path.is_file():
         raise BlenderError(f"blend {str(path)!r} does not exist")

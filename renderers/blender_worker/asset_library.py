@@ -14,8 +14,8 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from fbx import check_glb, subtree
-from scene import JobError, import_glb, mesh_objects, mesh_stats, require, reset_scene
+from fbx import check_glb, import_checked_glb, subtree
+from scene import JobError, mesh_objects, mesh_stats, require, reset_scene
 
 PREVIEW_SIZE = 256  # Blender's large asset previews are 256 px
 LAYOUT_GAP = 1.0  # metres between neighbouring trees when the file is opened as a scene
@@ -165,7 +165,7 @@ def run(job: dict, out_dir: str) -> dict:
         asset_id = require(asset, "id")
         if asset_id in bpy.data.collections:
             raise JobError(f"asset id {asset_id!r} appears twice: ids in one library must be unique")
-        objects = subtree(import_glb(asset["glb"]), asset.get("node"))
+        objects = subtree(import_checked_glb(asset["glb"]), asset.get("node"))
         for obj in objects:  # the asset's top objects leave parents outside it, keeping their place
             if obj.parent is not None and obj.parent not in objects:
                 world = obj.matrix_world.copy()
@@ -196,9 +196,18 @@ def run(job: dict, out_dir: str) -> dict:
             "save_seconds": time.perf_counter() - start, "blender_version": bpy.app.version_string}
 
 
+def _plain(value):
+    """An ID property as JSON-able Python (IDPropertyGroup/arrays have to_dict/to_list)."""
+    for method in ("to_dict", "to_list"):
+        if hasattr(value, method):
+            return getattr(value, method)()
+    return value
+
+
 def info(job: dict, out_dir: str) -> dict:
     """Job kind `blend_info`: open a .blend; per asset (any ID type) its name, type, catalog id, tags,
-    description, preview size and whether the preview has visible pixels, and its mesh statistics (bounds of a
+    description, custom properties, preview size, whether the preview has visible pixels and its mean RGBA,
+    and its mesh statistics (bounds of a
     collection as an instance of it places them, i.e. less its instance offset)."""
     path = require(job, "blend")
     if not os.path.isfile(path):
@@ -211,11 +220,13 @@ def info(job: dict, out_dir: str) -> dict:
                 continue
             data, preview = datablock.asset_data, datablock.preview
             size = tuple(preview.image_size) if preview is not None else (0, 0)
-            visible = False
+            visible, mean = False, None
             if size[0] * size[1]:
                 pixels = np.empty(size[0] * size[1] * 4, np.float32)
                 preview.image_pixels_float.foreach_get(pixels)
-                visible = bool((pixels.reshape(-1, 4)[:, 3] > 0).any() and pixels.reshape(-1, 4)[:, :3].max() > 0)
+                pixels = pixels.reshape(-1, 4)
+                visible = bool((pixels[:, 3] > 0).any() and pixels[:, :3].max() > 0)
+                mean = [float(v) for v in pixels.mean(axis=0)]
             objects = list(datablock.all_objects) if collection_name == "collections" else \
                 [datablock] if collection_name == "objects" else []
             stats = mesh_stats(objects)
@@ -225,6 +236,8 @@ def info(job: dict, out_dir: str) -> dict:
             rows.append({"name": datablock.name, "type": collection_name, "catalog_id": data.catalog_id,
                          "catalog_simple_name": data.catalog_simple_name, "tags": [t.name for t in data.tags],
                          "description": data.description, "author": data.author,
-                         "preview_size": list(size), "has_preview": visible, "objects": stats["objects"],
+                         "preview_size": list(size), "has_preview": visible, "preview_mean_rgba": mean,
+                         "properties": {k: _plain(datablock[k]) for k in datablock.keys() if not k.startswith("_")},
+                         "objects": stats["objects"],
                          "triangles": stats["triangles"], "bounds": stats["bounds"]})
     return {"blend": path, "assets": rows, "blender_version": bpy.app.version_string}

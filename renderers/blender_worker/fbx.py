@@ -37,11 +37,20 @@ def check_glb(path: str) -> None:
         raise JobError(f"{path!r} is not a GLB file: it starts with {magic!r}, a binary glTF starts with b'glTF'")
 
 
+def import_checked_glb(path: str) -> list:
+    """Import a GLB into the current scene after checking it is one; the importer's complaint about a broken
+    file (a RuntimeError) becomes a JobError naming the file. Returns the new objects."""
+    check_glb(path)
+    try:
+        return import_glb(path)
+    except RuntimeError as exc:
+        raise JobError(f"Blender's glTF importer could not read {path!r}: {str(exc).strip()}") from exc
+
+
 def load_glb(path: str) -> list:
     """A fresh scene with the GLB imported (checked first); returns the new objects."""
-    check_glb(path)
     reset_scene()
-    return import_glb(path)
+    return import_checked_glb(path)
 
 
 def subtree(objects: list, node: str | None) -> list:

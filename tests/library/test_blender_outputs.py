@@ -1,0 +1,299 @@
+"""Blender outputs of the asset library: FBX files read back by Blender's importer, `.blend` libraries read back
+by the worker (assets, previews, tags, catalogs), the catalog file, and bad input.
+
+Blender runs for real (`.venv-blender`, built by `make env`); without it every Blender test fails with that hint.
+"""
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+import species
+from renderers.blender import BlenderError
+from renderers.blender_assets import (CATALOG_FILE, catalog_uuid, export_fbx, export_fbx_batch, inspect_blend,
+                                      read_catalog_file, read_fbx, write_asset_library, write_catalog_file)
+
+PRESET = "sc_young_sapling"  # a small real tree: about 2,000 triangles, grown in a tenth of a second
+PREVIEW_RGB = (200, 40, 90)
+LOD_TRIANGLES = {"LOD0": 1280 + 64, "LOD1": 80}
+
+
+# ------------------------------------------------------------------------------------------- fixtures
+@pytest.fixture(scope="module")
+def tree(tmp_path_factory):
+    """(TreeMesh, GLB path) of a grown tree."""
+    params = species.sample(PRESET, np.random.default_rng(5))
+    mesh = species.build_mesh(species.grow(params, species.rng_for(params)), params)
+    path = tmp_path_factory.mktemp("glb") / "sapling.glb"
+    path.write_bytes(mesh.to_glb())
+    return mesh, path
+
+
+@pytest.fixture(scope="module")
+def lods_glb(tmp_path_factory):
+    """A GLB made by trimesh with two LOD nodes: LOD0 (crown 1,280 + trunk 64 triangles), LOD1 (crown 80)."""
+    import trimesh
+
+    scene = trimesh.Scene()
+    for lod in LOD_TRIANGLES:
+        scene.graph.update(frame_to=lod, frame_from=scene.graph.base_frame)
+    up = trimesh.transformations.translation_matrix
+    scene.add_geometry(trimesh.creation.icosphere(subdivisions=3), node_name="LOD0_crown", geom_name="crown0",
+                       parent_node_name="LOD0", transform=up([0, 3, 0]))
+    scene.add_geometry(trimesh.creation.cylinder(radius=0.2, height=2, sections=16), node_name="LOD0_trunk",
+                       geom_name="trunk0", parent_node_name="LOD0", transform=up([0, 1, 0]))
+    scene.add_geometry(trimesh.creation.icosphere(subdivisions=1), node_name="LOD1_crown", geom_name="crown1",
+                       parent_node_name="LOD1", transform=up([0, 3, 0]))
+    path = tmp_path_factory.mktemp("glb") / "lods.glb"
+    path.write_bytes(scene.export(file_type="glb"))
+    return path
+
+
+@pytest.fixture(scope="module")
+def fbx_batch(tree, lods_glb, tmp_path_factory):
+    """One Blender run: the tree, then LOD0 and LOD1 of the trimesh GLB, as FBX files."""
+    out = tmp_path_factory.mktemp("fbx")
+    jobs = [{"glb": tree[1], "fbx": out / "sapling.fbx", "name": "sapling_0001"},
+            {"glb": lods_glb, "fbx": out / "lod0.fbx", "node": "LOD0"},
+            {"glb": lods_glb, "fbx": out / "lod1.fbx", "node": "LOD1"}]
+    return export_fbx_batch(jobs)
+
+
+@pytest.fixture(scope="module")
+def tree_fbx_read_back(fbx_batch):
+    return read_fbx(fbx_batch[0]["fbx"])
+
+
+@pytest.fixture(scope="module")
+def library(tree, lods_glb, tmp_path_factory):
+    """A .blend with three assets (a 512 px preview given; previews drawn; one LOD node) and its inspection."""
+    from PIL import Image
+
+    folder = tmp_path_factory.mktemp("library")
+    preview = folder.parent / "preview.png"
+    Image.fromarray(np.broadcast_to(np.array(PREVIEW_RGB, np.uint8), (512, 512, 3)).copy()).save(preview)
+    assets = [
+        {"id": "sapling_0001", "glb_path": tree[1], "preview_png": preview, "tags": ["sapling", "broadleaf"],
+         "catalog_path": "Trees/Sapling", "description": "a young sapling", "properties": {"seed": 5}},
+        {"id": "sapling_0002", "glb_path": tree[1], "tags": ["sapling"], "catalog_path": "Trees/Sapling"},
+        {"id": "boxes_lod0", "glb_path": lods_glb, "node": "LOD0", "tags": ["test"], "catalog_path": "Tests/Boxes"},
+    ]
+    written = write_asset_library(assets, folder / "saplings.blend")
+    read = inspect_blend(written["blend"])
+    return written, {row["name"]: row for row in read["assets"]}
+
+
+# ------------------------------------------------------------------------------------------- FBX
+def test_fbx_reimports_with_the_triangle_count_of_each_part(tree, tree_fbx_read_back):
+    mesh, _ = tree
+    counts = {row["part"]: row["triangles"] for row in tree_fbx_read_back["objects"]}
+    assert counts == {"bark": len(mesh.bark.faces), "leaves": len(mesh.leaves.faces)}
+
+
+def test_fbx_export_reports_the_triangles_it_wrote(fbx_batch, tree_fbx_read_back):
+    assert fbx_batch[0]["triangles_per_object"] == {r["name"]: r["triangles"] for r in tree_fbx_read_back["objects"]}
+
+
+def test_fbx_names_the_tree_after_the_given_name(tree_fbx_read_back):
+    assert sorted(r["name"] for r in tree_fbx_read_back["objects"]) == ["sapling_0001_bark", "sapling_0001_leaves"]
+
+
+def test_fbx_keeps_metres_and_z_up(tree, tree_fbx_read_back):
+    mesh, _ = tree
+    vertices = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    expected = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+    np.testing.assert_allclose(np.array(tree_fbx_read_back["bounds"]), expected, atol=1e-3)
+
+
+def _fbx_double_property(data: bytes, name: bytes) -> float:
+    """The value of a binary FBX "P" property record of type double: name, type, label, flags, then D <value>."""
+    at = data.index(b"S" + struct.pack("<I", len(name)) + name) + 5 + len(name)
+    for _ in range(3):  # type name, label and flags: three more strings
+        assert data[at:at + 1] == b"S"
+        at += 5 + struct.unpack("<I", data[at + 1:at + 5])[0]
+    assert data[at:at + 1] == b"D"
+    return struct.unpack("<d", data[at + 1:at + 9])[0]
+
+
+def _fbx_int_property(data: bytes, name: bytes) -> int:
+    at = data.index(b"S" + struct.pack("<I", len(name)) + name) + 5 + len(name)
+    for _ in range(3):
+        at += 5 + struct.unpack("<I", data[at + 1:at + 5])[0]
+    assert data[at:at + 1] == b"I"
+    return struct.unpack("<i", data[at + 1:at + 5])[0]
+
+
+def test_fbx_header_declares_y_up_and_one_metre_units(fbx_batch):
+    data = open(fbx_batch[0]["fbx"], "rb").read()
+    assert _fbx_int_property(data, b"UpAxis") == 1  # Y
+    assert _fbx_int_property(data, b"FrontAxis") == 2 and _fbx_int_property(data, b"FrontAxisSign") == 1
+    assert _fbx_double_property(data, b"UnitScaleFactor") == 100.0  # one file unit = 100 cm
+
+
+def test_fbx_embeds_the_glb_textures(fbx_batch, tree_fbx_read_back):
+    data = open(fbx_batch[0]["fbx"], "rb").read()
+    assert b"bark_texture.png" in data and b"leaves_texture.png" in data
+    assert b"\x89PNG\r\n\x1a\n" in data  # the pixels themselves, not a path to them
+    assert {"bark_texture", "leaves_texture"} <= set(tree_fbx_read_back["textures"])
+
+
+@pytest.mark.parametrize("index, lod", [(1, "LOD0"), (2, "LOD1")])
+def test_fbx_of_a_lod_node_holds_only_that_lods_triangles(fbx_batch, index, lod):
+    assert fbx_batch[index]["triangles"] == LOD_TRIANGLES[lod]
+    assert all(name.startswith(lod) for name in fbx_batch[index]["triangles_per_object"])
+
+
+def test_fbx_of_a_lod_node_reimports_with_its_triangles(fbx_batch):
+    assert read_fbx(fbx_batch[2]["fbx"])["triangles"] == LOD_TRIANGLES["LOD1"]
+
+
+def test_fbx_bytes_depend_only_on_the_glb_not_on_the_run_or_folder(tree, fbx_batch, tmp_path):
+    again = export_fbx(tree[1], tmp_path / "elsewhere" / "sapling.fbx", name="sapling_0001")
+    assert open(again["fbx"], "rb").read() == open(fbx_batch[0]["fbx"], "rb").read()
+
+
+# ------------------------------------------------------------------------------------------- FBX errors
+def test_fbx_of_a_missing_glb_names_the_path(tmp_path):
+    with pytest.raises(BlenderError, match="no-such.glb.*does not exist"):
+        export_fbx(tmp_path / "no-such.glb", tmp_path / "out.fbx")
+
+
+def test_fbx_of_a_file_that_is_not_a_glb_fails_with_the_log_tail(tmp_path):
+    fake = tmp_path / "fake.glb"
+    fake.write_bytes(b"\x89PNG\r\n\x1a\n not a model")
+    with pytest.raises(BlenderError, match=r"(?s)invalid.*last lines of its log.*is not a GLB file"):
+        export_fbx(fake, tmp_path / "out.fbx")
+    assert not (tmp_path / "out.fbx").exists()
+
+
+def test_fbx_of_a_corrupt_glb_fails_with_the_log_tail(tree, tmp_path):
+    broken = tmp_path / "broken.glb"
+    broken.write_bytes(tree[1].read_bytes()[:200])  # a GLB header, then the file stops
+    with pytest.raises(BlenderError, match="(?s)invalid.*last lines of its log.*importer could not read.*broken.glb"):
+        export_fbx(broken, tmp_path / "out.fbx")
+    assert not (tmp_path / "out.fbx").exists()
+
+
+@pytest.mark.parametrize("job, message", [
+    ([], "at least one"),
+    ([("a.glb",)], "must be"),
+])
+def test_fbx_batch_rejects_malformed_jobs(job, message):
+    with pytest.raises(BlenderError, match=message):
+        export_fbx_batch(job)
+
+
+def test_fbx_output_must_end_in_fbx(tree, tmp_path):
+    with pytest.raises(BlenderError, match="must end in .fbx"):
+        export_fbx(tree[1], tmp_path / "out.obj")
+
+
+# ------------------------------------------------------------------------------------------- .blend
+def test_blend_lists_every_asset_as_a_collection(library):
+    _, assets = library
+    assert sorted(assets) == ["boxes_lod0", "sapling_0001", "sapling_0002"]
+    assert {row["type"] for row in assets.values()} == {"collections"}
+
+
+def test_blend_assets_keep_their_tags_description_and_properties(library):
+    _, assets = library
+    first = assets["sapling_0001"]
+    assert first["tags"] == ["sapling", "broadleaf"] and first["description"] == "a young sapling"
+    assert first["properties"] == {"seed": 5}
+
+
+def test_blend_assets_point_at_their_catalog_in_the_cats_file(library):
+    written, assets = library
+    assert assets["sapling_0001"]["catalog_id"] == catalog_uuid("Trees/Sapling")
+    assert assets["boxes_lod0"]["catalog_path"] == "Tests/Boxes"
+    listed = read_catalog_file(written["blend"].rsplit("/", 1)[0])
+    assert {"Trees", "Trees/Sapling", "Tests", "Tests/Boxes"} == set(listed)
+
+
+def test_given_preview_is_stored_at_256_pixels_with_its_colours(library):
+    _, assets = library
+    first = assets["sapling_0001"]
+    assert first["has_preview"] and first["preview_size"] == [256, 256]
+    np.testing.assert_allclose(first["preview_mean_rgba"], [*(np.array(PREVIEW_RGB) / 255), 1.0], atol=0.01)
+
+
+def test_missing_preview_is_drawn_from_the_mesh(library):
+    written, assets = library
+    assert [row["preview_generated"] for row in written["assets"]] == [False, True, True]
+    drawn = assets["sapling_0002"]
+    assert drawn["has_preview"] and 0.0 < drawn["preview_mean_rgba"][3] < 1.0  # a tree on a clear background
+
+
+def test_blend_asset_holds_the_glb_triangles(tree, library):
+    mesh, _ = tree
+    _, assets = library
+    assert assets["sapling_0002"]["triangles"] == len(mesh.bark.faces) + len(mesh.leaves.faces)
+
+
+def test_blend_asset_of_a_lod_node_holds_only_that_lod(library):
+    _, assets = library
+    assert assets["boxes_lod0"]["triangles"] == LOD_TRIANGLES["LOD0"]
+
+
+def test_blend_asset_instance_places_the_tree_where_the_glb_has_it(tree, library):
+    mesh, _ = tree
+    _, assets = library
+    vertices = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    expected = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+    for name in ("sapling_0001", "sapling_0002"):  # laid out side by side in the file, same offset back
+        np.testing.assert_allclose(np.array(assets[name]["bounds"]), expected, atol=1e-3)
+
+
+def test_blend_is_saved_uncompressed(library):
+    written, _ = library
+    assert open(written["blend"], "rb").read(7) == b"BLENDER"  # a compressed file starts with zstd's magic
+
+
+# ------------------------------------------------------------------------------------------- catalogs and errors
+def test_catalog_file_merges_libraries_and_keeps_uuids(tmp_path):
+    first = write_catalog_file(tmp_path, ["Trees/Fir"])
+    second = write_catalog_file(tmp_path, ["Trees/Maple"])
+    assert set(second) == {"Trees", "Trees/Fir", "Trees/Maple"}
+    assert second["Trees/Fir"] == first["Trees/Fir"] == catalog_uuid("Trees/Fir")
+    assert read_catalog_file(tmp_path) == second
+    assert "VERSION 1" in (tmp_path / CATALOG_FILE).read_text().splitlines()
+
+
+@pytest.mark.parametrize("path", ["", "Trees//Fir", "Trees/Fi:r", "   "])
+def test_bad_catalog_paths_are_rejected(path, tmp_path):
+    with pytest.raises(BlenderError, match="catalog path"):
+        write_catalog_file(tmp_path, [path])
+
+
+def test_library_rejects_repeated_ids(tree, tmp_path):
+    asset = {"id": "same", "glb_path": tree[1], "tags": []}
+    with pytest.raises(BlenderError, match="unique.*same"):
+        write_asset_library([asset, asset], tmp_path / "lib.blend")
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"glb_path": "/no/such.glb"}, "does not exist"),
+    ({"preview_png": "/no/such.png"}, "preview_png"),
+    ({"tags": "sapling"}, "list of non-empty strings"),
+    ({"id": ""}, "non-empty string"),
+])
+def test_library_rejects_bad_assets_before_starting_blender(tree, tmp_path, change, message):
+    asset = {"id": "a", "glb_path": tree[1], "tags": ["t"], **change}
+    with pytest.raises(BlenderError, match=message):
+        write_asset_library([asset], tmp_path / "lib.blend")
+    assert not list(tmp_path.iterdir())  # nothing written
+
+
+def test_library_of_a_file_that_is_not_a_glb_fails_with_the_log_tail(tmp_path):
+    fake = tmp_path / "fake.glb"
+    fake.write_text("hello")
+    with pytest.raises(BlenderError, match=r"(?s)last lines of its log.*is not a GLB file"):
+        write_asset_library([{"id": "a", "glb_path": fake, "tags": []}], tmp_path / "lib" / "lib.blend")
+    assert not (tmp_path / "lib").exists()  # neither the .blend nor the catalog file
+
+
+def test_inspect_of_a_missing_blend_names_the_path(tmp_path):
+    with pytest.raises(BlenderError, match="nothing.blend.*does not exist"):
+        inspect_blend(tmp_path / "nothing.blend")
