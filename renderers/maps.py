@@ -143,9 +143,30 @@ class DepthRenderer:
         return list(self._mesh_nodes)
 
     def close(self) -> None:
-        if self._renderer is not None:
+        """Free this renderer's GL objects and context.
+
+        pyrender's own delete() also calls eglTerminate, and the EGL display is one per process: that would
+        break every other renderer alive in the process, so for EGL the context is destroyed and the display
+        left initialised.
+        """
+        if self._renderer is None:
+            return
+        platform = self._renderer._platform
+        if os.environ.get("PYOPENGL_PLATFORM") != "egl":
             self._renderer.delete()
-            self._renderer = None
+        else:
+            from OpenGL import EGL
+
+            platform.make_current()
+            self._renderer._renderer.delete()
+            EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+            EGL.eglDestroyContext(platform._egl_display, platform._egl_context)
+            # Forget the display too, so pyrender's OffscreenRenderer.__del__ has nothing left to terminate.
+            platform._egl_context = None
+            platform._egl_display = None
+        self._renderer = None
+        self._mesh_nodes = {}
+        self._tree = None
 
     def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool):
         # pyrender culls back faces in depth-only passes whatever the material says: leaf cards go in twice,

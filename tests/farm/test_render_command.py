@@ -16,7 +16,7 @@ def test_render_writes_a_png_per_view_and_output_and_a_decodable_depth(tmp_path,
     assert status == 0
     meta = json.loads((out / "cameras.json").read_text())
     assert [v["name"] for v in meta["views"]] == ["front", "side"]
-    assert len(list(out.glob("*.png"))) == 2 * 3
+    assert len(list(out.glob("view*.png"))) == 2 * 3 and (out / "contact_sheet.png").is_file()
     view = meta["views"][0]
     depth_png = cv2.imread(str(out / view["images"]["depth"]["file"]), cv2.IMREAD_UNCHANGED)
     assert depth_png.dtype == np.uint16 and depth_png.shape == (64, 64)
