@@ -77,9 +77,10 @@ def combine_parts(parts: PartDepths) -> tuple[np.ndarray, np.ndarray, np.ndarray
     """
     names = list(parts.depths)
     depth, winner = _nearest([parts.depths[n] for n in names])
+    # Lookup tables by winner index; the extra last entry serves winner -1 (background).
     is_leaf = np.array([n == LEAVES for n in names] + [False])
-    order_of = np.array([0 if n in (LEAVES, "bark") else int(n[4:]) + 1 for n in names] + [0], np.uint8)
-    order_of[[i for i, n in enumerate(names) if n == "bark"]] = 1
+    order_of = np.array([0 if n == LEAVES else 1 if n == "bark" else int(n[4:]) + 1 for n in names] + [0],
+                        np.uint8)
     mask = np.where(winner < 0, 0, np.where(is_leaf[winner], 2, 1)).astype(np.uint8)
     return depth, mask, order_of[winner]
 
