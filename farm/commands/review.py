@@ -28,8 +28,10 @@ def run(args: argparse.Namespace) -> int:
         if args.target != "export":
             raise ReviewError(f"unexpected argument {args.export_dir!r}: use `farm review DIR` or "
                               f"`farm review export DIR`")
+        from farm.dataset import read_manifest
         from farm.review.export import export_reviews
 
+        read_manifest(args.export_dir)  # a dataset folder, before a database is created in it
         path, rows = export_reviews(args.export_dir, ReviewStore(args.db or default_db_path(args.export_dir)))
         print(f"{rows} verdicts -> {path}")
         return 0
