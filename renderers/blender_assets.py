@@ -230,7 +230,8 @@ def inspect_blend(path: str | Path, timeout: float = 300.0) -> dict:
     """The assets of a .blend as Blender reads them: per asset name, type ("collections", "objects", ...),
     catalog_id, catalog_path (from the cats file beside it; None when not listed), tags, description, author,
     properties (custom properties), preview_size, has_preview (a preview with visible pixels),
-    preview_mean_rgba (values in [0, 1]), objects, triangles and bounds ((2, 3) metres, as an instance places them)."""
+    preview_mean_rgba (values in [0, 1]), objects (meshes), object_count (empties too), triangles and bounds
+    ((2, 3) metres, as an instance places them); and the file's objects and collections counts."""
     path = Path(path)
     if not path.is_file():
         raise BlenderError(f"blend {str(path)!r} does not exist")

@@ -14,7 +14,7 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from fbx import check_glb, import_checked_glb, subtree
+from fbx import check_glb, import_checked_glb, merge_instances, subtree
 from scene import JobError, mesh_objects, mesh_stats, require, reset_scene
 
 PREVIEW_SIZE = 256  # Blender's large asset previews are 256 px
@@ -159,22 +159,24 @@ def run(job: dict, out_dir: str) -> dict:
     # Overwriting a library must not leave `.blend1` backups in the library folder.
     bpy.context.preferences.filepaths.save_version = 0
     scene = bpy.context.scene
-    rows, x = [], 0.0
+    rows, made, x = [], [], 0.0
     for i, asset in enumerate(assets):
         start = time.perf_counter()
         asset_id = require(asset, "id")
-        if asset_id in bpy.data.collections:
+        if asset_id in {c.name for c in made}:
             raise JobError(f"asset id {asset_id!r} appears twice: ids in one library must be unique")
-        objects = subtree(import_checked_glb(asset["glb"]), asset.get("node"))
+        objects = subtree(merge_instances(import_checked_glb(asset["glb"])), asset.get("node"))
         for obj in objects:  # the asset's top objects leave parents outside it, keeping their place
             if obj.parent is not None and obj.parent not in objects:
                 world = obj.matrix_world.copy()
                 obj.parent = None
                 obj.matrix_world = world
         collection = _collect(objects, asset_id)
+        made.append(collection)
         scene.collection.children.link(collection)
-        for obj in objects:  # readable, unique names in the outliner
-            obj.name = f"{asset_id}:{obj.name}"
+        for obj in objects:  # unique names in the outliner, saying which asset they belong to
+            if not obj.name.startswith(asset_id):
+                obj.name = f"{asset_id}:{obj.name}"
             if obj.type == "MESH":
                 obj.data.name = obj.name
         x = _place(collection, objects, x)
@@ -185,9 +187,11 @@ def run(job: dict, out_dir: str) -> dict:
         rows.append({"id": asset_id, "objects": stats["objects"], "triangles": stats["triangles"],
                      "preview_generated": generated, "seconds": time.perf_counter() - start})
         print(f"treefarm-blender: asset {i + 1}/{len(assets)} {asset_id} in {rows[-1]['seconds']:.2f} s", flush=True)
-    # The imported GLB objects left outside any asset (other LODs when `node` picks one) are dropped.
-    leftovers = [obj for obj in scene.collection.objects]
-    bpy.data.batch_remove(leftovers)
+    # What the imports left outside the assets (other LODs when `node` picks one, the importer's "Orphan Nodes"
+    # collections of glTF nodes outside its scene) is dropped.
+    kept = {obj for collection in made for obj in collection.all_objects}
+    bpy.data.batch_remove([obj for obj in bpy.data.objects if obj not in kept])
+    bpy.data.batch_remove([c for c in bpy.data.collections if c not in made])
     bpy.data.orphans_purge(do_recursive=True)
     os.makedirs(os.path.dirname(os.path.abspath(blend)) or ".", exist_ok=True)
     start = time.perf_counter()
@@ -207,7 +211,7 @@ def _plain(value):
 def info(job: dict, out_dir: str) -> dict:
     """Job kind `blend_info`: open a .blend; per asset (any ID type) its name, type, catalog id, tags,
     description, custom properties, preview size, whether the preview has visible pixels and its mean RGBA,
-    and its mesh statistics (bounds of a
+    its mesh statistics and object_count (empties included) (bounds of a
     collection as an instance of it places them, i.e. less its instance offset)."""
     path = require(job, "blend")
     if not os.path.isfile(path):
@@ -238,6 +242,7 @@ def info(job: dict, out_dir: str) -> dict:
                          "description": data.description, "author": data.author,
                          "preview_size": list(size), "has_preview": visible, "preview_mean_rgba": mean,
                          "properties": {k: _plain(datablock[k]) for k in datablock.keys() if not k.startswith("_")},
-                         "objects": stats["objects"],
+                         "objects": stats["objects"], "object_count": len(objects),
                          "triangles": stats["triangles"], "bounds": stats["bounds"]})
-    return {"blend": path, "assets": rows, "blender_version": bpy.app.version_string}
+    return {"blend": path, "assets": rows, "objects": len(bpy.data.objects), "collections": len(bpy.data.collections),
+            "blender_version": bpy.app.version_string}

@@ -48,9 +48,15 @@ def import_checked_glb(path: str) -> list:
 
 
 def load_glb(path: str) -> list:
-    """A fresh scene with the GLB imported (checked first); returns the new objects."""
-    reset_scene()
-    return import_checked_glb(path)
+    """A fresh scene with the GLB imported (checked first); returns the new objects, all selectable: the
+    importer puts glTF nodes outside its scene (LOD1.. under MSFT_lod) in an excluded "Orphan Nodes" collection."""
+    scene = reset_scene()
+    objects = import_checked_glb(path)
+    visible = set(scene.view_layers[0].objects)
+    for obj in objects:
+        if obj not in visible:
+            scene.collection.objects.link(obj)
+    return objects
 
 
 def subtree(objects: list, node: str | None) -> list:
@@ -61,6 +67,37 @@ def subtree(objects: list, node: str | None) -> list:
     if not roots:
         raise JobError(f"node {node!r} is not in the GLB: it has {sorted(obj.name for obj in objects)}")
     return [roots[0]] + list(roots[0].children_recursive)
+
+
+def merge_instances(objects: list) -> list:
+    """Objects sharing one mesh (what the importer makes of glTF EXT_mesh_gpu_instancing: one object per
+    instance) joined into one mesh object; FBX has no instancing engines read, and thousands of leaf objects
+    would swamp a library. The joined object takes the place and name of the instances' parent node when
+    that node holds nothing else. Returns the objects left (the same list when nothing was instanced)."""
+    groups: dict = {}
+    for obj in objects:
+        if obj.type == "MESH":
+            groups.setdefault(obj.data, []).append(obj)
+    pointers = [obj.as_pointer() for obj in objects]  # removed objects cannot be asked anything afterwards
+    removed = set()
+    for group in groups.values():
+        if len(group) < 2:
+            continue
+        target = group[0]
+        removed.update(obj.as_pointer() for obj in group[1:])
+        target.data = target.data.copy()  # the join writes into the active object's mesh: make it its own
+        with bpy.context.temp_override(active_object=target, object=target, selected_objects=group,
+                                       selected_editable_objects=group):
+            bpy.ops.object.join()
+        holder = target.parent
+        if holder is not None and holder.type == "EMPTY" and list(holder.children) == [target]:
+            world, name = target.matrix_world.copy(), holder.name
+            target.parent = holder.parent
+            target.matrix_world = world
+            removed.add(holder.as_pointer())
+            bpy.data.objects.remove(holder)
+            target.name = target.data.name = name
+    return [obj for obj, pointer in zip(objects, pointers) if pointer not in removed]
 
 
 def rename(objects: list, name: str) -> None:
@@ -144,7 +181,7 @@ def run(job: dict, out_dir: str) -> dict:
         start = time.perf_counter()
         glb, fbx = require(item, "glb"), require(item, "fbx")
         if glb != loaded:  # several LODs of one GLB: import it once
-            objects, loaded = load_glb(glb), glb
+            objects, loaded = merge_instances(load_glb(glb)), glb
             name_textures()
         chosen = subtree(objects, item.get("node"))
         if item.get("name"):

@@ -5,6 +5,7 @@ Blender runs for real (`.venv-blender`, built by `make env`); without it every B
 """
 from __future__ import annotations
 
+import json
 import struct
 
 import numpy as np
@@ -18,6 +19,50 @@ from renderers.blender_assets import (CATALOG_FILE, catalog_uuid, export_fbx, ex
 PRESET = "sc_young_sapling"  # a small real tree: about 2,000 triangles, grown in a tenth of a second
 PREVIEW_RGB = (200, 40, 90)
 LOD_TRIANGLES = {"LOD0": 1280 + 64, "LOD1": 80}
+
+
+N_LEAVES = 30
+
+
+def _instanced_glb() -> bytes:
+    """A GLB laid out like the library's asset GLBs: scene root X_LOD0 with X_LOD0_bark (a box, 12 triangles) and
+    X_LOD0_leaves (one 2-triangle card drawn N_LEAVES times with EXT_mesh_gpu_instancing); X_LOD1 (one triangle)
+    outside the scene, as MSFT_lod keeps coarser levels."""
+    blobs, views, accessors = [], [], []
+
+    def accessor(array: np.ndarray, kind: str, target: int | None = None) -> int:
+        data = array.tobytes()
+        views.append({"buffer": 0, "byteOffset": sum(len(b) for b in blobs), "byteLength": len(data),
+                      **({"target": target} if target else {})})
+        blobs.append(data + b"\0" * (-len(data) % 4))
+        entry = {"bufferView": len(views) - 1, "componentType": 5126 if array.dtype == np.float32 else 5125,
+                 "count": len(array), "type": kind}
+        if target == 34962:
+            entry.update(min=array.min(axis=0).tolist(), max=array.max(axis=0).tolist())
+        accessors.append(entry)
+        return len(accessors) - 1
+
+    def mesh(vertices, faces) -> dict:
+        return {"primitives": [{"attributes": {"POSITION": accessor(np.array(vertices, np.float32), "VEC3", 34962)},
+                                "indices": accessor(np.array(faces, np.uint32).reshape(-1), "SCALAR", 34963)}]}
+
+    box = [[x, y, z] for x in (-0.2, 0.2) for y in (0.0, 2.0) for z in (-0.2, 0.2)]
+    box_faces = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                 [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
+    card = [[-0.1, 0.0, 0.0], [0.1, 0.0, 0.0], [0.1, 0.2, 0.0], [-0.1, 0.2, 0.0]]
+    offsets = (np.random.default_rng(0).uniform(-1, 1, (N_LEAVES, 3)) + [0, 2, 0]).astype(np.float32)
+    meshes = [mesh(box, box_faces), mesh(card, [[0, 1, 2], [0, 2, 3]]), mesh(card[:3], [[0, 1, 2]])]
+    instancing = {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": accessor(offsets, "VEC3")}}}
+    nodes = [{"name": "X_LOD0", "children": [1, 2]}, {"name": "X_LOD0_bark", "mesh": 0},
+             {"name": "X_LOD0_leaves", "mesh": 1, "extensions": instancing},
+             {"name": "X_LOD1", "children": [4]}, {"name": "X_LOD1_bark", "mesh": 2}]
+    binary = b"".join(blobs)
+    document = json.dumps({"asset": {"version": "2.0"}, "extensionsUsed": ["EXT_mesh_gpu_instancing"], "scene": 0,
+                           "scenes": [{"nodes": [0]}], "nodes": nodes, "meshes": meshes, "accessors": accessors,
+                           "bufferViews": views, "buffers": [{"byteLength": len(binary)}]}).encode()
+    document += b" " * (-len(document) % 4)
+    body = struct.pack("<II", len(document), 0x4E4F534A) + document + struct.pack("<II", len(binary), 0x004E4942)
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(body) + len(binary)) + body + binary
 
 
 # ------------------------------------------------------------------------------------------- fixtures
@@ -52,12 +97,21 @@ def lods_glb(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def fbx_batch(tree, lods_glb, tmp_path_factory):
-    """One Blender run: the tree, then LOD0 and LOD1 of the trimesh GLB, as FBX files."""
+def instanced_glb(tmp_path_factory):
+    path = tmp_path_factory.mktemp("glb") / "instanced.glb"
+    path.write_bytes(_instanced_glb())
+    return path
+
+
+@pytest.fixture(scope="module")
+def fbx_batch(tree, lods_glb, instanced_glb, tmp_path_factory):
+    """One Blender run: the tree, LOD0 and LOD1 of the trimesh GLB, X_LOD0 and X_LOD1 of the instanced GLB."""
     out = tmp_path_factory.mktemp("fbx")
     jobs = [{"glb": tree[1], "fbx": out / "sapling.fbx", "name": "sapling_0001"},
             {"glb": lods_glb, "fbx": out / "lod0.fbx", "node": "LOD0"},
-            {"glb": lods_glb, "fbx": out / "lod1.fbx", "node": "LOD1"}]
+            {"glb": lods_glb, "fbx": out / "lod1.fbx", "node": "LOD1"},
+            {"glb": instanced_glb, "fbx": out / "x_lod0.fbx", "node": "X_LOD0"},
+            {"glb": instanced_glb, "fbx": out / "x_lod1.fbx", "node": "X_LOD1"}]
     return export_fbx_batch(jobs)
 
 
@@ -67,8 +121,8 @@ def tree_fbx_read_back(fbx_batch):
 
 
 @pytest.fixture(scope="module")
-def library(tree, lods_glb, tmp_path_factory):
-    """A .blend with three assets (a 512 px preview given; previews drawn; one LOD node) and its inspection."""
+def library(tree, lods_glb, instanced_glb, tmp_path_factory):
+    """A .blend with four assets (a 512 px preview given; previews drawn; LOD nodes) and its inspection."""
     from PIL import Image
 
     folder = tmp_path_factory.mktemp("library")
@@ -79,10 +133,11 @@ def library(tree, lods_glb, tmp_path_factory):
          "catalog_path": "Trees/Sapling", "description": "a young sapling", "properties": {"seed": 5}},
         {"id": "sapling_0002", "glb_path": tree[1], "tags": ["sapling"], "catalog_path": "Trees/Sapling"},
         {"id": "boxes_lod0", "glb_path": lods_glb, "node": "LOD0", "tags": ["test"], "catalog_path": "Tests/Boxes"},
+        {"id": "X", "glb_path": instanced_glb, "node": "X_LOD0", "tags": ["test"], "catalog_path": "Tests/Boxes"},
     ]
     written = write_asset_library(assets, folder / "saplings.blend")
     read = inspect_blend(written["blend"])
-    return written, {row["name"]: row for row in read["assets"]}
+    return written, {row["name"]: row for row in read["assets"]}, read
 
 
 # ------------------------------------------------------------------------------------------- FBX
@@ -149,6 +204,19 @@ def test_fbx_of_a_lod_node_reimports_with_its_triangles(fbx_batch):
     assert read_fbx(fbx_batch[2]["fbx"])["triangles"] == LOD_TRIANGLES["LOD1"]
 
 
+def test_fbx_joins_instanced_leaves_into_one_mesh_object(fbx_batch):
+    assert fbx_batch[3]["triangles_per_object"] == {"X_LOD0_bark": 12, "X_LOD0_leaves": 2 * N_LEAVES}
+
+
+def test_fbx_of_instanced_leaves_reimports_with_every_leaf(fbx_batch):
+    read = read_fbx(fbx_batch[3]["fbx"])
+    assert {r["name"]: r["triangles"] for r in read["objects"]} == {"X_LOD0_bark": 12, "X_LOD0_leaves": 2 * N_LEAVES}
+
+
+def test_fbx_exports_a_lod_node_outside_the_gltf_scene(fbx_batch):
+    assert fbx_batch[4]["triangles_per_object"] == {"X_LOD1_bark": 1}
+
+
 def test_fbx_bytes_depend_only_on_the_glb_not_on_the_run_or_folder(tree, fbx_batch, tmp_path):
     again = export_fbx(tree[1], tmp_path / "elsewhere" / "sapling.fbx", name="sapling_0001")
     assert open(again["fbx"], "rb").read() == open(fbx_batch[0]["fbx"], "rb").read()
@@ -192,20 +260,20 @@ def test_fbx_output_must_end_in_fbx(tree, tmp_path):
 
 # ------------------------------------------------------------------------------------------- .blend
 def test_blend_lists_every_asset_as_a_collection(library):
-    _, assets = library
-    assert sorted(assets) == ["boxes_lod0", "sapling_0001", "sapling_0002"]
+    _, assets, _ = library
+    assert sorted(assets) == ["X", "boxes_lod0", "sapling_0001", "sapling_0002"]
     assert {row["type"] for row in assets.values()} == {"collections"}
 
 
 def test_blend_assets_keep_their_tags_description_and_properties(library):
-    _, assets = library
+    _, assets, _ = library
     first = assets["sapling_0001"]
     assert first["tags"] == ["sapling", "broadleaf"] and first["description"] == "a young sapling"
     assert first["properties"] == {"seed": 5}
 
 
 def test_blend_assets_point_at_their_catalog_in_the_cats_file(library):
-    written, assets = library
+    written, assets, _ = library
     assert assets["sapling_0001"]["catalog_id"] == catalog_uuid("Trees/Sapling")
     assert assets["boxes_lod0"]["catalog_path"] == "Tests/Boxes"
     listed = read_catalog_file(written["blend"].rsplit("/", 1)[0])
@@ -213,33 +281,40 @@ def test_blend_assets_point_at_their_catalog_in_the_cats_file(library):
 
 
 def test_given_preview_is_stored_at_256_pixels_with_its_colours(library):
-    _, assets = library
+    _, assets, _ = library
     first = assets["sapling_0001"]
     assert first["has_preview"] and first["preview_size"] == [256, 256]
     np.testing.assert_allclose(first["preview_mean_rgba"], [*(np.array(PREVIEW_RGB) / 255), 1.0], atol=0.01)
 
 
 def test_missing_preview_is_drawn_from_the_mesh(library):
-    written, assets = library
-    assert [row["preview_generated"] for row in written["assets"]] == [False, True, True]
+    written, assets, _ = library
+    assert [row["preview_generated"] for row in written["assets"]] == [False, True, True, True]
     drawn = assets["sapling_0002"]
     assert drawn["has_preview"] and 0.0 < drawn["preview_mean_rgba"][3] < 1.0  # a tree on a clear background
 
 
 def test_blend_asset_holds_the_glb_triangles(tree, library):
     mesh, _ = tree
-    _, assets = library
+    _, assets, _ = library
     assert assets["sapling_0002"]["triangles"] == len(mesh.bark.faces) + len(mesh.leaves.faces)
 
 
 def test_blend_asset_of_a_lod_node_holds_only_that_lod(library):
-    _, assets = library
+    _, assets, _ = library
     assert assets["boxes_lod0"]["triangles"] == LOD_TRIANGLES["LOD0"]
+
+
+def test_blend_keeps_nothing_but_the_assets(library):
+    _, assets, read = library
+    assert read["collections"] == len(assets)  # no importer collections ("Orphan Nodes") left behind
+    assert read["objects"] == sum(row["object_count"] for row in assets.values())
+    assert assets["X"]["triangles"] == 12 + 2 * N_LEAVES  # X_LOD1 dropped, instances joined
 
 
 def test_blend_asset_instance_places_the_tree_where_the_glb_has_it(tree, library):
     mesh, _ = tree
-    _, assets = library
+    _, assets, _ = library
     vertices = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
     expected = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
     for name in ("sapling_0001", "sapling_0002"):  # laid out side by side in the file, same offset back
@@ -247,7 +322,7 @@ def test_blend_asset_instance_places_the_tree_where_the_glb_has_it(tree, library
 
 
 def test_blend_is_saved_uncompressed(library):
-    written, _ = library
+    written, _, _ = library
     assert open(written["blend"], "rb").read(7) == b"BLENDER"  # a compressed file starts with zstd's magic
 
 
