@@ -74,3 +74,11 @@ def test_contact_sheet_is_a_grid_of_rows_and_columns(tmp_path, all_outputs):
     path = write_contact_sheet(tmp_path / "sheet.png", rows, cell=64)
     sheet = cv2.imread(str(path))
     assert sheet.shape[0] > 2 * 64 and sheet.shape[1] >= len(DEFAULT_OUTPUTS) * 64
+
+
+def test_jittered_rig_repeats_with_the_rng_and_moves_the_cameras(view_renderer, tree):
+    mesh, skeleton = tree
+    a, b = (view_renderer.render(mesh, skeleton, "tsn4:jitter", ["mask"], np.random.default_rng(9)) for _ in "ab")
+    plain = view_renderer.render(mesh, skeleton, "tsn4", ["mask"], np.random.default_rng(9))
+    np.testing.assert_array_equal(a[1].images["mask"], b[1].images["mask"])
+    assert not np.allclose(a[1].camera.world_to_camera, plain[1].camera.world_to_camera)
