@@ -19,6 +19,7 @@ COMMAND_MODULES = [
     "farm.commands.export",
     "farm.commands.render",
     "farm.commands.review",
+    "farm.commands.library",
 ]
 
 

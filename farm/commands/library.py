@@ -1,0 +1,73 @@
+"""`farm library`: build a studio asset library (LODs, impostor, wind, seasons; GLB, USD, OBJ, FBX) on the farm.
+
+`farm library [SPEC.yaml] --out DIR` (no spec: every preset, 4 variants each; resumable), `farm library validate
+DIR`, `farm library add DIR --species NAME --seed N`.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser("library", help="build a studio asset library of trees (resumable)",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("spec", nargs="?", help="library spec YAML, or `validate` / `add` (see below)")
+    parser.add_argument("folder", nargs="?", help="the library folder (for validate and add)")
+    parser.add_argument("--out", help="output folder of a library job")
+    parser.add_argument("--per-species", type=int, help="variants per species (overrides the spec)")
+    parser.add_argument("--workers", type=int, help="worker actors (default: one per CPU)")
+    parser.add_argument("--address", help="join this Ray cluster instead of starting a local one")
+    parser.add_argument("--species", help="(add) the species preset of the new asset")
+    parser.add_argument("--seed", type=int, help="(add) the tree seed of the new asset")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(run=run)
+
+
+def _load(args):
+    from farm.library.spec import LibrarySpecError, load_library_spec, parse_library_spec
+
+    if args.spec:
+        spec = load_library_spec(args.spec)
+    else:
+        spec = parse_library_spec({})
+    if args.per_species is not None:
+        if args.per_species < 1:
+            raise LibrarySpecError("--per-species", args.per_species, "an integer >= 1")
+        raw = {**spec.to_dict(), "species": {name: args.per_species for name in spec.species}}
+        spec = parse_library_spec({k: v for k, v in raw.items() if k not in ("kind", "render", "store_glb")})
+    return spec
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.spec == "validate":
+        from farm.library.catalog import validate_library
+
+        if not args.folder:
+            raise ValueError("farm library validate needs the library folder: farm library validate DIR")
+        problems = validate_library(args.folder)
+        for problem in problems:
+            print(problem, file=sys.stderr)
+        if not problems:
+            print(f"{args.folder}: library valid")
+        return 1 if problems else 0
+    if args.spec == "add":
+        from farm.library.job import add_asset
+
+        if not args.folder or args.species is None or args.seed is None:
+            raise ValueError("usage: farm library add DIR --species NAME --seed N")
+        record = add_asset(args.folder, args.species, args.seed)
+        print(f"{args.folder}: added {record['id']}")
+        return 0
+    spec = _load(args)
+    if not args.out:
+        raise ValueError("no output location: pass --out DIR")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers {args.workers} is invalid: allowed an integer >= 1")
+    from farm.library.job import run_library
+
+    result = run_library(spec, args.out, workers=args.workers, address=args.address, progress=not args.quiet)
+    counts = result["manifest"]["counts"]
+    print(f"{args.out}: {result['catalog']['assets']} assets ({counts['failed']} failed); "
+          f"blender outputs: {result['catalog']['blender']}")
+    return 0

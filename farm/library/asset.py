@@ -1,0 +1,161 @@
+"""One library asset in memory: LOD0 and coarser levels, impostor, wind data, collision capsules, textures and the
+measured quality of the chain (triangles, switch size and silhouette IoU per level).
+
+In: species name, tree seed, LibrarySpec, the process's CoverageRenderer and a StageTimer. Out: `LibraryAsset`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances"]
+
+
+def asset_id(species_name: str, seed: int) -> str:
+    """Stable id of an asset: its species and tree seed (the same spec and seed give the same id)."""
+    return f"{species_name}-{int(seed):016x}"
+
+
+@dataclass
+class LevelData:
+    """One level (0..3) of detail, or the impostor (level = len(lods) + 1 with name "IMPOSTOR").
+
+    name     : "LOD0", "LOD1", ..., "IMPOSTOR".
+    mesh     : TreeMesh (bark with `branch`, leaves = cards); impostor: bark = billboard, no leaves.
+    skeleton : the skeleton meshed (None for the impostor).
+    bark_wind, bark_pivot : (V, 4) / (V, 3) float32 wind attributes of the bark vertices (Z up).
+    leaf_wind, leaf_pivot : (M, 4) / (M, 3) float32 wind attributes per leaf card (instance).
+    switch_px : tree height on screen at which this level takes over (0 for LOD0).
+    iou      : per-azimuth silhouette IoU against LOD0 at switch_px (empty for LOD0).
+    """
+
+    name: str
+    mesh: object
+    skeleton: object
+    bark_wind: np.ndarray
+    bark_pivot: np.ndarray
+    leaf_wind: np.ndarray
+    leaf_pivot: np.ndarray
+    switch_px: int
+    iou: list[float] = field(default_factory=list)
+
+    @property
+    def n_triangles(self) -> int:
+        return int(self.mesh.n_faces)
+
+
+@dataclass
+class LibraryAsset:
+    """Everything one asset's files are written from."""
+
+    asset_id: str
+    species: str
+    generator: str
+    seed: int
+    params: dict
+    skeleton: object
+    levels: list[LevelData]
+    impostor: object  # renderers.impostor.ImpostorAtlas
+    capsules: np.ndarray
+    bark_maps: object  # species.pbr_textures.BarkMaps
+    leaf_atlases: dict[str, np.ndarray]
+
+    @property
+    def lod0(self):
+        return self.levels[0].mesh
+
+    def metadata(self) -> dict:
+        """JSON-able facts about the asset (catalog row without file entries)."""
+        lod0_tris = self.levels[0].n_triangles
+        return {
+            "id": self.asset_id, "species": self.species, "generator": self.generator, "seed": int(self.seed),
+            "params": self.params, "height_m": float(self.skeleton.height),
+            "crown_radius_m": float(self.skeleton.crown_radius),
+            "levels": [{"name": lv.name, "triangles": lv.n_triangles, "share_of_lod0": lv.n_triangles / lod0_tris,
+                        "switch_px": lv.switch_px,
+                        "iou_min": min(lv.iou) if lv.iou else 1.0,
+                        "iou_mean": float(np.mean(lv.iou)) if lv.iou else 1.0,
+                        "iou_per_azimuth": [round(v, 4) for v in lv.iou]} for lv in self.levels],
+            "collision_capsules": [[round(float(v), 5) for v in row] for row in self.capsules],
+            "wind_layout": __import__("species.wind", fromlist=["WIND_LAYOUT"]).WIND_LAYOUT,
+        }
+
+
+def leaf_instances(skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Leaf card instances of a skeleton: translation (M, 3), rotation matrices (M, 3, 3) and scale (M, 3),
+    float64, Z up, with transform = T R S exactly when the card axes are orthogonal (nearest rotation otherwise)."""
+    linear = skeleton.leaves[:, :3, :3].astype(np.float64)
+    u, _, vt = np.linalg.svd(linear)
+    rotation = u @ vt
+    flip = np.linalg.det(rotation) < 0
+    rotation[flip] = rotation[flip] @ np.diag([1.0, -1.0, 1.0])  # the card is flat in y: flip its normal axis
+    scale = np.einsum("mji,mji->mi", rotation, linear)  # diag(R^T M)
+    return skeleton.leaves[:, :3, 3].astype(np.float64), rotation, scale
+
+
+def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
+    from species.wind import wind_attributes
+
+    keys = None if original_node is None else original_node[skeleton.branch_starts]
+    bark_wind, bark_pivot = wind_attributes(skeleton, mesh.bark.vertices, mesh.bark.attributes["branch"], keys)
+    if skeleton.n_leaves:
+        leaf_branch = skeleton.branch_id[skeleton.leaf_node]
+        leaf_wind, leaf_pivot = wind_attributes(skeleton, skeleton.leaves[:, :3, 3], leaf_branch, keys)
+    else:
+        leaf_wind, leaf_pivot = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
+    return bark_wind, bark_pivot, leaf_wind, leaf_pivot
+
+
+def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryAsset:
+    """Grow, simplify, measure and texture one asset (no files written)."""
+    import species
+    from renderers.impostor import (QUALITY_AZIMUTHS, closed_silhouette, impostor_coverage, render_impostor,
+                                    silhouette_iou, switch_camera)
+    from species.collision import collision_capsules
+    from species.lod import build_lod
+    from species.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
+
+    from ..tree_chain import stage_rngs
+
+    sample_rng, _ = stage_rngs(seed)
+    ident = asset_id(species_name, seed)
+    with timer.stage("sample"):
+        params = species.sample(species_name, sample_rng)
+    with timer.stage("grow"):
+        skeleton = species.grow(params, species.rng_for(params))
+        lod0 = species.build_mesh(skeleton, {**params, "name": ident})
+    with timer.stage("lods"):
+        lods = [build_lod(skeleton, lod0, level, budget) for level, budget in enumerate(spec.lod_budgets, 1)]
+    with timer.stage("wind"):
+        levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
+        for lod, px in zip(lods, spec.switch_px):
+            levels.append(LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
+                                    *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px)))
+        capsules = collision_capsules(skeleton)
+    with timer.stage("impostor"):
+        atlas = render_impostor(renderer, lod0, tile=spec.impostor_tile)
+        billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
+        empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
+        levels.append(LevelData("IMPOSTOR", billboard, None, np.zeros((billboard.bark.n_vertices, 4), np.float32),
+                                np.zeros((billboard.bark.n_vertices, 3), np.float32), empty4, empty3,
+                                switch_px=int(spec.switch_px[-1])))
+    with timer.stage("quality"):
+        points = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
+        cameras = [[switch_camera(points, azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
+                   for level in levels[1:]]
+        # LOD0 first for every camera, then each level: the renderer uploads each mesh once.
+        references = [[closed_silhouette(renderer.coverage(lod0, camera)) for camera in row] for row in cameras]
+        for level, row, refs in zip(levels[1:], cameras, references):
+            for camera, reference in zip(row, refs):
+                if level.name == "IMPOSTOR":
+                    candidate = impostor_coverage(atlas, camera)
+                else:
+                    candidate = renderer.coverage(level.mesh, camera)
+                level.iou.append(silhouette_iou(reference, closed_silhouette(candidate)))
+    with timer.stage("textures"):
+        maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
+        atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
+                   for season in SEASONS if season != "bare"}
+    return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
+                        levels, atlas, capsules, maps, atlases)

@@ -1,0 +1,155 @@
+"""The library's catalog (catalog.parquet, catalog.json), per-species contact sheets, index.html, the per-species
+Blender libraries (when the Blender outputs exist), and validation of a library folder.
+
+In: a library folder (its asset.json records); out: those files, or a list of `Problem`s.
+"""
+from __future__ import annotations
+
+import io
+import json
+
+import numpy as np
+
+from ..manifest import Problem
+from ..storage import Location, sha256_hex
+from ..tree_chain import to_json, tree_seed
+
+__all__ = ["catalog_rows", "write_catalog", "validate_library", "CATALOG_COLUMNS"]
+
+CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_m", "crown_radius_m",
+                   "level_names", "triangles", "switch_px", "iou_min", "iou_mean", "file_sizes_json", "files_json",
+                   "tags", "thumbnail", "turntable", "glb_bytes", "glb_bytes_without_instancing")
+
+
+def _asset_ids(location: Location, spec) -> list[str]:
+    from .asset import asset_id
+    from .spec import species_of_trees
+
+    ids = [asset_id(name, tree_seed(spec.seed, i)) for i, name in enumerate(species_of_trees(spec))]
+    for name in location.list("_added"):
+        if name.endswith(".json") and not name.startswith("."):
+            added = json.loads(location.read_bytes(f"_added/{name}"))
+            ids.append(asset_id(added["species"], added["seed"]))
+    return sorted(set(ids))
+
+
+def catalog_rows(location: Location, spec) -> list[dict]:
+    """One row per asset present (asset.json written), sorted by id."""
+    rows = []
+    for ident in _asset_ids(location, spec):
+        path = f"assets/{ident}/asset.json"
+        if not location.exists(path):
+            continue  # a failed tree: the manifest's failures name it
+        record = json.loads(location.read_bytes(path))
+        levels = record["levels"]
+        rows.append({
+            "id": record["id"], "species": record["species"], "generator": record["generator"],
+            "seed": int(record["seed"]), "params_json": to_json(record["params"]),
+            "height_m": record["height_m"], "crown_radius_m": record["crown_radius_m"],
+            "level_names": [lv["name"] for lv in levels], "triangles": [lv["triangles"] for lv in levels],
+            "switch_px": [lv["switch_px"] for lv in levels], "iou_min": [lv["iou_min"] for lv in levels],
+            "iou_mean": [lv["iou_mean"] for lv in levels], "file_sizes_json": to_json(record["sizes"]),
+            "files_json": to_json(record["files"]), "tags": record["tags"],
+            "thumbnail": record["files"]["thumbnail"], "turntable": record["files"]["turntable"],
+            "glb_bytes": record["sizes"].get("glb"), "glb_bytes_without_instancing":
+                record["sizes"].get("glb_without_instancing"),
+            "files": record["files"],
+        })
+    return rows
+
+
+def _parquet_bytes(rows: list[dict]) -> bytes:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pa.schema([("id", pa.string()), ("species", pa.string()), ("generator", pa.string()),
+                        ("seed", pa.int64()), ("params_json", pa.string()), ("height_m", pa.float64()),
+                        ("crown_radius_m", pa.float64()), ("level_names", pa.list_(pa.string())),
+                        ("triangles", pa.list_(pa.int64())), ("switch_px", pa.list_(pa.int64())),
+                        ("iou_min", pa.list_(pa.float64())), ("iou_mean", pa.list_(pa.float64())),
+                        ("file_sizes_json", pa.string()), ("files_json", pa.string()), ("tags", pa.list_(pa.string())),
+                        ("thumbnail", pa.string()), ("turntable", pa.string()), ("glb_bytes", pa.int64()),
+                        ("glb_bytes_without_instancing", pa.int64())])
+    table = pa.Table.from_pylist([{k: r[k] for k in CATALOG_COLUMNS} for r in rows], schema=schema)
+    sink = io.BytesIO()
+    pq.write_table(table, sink, compression="zstd", write_statistics=False)
+    return sink.getvalue()
+
+
+def write_catalog(location: Location, spec) -> dict:
+    """Write catalog.parquet, catalog.json, previews/<species>.png, index.html (and blender/<species>.blend when
+    asked and available); returns {"assets": n, "blender": status}."""
+    import cv2
+
+    from renderers.contact_sheet import contact_sheet
+
+    from .job import BLENDER_PENDING, blender_available
+    from .previews import gallery_html
+
+    rows = catalog_rows(location, spec)
+    location.write_atomic("catalog.parquet", _parquet_bytes(rows))
+    location.write_atomic("catalog.json", json.dumps(
+        [{k: (json.loads(r[k]) if k.endswith("_json") else r[k]) for k in CATALOG_COLUMNS} for r in rows],
+        indent=1, sort_keys=True).encode())
+    by_species: dict[str, list[dict]] = {}
+    for row in rows:
+        by_species.setdefault(row["species"], []).append(row)
+    for name, group in by_species.items():
+        cells = []
+        for row in group:
+            data = np.frombuffer(location.read_bytes(row["thumbnail"]), np.uint8)
+            image = cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+            cells.append((row["id"].split("-")[-1][-6:], image))
+        sheet = contact_sheet([(name, cells)], cell=192)
+        ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
+        location.write_atomic(f"previews/{name}.png", png.tobytes())
+    location.write_atomic("index.html", gallery_html(rows).encode())
+    blender = "not asked"
+    if "blend" in spec.formats:
+        blender = BLENDER_PENDING
+        if blender_available() and location.is_local and rows:
+            from renderers.blender_assets import write_asset_library
+
+            for name, group in by_species.items():
+                assets = [{"id": r["id"][:60], "glb_path": location.path(r["files"]["glb"]), "node": f"{r['id']}_LOD0",
+                           "preview_png": location.path(r["thumbnail"]), "tags": r["tags"],
+                           "catalog_path": f"Trees/{name}", "description": f"{name} ({r['generator']})"}
+                          for r in group if "glb" in r["files"]]
+                if assets:
+                    write_asset_library(assets, location.path(f"blender/{name}.blend"))
+            blender = "written"
+    return {"assets": len(rows), "blender": blender}
+
+
+def validate_library(path: str) -> list[Problem]:
+    """Problems of a library folder: not a library, missing catalog, missing or changed asset files, unreadable
+    GLBs. An empty list means every catalogued file is present with its recorded checksum."""
+    from species.gltf import GlbError, read_glb_chunks
+
+    from .job import LIBRARY_RECORD, LibraryError, read_library_spec
+
+    location = Location.resolve(path)
+    try:
+        read_library_spec(location)
+    except LibraryError as exc:
+        return [Problem(location.path(LIBRARY_RECORD), str(exc))]
+    if not location.exists("catalog.json"):
+        return [Problem(location.path("catalog.json"), "missing (the job has not finished: run it again)")]
+    problems = []
+    for row in json.loads(location.read_bytes("catalog.json")):
+        record_path = f"assets/{row['id']}/asset.json"
+        if not location.exists(record_path):
+            problems.append(Problem(location.path(record_path), "missing"))
+            continue
+        record = json.loads(location.read_bytes(record_path))
+        for relative, digest in record["sha256"].items():
+            if not location.exists(relative):
+                problems.append(Problem(location.path(relative), "missing"))
+            elif sha256_hex(data := location.read_bytes(relative)) != digest:
+                problems.append(Problem(location.path(relative), "sha256 differs from asset.json (changed or damaged)"))
+            elif relative.endswith(".glb"):
+                try:
+                    read_glb_chunks(data)
+                except GlbError as exc:
+                    problems.append(Problem(location.path(relative), f"unreadable GLB: {exc}"))
+    return problems

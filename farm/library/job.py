@@ -1,0 +1,222 @@
+"""The asset-library job on the farm's pipeline: `LibraryChain` is a tree builder for `farm.pipeline.run_job` that
+builds an asset and writes its files atomically; the driver then writes the catalog, sheets and gallery.
+
+In: a LibrarySpec and an output folder; out: assets/<id>/..., trees/ and views/ parts (the library's trees as a
+farm dataset, which also carries resume), manifest.json, library.json, catalog.parquet/.json, index.html.
+"""
+from __future__ import annotations
+
+import json
+import os
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from species.errors import TreefarmError
+
+from ..storage import Location, sha256_hex
+from ..tree_chain import BuiltTree, StageTimer, to_json
+from .asset import LibraryAsset, build_asset
+
+__all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "LibraryError", "LIBRARY_RECORD",
+           "blender_available", "BLENDER_PENDING"]
+
+LIBRARY_RECORD = "library.json"
+ASSETS = "assets"
+BLENDER_PENDING = "blender outputs pending (renderers.blender_assets is not available)"
+
+
+class LibraryError(TreefarmError):
+    """A folder that is not a library, or an asset that cannot be added."""
+
+
+def blender_available() -> bool:
+    """True when the Blender engineer's adapter (renderers.blender_assets) and its worker venv exist."""
+    try:
+        from renderers import blender_assets  # noqa: F401
+        from renderers.blender import blender_python
+    except ImportError:
+        return False
+    try:
+        return Path(blender_python()).exists()
+    except TreefarmError:
+        return False
+
+
+def _obj_text(part, name: str) -> bytes:
+    from species.gltf import z_up_to_y_up
+
+    lines = [f"# treefarm collision capsules of {name}: metres, Y up\no {name}\n"]
+    lines += [f"v {x:.5f} {y:.5f} {z:.5f}\n" for x, y, z in z_up_to_y_up(part.vertices).astype(np.float64)]
+    lines += [f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in part.faces]
+    return "".join(lines).encode("ascii")
+
+
+def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
+    """Write every file of one asset under assets/<id>/ (each atomically; asset.json last) and return the
+    asset record: metadata plus files {kind: relative path}, sizes {kind: bytes} and sha256 {path: hex}."""
+    from species.textures import png_bytes
+
+    from .gltf_asset import asset_to_glb
+    from .previews import thumbnail, turntable
+    from .usd_asset import TEXTURE_FILES, asset_to_usdc
+
+    folder = f"{ASSETS}/{asset.asset_id}"
+    files: dict[str, bytes] = {}
+    kinds: dict[str, str] = {}
+
+    def put(kind: str, relative: str, data: bytes) -> None:
+        files[f"{folder}/{relative}"] = data
+        kinds[kind] = f"{folder}/{relative}"
+
+    sizes = {}
+    with timer.stage("textures"):
+        maps = asset.bark_maps
+        images = {"bark_base_color": maps.base_color, "bark_normal": maps.normal,
+                  "bark_roughness_metallic": maps.roughness_metallic, "impostor_albedo": asset.impostor.albedo,
+                  "impostor_normal": asset.impostor.normal,
+                  **{f"leaf_atlas_{s}": image for s, image in asset.leaf_atlases.items()}}
+        if "usd" in spec.formats:
+            for name, relative in TEXTURE_FILES.items():
+                put(f"texture_{name}", relative, png_bytes(images[name]))
+    if "glb" in spec.formats:
+        with timer.stage("glb"):
+            put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset))
+            sizes["glb_without_instancing"] = len(asset_to_glb(asset, instanced=False))
+    if "usd" in spec.formats:
+        with timer.stage("usd"):
+            put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
+    if "obj" in spec.formats:
+        with timer.stage("obj"):
+            for name, data in asset.lod0.to_obj().items():
+                put("obj" if name.endswith(".obj") else f"obj_{name.rsplit('.', 1)[-1]}_{len(kinds)}",
+                    f"obj/{name}", data)
+    if "collision" in spec.formats:
+        from species.collision import capsule_mesh
+
+        put("collision", f"{asset.asset_id}_collision.obj", _obj_text(capsule_mesh(asset.capsules),
+                                                                       f"{asset.asset_id}_collision"))
+    with timer.stage("previews"):
+        put("thumbnail", "thumbnail.png", png_bytes(thumbnail(renderer, asset.lod0)))
+        put("turntable", "turntable.png", png_bytes(turntable(renderer, asset.lod0)))
+    with timer.stage("write"):
+        for relative, data in files.items():
+            location.write_atomic(relative, data)
+    fbx = _write_fbx(asset, location, spec, kinds, timer)
+    record = asset.metadata()
+    record.update({"files": {k: v for k, v in kinds.items() if not k.startswith(("texture_", "obj_"))},
+                   "all_files": sorted(files) + sorted(fbx),
+                   "sizes": {**{k: len(files[v]) for k, v in kinds.items() if v in files}, **sizes,
+                             **{k: v for k, v in fbx.items()}},
+                   "sha256": {path: sha256_hex(data) for path, data in sorted(files.items())},
+                   "tags": _tags(asset), "blender": "written" if fbx else (
+                       BLENDER_PENDING if ("fbx" in spec.formats and not blender_available()) else "not asked")})
+    location.write_atomic(f"{folder}/asset.json", to_json(record).encode())
+    return record
+
+
+def _write_fbx(asset, location: Location, spec, kinds: dict, timer) -> dict:
+    """One FBX per LOD through the Blender worker when asked and available; {} otherwise (pending)."""
+    if "fbx" not in spec.formats or "glb" not in kinds or not blender_available() or not location.is_local:
+        return {}
+    from renderers.blender_assets import export_fbx_batch
+
+    with timer.stage("blender"):
+        glb = location.path(kinds["glb"])
+        jobs = [{"glb": glb, "fbx": location.path(f"{ASSETS}/{asset.asset_id}/fbx/{asset.asset_id}_{lv.name}.fbx"),
+                 "node": f"{asset.asset_id}_{lv.name}", "name": f"{asset.asset_id}_{lv.name}"}
+                for lv in asset.levels]
+        rows = export_fbx_batch(jobs)
+    for lv, job in zip(asset.levels, jobs):
+        kinds[f"fbx_{lv.name}"] = os.path.relpath(job["fbx"], location.root)
+    return {f"fbx_{lv.name}": int(row["bytes"]) for lv, row in zip(asset.levels, rows)}
+
+
+def _tags(asset: LibraryAsset) -> list[str]:
+    height = asset.skeleton.height
+    size = "small" if height < 4 else "medium" if height < 15 else "large"
+    return sorted({asset.species, asset.generator, size, "leafless" if asset.skeleton.n_leaves == 0 else "leafy"})
+
+
+class LibraryChain:
+    """A farm tree builder: one asset per call, files written as a side effect, the tree returned for the
+    pipeline's trees table. One CoverageRenderer per worker process."""
+
+    def __init__(self, spec, out: str) -> None:
+        self.spec, self.location = spec, Location.resolve(out)
+        self._renderer = None
+
+    def renderer(self):
+        if self._renderer is None:
+            from renderers.impostor import CoverageRenderer
+
+            self._renderer = CoverageRenderer(64)
+        return self._renderer
+
+    def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree:
+        asset = build_asset(species_name, seed, self.spec, self.renderer(), timer)
+        write_asset_files(asset, self.location, self.spec, self.renderer(), timer)
+        return BuiltTree(params=asset.params, skeleton=asset.skeleton, mesh=asset.lod0)
+
+
+def _write_library_record(location: Location, spec) -> None:
+    location.write_atomic(LIBRARY_RECORD, json.dumps({"format": "treefarm-library", "spec": spec.to_dict(),
+                                                      "spec_digest": spec.digest()}, indent=1).encode())
+
+
+def run_library(spec, out: str, workers: int | None = None, address: str | None = None,
+                progress: bool = True) -> dict:
+    """Run (or resume) a library job into `out` on the farm pipeline, then write the catalog; returns it."""
+    from ..pipeline import run_job
+    from .catalog import write_catalog
+
+    location = Location.resolve(out)
+    if location.exists(LIBRARY_RECORD):
+        existing = json.loads(location.read_bytes(LIBRARY_RECORD))
+        if existing.get("spec_digest") != spec.digest():
+            raise LibraryError(f"{location.uri} holds a library of another spec; write this one to another --out")
+    _write_library_record(location, spec)
+    manifest = run_job(spec, out, workers=workers, address=address,
+                       builder_factory=partial(LibraryChain, out=location.uri), progress=progress)
+    catalog = write_catalog(location, spec)
+    return {"manifest": manifest, "catalog": catalog}
+
+
+def read_library_spec(location: Location):
+    """The LibrarySpec a library folder was made with; LibraryError when the folder is not a library."""
+    from .spec import parse_library_spec
+
+    if not location.exists(LIBRARY_RECORD):
+        raise LibraryError(f"{location.uri} is not an asset library (no {LIBRARY_RECORD}); make one with "
+                           f"`farm library --out DIR`")
+    raw = json.loads(location.read_bytes(LIBRARY_RECORD))["spec"]
+    raw = {k: v for k, v in raw.items() if k not in ("kind", "render", "store_glb")}
+    return parse_library_spec(raw)
+
+
+def add_asset(out: str, species_name: str, seed: int) -> dict:
+    """Build one more asset (species, tree seed) into an existing library with its spec; rewrite the catalog."""
+    import species
+
+    from .catalog import write_catalog
+
+    location = Location.resolve(out)
+    spec = read_library_spec(location)
+    known = [p.name for p in species.list_presets()]
+    if species_name not in known:
+        raise LibraryError(f"species {species_name!r} is unknown: allowed {', '.join(sorted(known))}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+        raise LibraryError(f"seed {seed!r} is invalid: allowed an integer in [0, 2^63)")
+    from renderers.impostor import CoverageRenderer
+
+    renderer = CoverageRenderer(64)
+    try:
+        timer = StageTimer()
+        asset = build_asset(species_name, seed, spec, renderer, timer)
+        record = write_asset_files(asset, location, spec, renderer, timer)
+    finally:
+        renderer.close()
+    location.write_atomic(f"_added/{asset.asset_id}.json", to_json({"species": species_name, "seed": seed}).encode())
+    write_catalog(location, spec)
+    return record

@@ -1,0 +1,165 @@
+"""Library job specifications: species and variants, LOD budgets and switch sizes, formats, texture size.
+
+Input: a YAML mapping (or none: every preset, 4 variants each); output: a frozen `LibrarySpec` that the farm's
+pipeline runs like a JobSpec (same planner, seeds, shards and resume), or a `LibrarySpecError` naming the field.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from farm.jobs import JobSpecError, RenderSpec, _check_int, _check_keys, _known_species, species_of_trees
+
+__all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
+           "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "species_of_trees"]
+
+FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")
+DEFAULT_FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")
+DEFAULT_BUDGETS = (0.40, 0.12, 0.04)
+DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
+_TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
+             "impostor_tile", "shard_size", "resources"}
+
+
+class LibrarySpecError(JobSpecError):
+    """A library spec has a missing, unknown or impossible field."""
+
+
+@dataclass(frozen=True)
+class LibrarySpec:
+    """One asset-library job.
+
+    name          : job name (the dataset tables' tree ids are f"{name}-{index:08d}").
+    seed          : job seed; asset i grows from `tree_seed(seed, i)`; its id is f"{species}-{seed:016x}".
+    species       : preset name -> number of variants, in spec order.
+    lod_budgets   : LOD1.. triangle budgets as fractions of LOD0, strictly decreasing, in (0, 1).
+    switch_px     : tree height on screen (px, 1080-px reference screen) at which LOD1.., then the impostor,
+                    take over; strictly decreasing, one more than lod_budgets.
+    formats       : files written per asset (glb, usd, obj, fbx, collision) and per species (blend).
+    texture_size  : bark texture height in pixels (leaf atlas tiles are half of it).
+    impostor_tile : pixels per impostor atlas tile (4 tiles).
+    shard_size    : assets per shard; resources: Ray resources per worker actor.
+    """
+
+    name: str = "library"
+    seed: int = 0
+    species: dict[str, float] = field(default_factory=dict)
+    lod_budgets: tuple[float, ...] = DEFAULT_BUDGETS
+    switch_px: tuple[int, ...] = DEFAULT_SWITCH_PX
+    formats: tuple[str, ...] = DEFAULT_FORMATS
+    texture_size: int = 256
+    impostor_tile: int = 128
+    shard_size: int = 4
+    resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
+
+    # What the farm's pipeline reads from a job spec: no views rendered, no GLB column in the trees table.
+    trees = None
+    render = RenderSpec(rig="tsn4", size=64, outputs=())
+    store_glb = False
+
+    @property
+    def species_counts(self) -> dict[str, int]:
+        return {name: int(count) for name, count in self.species.items()}
+
+    @property
+    def n_trees(self) -> int:
+        return sum(self.species_counts.values())
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.n_trees // self.shard_size)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        for key in ("lod_budgets", "switch_px", "formats"):
+            out[key] = list(out[key])
+        out["kind"] = "library"
+        out["render"] = {"rig": self.render.rig, "size": self.render.size, "outputs": []}
+        out["store_glb"] = False
+        return out
+
+    def digest(self) -> str:
+        """sha256 of everything that decides the files' bytes (not `resources`)."""
+        content = self.to_dict()
+        content.pop("resources")
+        return hashlib.sha256(json.dumps(content, sort_keys=True).encode()).hexdigest()
+
+
+def _check_fractions(name: str, value: Any) -> tuple[float, ...]:
+    allowed = "a strictly decreasing list of fractions of LOD0 triangles in (0, 1), e.g. [0.4, 0.12, 0.04]"
+    if not isinstance(value, (list, tuple)) or not 1 <= len(value) <= 3:
+        raise LibrarySpecError(name, value, allowed + " (1 to 3 levels)")
+    for item in value:
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or not 0.0 < item < 1.0:
+            raise LibrarySpecError(name, value, allowed)
+    if any(b >= a for a, b in zip(value, value[1:])):
+        raise LibrarySpecError(name, value, allowed)
+    if value[-1] < 0.002:
+        raise LibrarySpecError(name, value, allowed + " with the last >= 0.002 (room for a trunk and a card)")
+    return tuple(float(v) for v in value)
+
+
+def parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
+    """Validate a library spec mapping; None or {} gives the default (every preset, 4 variants each)."""
+    raw = _check_keys("", raw or {}, _TOP_KEYS)
+    known = list(known_species) if known_species is not None else _known_species()
+    name = raw.get("name", "library")
+    if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
+        raise LibrarySpecError("name", name, "letters, digits, '_' and '-'")
+    seed = _check_int("seed", raw.get("seed", 0), 0, 2**63 - 1)
+    per_species = _check_int("per_species", raw.get("per_species", 4), 1, 100_000)
+    mix = raw.get("species")
+    if mix is None:
+        mix = {preset: per_species for preset in known}
+    elif isinstance(mix, list):
+        mix = {preset: per_species for preset in mix}
+    if not isinstance(mix, dict) or not mix:
+        raise LibrarySpecError("species", mix, "a list of preset names or a mapping name -> variants")
+    species = {}
+    for preset, count in mix.items():
+        if preset not in known:
+            raise LibrarySpecError(f"species.{preset}", preset, f"a known species: {', '.join(sorted(known))}")
+        species[preset] = float(_check_int(f"species.{preset}", count, 1, 100_000))
+    budgets = _check_fractions("lod_budgets", raw.get("lod_budgets", list(DEFAULT_BUDGETS)))
+    switch = raw.get("switch_px", list(DEFAULT_SWITCH_PX[:len(budgets)]) + [DEFAULT_SWITCH_PX[-1]])
+    allowed = f"a strictly decreasing list of {len(budgets) + 1} pixel heights (LODs then the impostor)"
+    if (not isinstance(switch, (list, tuple)) or len(switch) != len(budgets) + 1
+            or any(isinstance(v, bool) or not isinstance(v, int) or not 8 <= v <= 4096 for v in switch)
+            or any(b >= a for a, b in zip(switch, switch[1:]))):
+        raise LibrarySpecError("switch_px", switch, allowed + " in [8, 4096]")
+    formats = raw.get("formats", list(DEFAULT_FORMATS))
+    if not isinstance(formats, (list, tuple)) or not formats:
+        raise LibrarySpecError("formats", formats, f"a list from: {', '.join(FORMATS)}")
+    for item in formats:
+        if item not in FORMATS:
+            raise LibrarySpecError("formats", item, f"formats from: {', '.join(FORMATS)}")
+    texture_size = _check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
+    if texture_size % 4:
+        raise LibrarySpecError("texture_size", texture_size, "a multiple of 4 in [32, 4096]")
+    tile = _check_int("impostor_tile", raw.get("impostor_tile", 128), 16, 2048)
+    shard_size = _check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
+    res = _check_keys("resources", raw.get("resources", {}), {"num_cpus", "num_gpus"})
+    resources = {"num_cpus": float(res.get("num_cpus", 1)), "num_gpus": float(res.get("num_gpus", 0))}
+    return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
+                       formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, impostor_tile=tile,
+                       shard_size=shard_size, resources=resources)
+
+
+def load_library_spec(path: str | Path, **known) -> LibrarySpec:
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise LibrarySpecError("spec file", str(path), "an existing YAML file")
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise LibrarySpecError("spec file", str(path), f"valid YAML ({' '.join(str(exc).split())})") from None
+    return parse_library_spec(raw, **known)
+
+
+def default_library_spec(per_species: int = 4) -> LibrarySpec:
+    return parse_library_spec({"per_species": per_species})

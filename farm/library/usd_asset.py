@@ -1,0 +1,193 @@
+"""The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
+variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of one card, wind primvars.
+
+In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+
+import numpy as np
+
+from species.pbr_textures import SEASONS
+from species.skeleton import LEAF_CARD_CORNERS
+
+from .asset import LibraryAsset, leaf_instances
+
+__all__ = ["asset_to_usdc", "TEXTURE_FILES", "prim_name"]
+
+# Texture files written beside the USD (relative asset paths in the shaders).
+TEXTURE_FILES = {"bark_base_color": "textures/bark_base_color.png", "bark_normal": "textures/bark_normal.png",
+                 "bark_roughness_metallic": "textures/bark_roughness_metallic.png",
+                 "impostor_albedo": "textures/impostor_albedo.png", "impostor_normal": "textures/impostor_normal.png",
+                 **{f"leaf_atlas_{s}": f"textures/leaf_atlas_{s}.png" for s in SEASONS if s != "bare"}}
+
+
+def prim_name(asset_id: str) -> str:
+    """A valid USD prim name for an asset id (letters, digits, '_'; not starting with a digit)."""
+    cleaned = "".join(c if c.isalnum() else "_" for c in asset_id)
+    return cleaned if not cleaned[0].isdigit() else f"_{cleaned}"
+
+
+def _material(stage, path: str, colour_file: str | None, normal_file: str | None, roughness_file: str | None,
+              opacity_from_texture: bool, roughness: float):
+    from pxr import Sdf, UsdShade
+
+    material = UsdShade.Material.Define(stage, path)
+    shader = UsdShade.Shader.Define(stage, f"{path}/surface")
+    shader.CreateIdAttr("UsdPreviewSurface")
+    shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+    material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+    reader = UsdShade.Shader.Define(stage, f"{path}/st")
+    reader.CreateIdAttr("UsdPrimvarReader_float2")
+    reader.CreateInput("varname", Sdf.ValueTypeNames.String).Set("st")
+    st = reader.CreateOutput("result", Sdf.ValueTypeNames.Float2)
+
+    def texture(name: str, file: str, colour: bool):
+        tex = UsdShade.Shader.Define(stage, f"{path}/{name}")
+        tex.CreateIdAttr("UsdUVTexture")
+        tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
+        tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
+        tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB" if colour else "raw")
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+        return tex
+
+    if colour_file:
+        tex = texture("base_color", colour_file, True)
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).ConnectToSource(
+            tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3))
+        if opacity_from_texture:
+            shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).ConnectToSource(
+                tex.CreateOutput("a", Sdf.ValueTypeNames.Float))
+            shader.CreateInput("opacityThreshold", Sdf.ValueTypeNames.Float).Set(0.5)
+    if normal_file:
+        tex = texture("normal", normal_file, False)
+        tex.CreateInput("scale", Sdf.ValueTypeNames.Float4).Set((2.0, 2.0, 2.0, 1.0))
+        tex.CreateInput("bias", Sdf.ValueTypeNames.Float4).Set((-1.0, -1.0, -1.0, 0.0))
+        shader.CreateInput("normal", Sdf.ValueTypeNames.Normal3f).ConnectToSource(
+            tex.CreateOutput("rgb", Sdf.ValueTypeNames.Float3))
+    if roughness_file:
+        tex = texture("roughness", roughness_file, False)
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).ConnectToSource(
+            tex.CreateOutput("g", Sdf.ValueTypeNames.Float))
+    else:
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(roughness)
+    return material
+
+
+def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = None):
+    from pxr import Sdf, UsdGeom, Vt
+
+    mesh = UsdGeom.Mesh.Define(stage, path)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(part.vertices, np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(part.n_faces, 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(part.faces.reshape(-1), np.int32)))
+    mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(part.normals, np.float32)))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    lo, hi = part.vertices.min(axis=0), part.vertices.max(axis=0)
+    mesh.CreateExtentAttr(Vt.Vec3fArray.FromNumpy(np.stack([lo, hi]).astype(np.float32)))
+    primvars = UsdGeom.PrimvarsAPI(mesh)
+    uvs = np.asarray(part.uvs, np.float32).copy()
+    if uv_tile is not None:
+        uvs[:, 0] = 0.5 * uvs[:, 0] + 0.5 * uv_tile
+    primvars.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
+        Vt.Vec2fArray.FromNumpy(uvs))
+    if wind is not None:
+        primvars.CreatePrimvar("wind", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
+            Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(wind, np.float32)))
+        primvars.CreatePrimvar("windPivot", Sdf.ValueTypeNames.Float3Array, UsdGeom.Tokens.vertex).Set(
+            Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(pivot, np.float32)))
+    return mesh
+
+
+def _leaf_instancer(stage, path: str, level, level_index: int, card_material):
+    from pxr import Sdf, UsdGeom, UsdShade, Vt
+    from scipy.spatial.transform import Rotation
+
+    from species.mesh import _CARD_FACES, _CARD_UVS
+    from species.tree_mesh import MeshPart
+
+    instancer = UsdGeom.PointInstancer.Define(stage, path)
+    card = MeshPart(LEAF_CARD_CORNERS, _CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), _CARD_UVS)
+    prototype = _mesh(stage, f"{path}/prototypes/card", card, uv_tile=0 if level_index == 0 else 1)
+    UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+    instancer.CreatePrototypesRel().SetTargets([prototype.GetPath()])
+    translation, rotation, scale = leaf_instances(level.skeleton)
+    quat = Rotation.from_matrix(rotation).as_quat()  # x, y, z, w
+    quat[quat[:, 3] < 0] *= -1.0
+    instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.zeros(len(translation), np.int32)))
+    instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
+    instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))
+    instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scale.astype(np.float32)))
+    primvars = UsdGeom.PrimvarsAPI(instancer)
+    primvars.CreatePrimvar("wind", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
+        Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(level.leaf_wind, np.float32)))
+    primvars.CreatePrimvar("windPivot", Sdf.ValueTypeNames.Float3Array, UsdGeom.Tokens.vertex).Set(
+        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(level.leaf_pivot, np.float32)))
+    return instancer
+
+
+def asset_to_usdc(asset: LibraryAsset) -> bytes:
+    """`.usdc` bytes of the asset: /<id> (component, default prim) with Looks/, and Geom/ filled per `lod`
+    variant (bark mesh + leaves PointInstancer, or the impostor card); the `season` variant set binds the leaf
+    material of that season, and `bare` deactivates the leaves. Selected by default: LOD0, summer."""
+    from pxr import Kind, Sdf, Usd, UsdGeom, UsdShade, Vt
+
+    layer = Sdf.Layer.CreateAnonymous(".usdc")
+    stage = Usd.Stage.Open(layer)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, UsdGeom.LinearUnits.meters)
+    root_path = f"/{prim_name(asset.asset_id)}"
+    root = UsdGeom.Xform.Define(stage, root_path).GetPrim()
+    stage.SetDefaultPrim(root)
+    Usd.ModelAPI(root).SetKind(Kind.Tokens.component)
+    root.SetCustomDataByKey("treefarm:asset_id", asset.asset_id)
+    root.SetCustomDataByKey("treefarm:switch_px", Vt.IntArray([int(lv.switch_px) for lv in asset.levels]))
+    looks = f"{root_path}/Looks"
+    UsdGeom.Scope.Define(stage, looks)
+    bark = _material(stage, f"{looks}/bark", TEXTURE_FILES["bark_base_color"], TEXTURE_FILES["bark_normal"],
+                     TEXTURE_FILES["bark_roughness_metallic"], False, 0.9)
+    leaves = {s: _material(stage, f"{looks}/leaves_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, True, 0.7)
+              for s in SEASONS if s != "bare"}
+    impostor = _material(stage, f"{looks}/impostor", TEXTURE_FILES["impostor_albedo"],
+                         TEXTURE_FILES["impostor_normal"], None, True, 0.8)
+    geom = f"{root_path}/Geom"
+    UsdGeom.Xform.Define(stage, geom)
+    lod_set = root.GetVariantSets().AddVariantSet("lod")
+    for index, level in enumerate(asset.levels):
+        lod_set.AddVariant(level.name)
+        lod_set.SetVariantSelection(level.name)
+        with lod_set.GetVariantEditContext():
+            if level.name == "IMPOSTOR":
+                card = _mesh(stage, f"{geom}/impostor", level.mesh.bark)
+                UsdShade.MaterialBindingAPI.Apply(card.GetPrim()).Bind(impostor)
+            else:
+                mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
+                UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
+                if level.skeleton.n_leaves:
+                    _leaf_instancer(stage, f"{geom}/leaves", level, index, leaves["summer"])
+            stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
+    lod_set.SetVariantSelection("LOD0")
+    season_set = root.GetVariantSets().AddVariantSet("season")
+    for season in SEASONS:
+        season_set.AddVariant(season)
+        season_set.SetVariantSelection(season)
+        with season_set.GetVariantEditContext():
+            over = stage.OverridePrim(f"{geom}/leaves")
+            if season == "bare":
+                over.SetActive(False)
+            else:
+                card = stage.OverridePrim(f"{geom}/leaves/prototypes/card")
+                UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
+    season_set.SetVariantSelection("summer")
+    handle, path = tempfile.mkstemp(suffix=".usdc")
+    os.close(handle)
+    try:
+        layer.Export(path)
+        with open(path, "rb") as stream:
+            return stream.read()
+    finally:
+        os.unlink(path)
