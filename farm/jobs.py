@@ -55,6 +55,8 @@ class JobSpec:
     render        : RenderSpec.
     store_glb     : store each tree's GLB bytes in the trees table.
     shard_size    : trees per shard (one trees and one views part file per shard).
+    max_nodes     : a tree whose skeleton has more nodes is recorded as failed before meshing (keeps one
+                    runaway parameter draw from stalling a worker for minutes and gigabytes).
     output        : default output location (local path or pyarrow filesystem URI), or None.
     resources     : Ray resources per worker actor (`num_cpus`, `num_gpus`).
     """
@@ -66,6 +68,7 @@ class JobSpec:
     render: RenderSpec = field(default_factory=RenderSpec)
     store_glb: bool = True
     shard_size: int = 8
+    max_nodes: int = 300_000
     output: str | None = None
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
 
@@ -124,7 +127,8 @@ def species_of_trees(spec: JobSpec) -> list[str]:
 
 
 # ---------------------------------------------------------------------- parsing and validation
-_TOP_KEYS = {"name", "seed", "species", "trees", "render", "store_glb", "shard_size", "output", "resources"}
+_TOP_KEYS = {"name", "seed", "species", "trees", "render", "store_glb", "shard_size", "max_nodes", "output",
+             "resources"}
 _RENDER_KEYS = {"rig", "size", "outputs"}
 _RESOURCE_KEYS = {"num_cpus", "num_gpus"}
 
@@ -230,6 +234,7 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
     if not isinstance(store_glb, bool):
         raise JobSpecError("store_glb", store_glb, "true or false")
     shard_size = _check_int("shard_size", raw.get("shard_size", 8), 1, 100_000)
+    max_nodes = _check_int("max_nodes", raw.get("max_nodes", 300_000), 1)
     output = raw.get("output")
     if output is not None and (not isinstance(output, str) or not output):
         raise JobSpecError("output", output, "a path or URI string")
@@ -238,7 +243,7 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
                  "num_gpus": _check_number("resources.num_gpus", res_raw.get("num_gpus", 0), 0.0)}
     return JobSpec(name=name, seed=seed, species=species_mix, trees=trees,
                    render=RenderSpec(rig=rig, size=size, outputs=tuple(outputs)), store_glb=store_glb,
-                   shard_size=shard_size, output=output, resources=resources)
+                   shard_size=shard_size, max_nodes=max_nodes, output=output, resources=resources)
 
 
 def load_spec(path: str | Path, **known) -> JobSpec:

@@ -19,12 +19,19 @@ from .storage import Location
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 
-__all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORKER_ENV", "ACTOR_RETRIES"]
+__all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORKER_ENV", "ACTOR_RETRIES",
+           "worker_env", "ShardWorker"]
 
 # Worker processes render offscreen through EGL (no display on farm machines).
 WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
 # A worker that dies is restarted and its in-flight shard re-run this many times (Ray's own retries).
 ACTOR_RETRIES = 3
+
+
+def worker_env(spec: JobSpec) -> dict[str, str]:
+    """Environment of a worker actor: EGL, and Mesa's rasterizer threads matched to the actor's CPUs
+    (llvmpipe would otherwise start one thread per core in every actor and oversubscribe the machine)."""
+    return {**WORKER_ENV, "LP_NUM_THREADS": str(max(1, int(spec.resources["num_cpus"])))}
 
 
 class JobError(TreefarmError):
@@ -105,6 +112,9 @@ class ShardWorker:
     """A Ray actor: one tree builder (so one offscreen renderer) per process, taking shard tasks."""
 
     def __init__(self, spec: JobSpec, uri: str, builder_factory: BuilderFactory):
+        import cv2
+
+        cv2.setNumThreads(max(1, int(spec.resources["num_cpus"])))  # as LP_NUM_THREADS: one actor, its CPUs
         self.spec, self.location = spec, Location.resolve(uri)
         self.builder = builder_factory(spec)
 
@@ -137,6 +147,7 @@ def _connect_ray(address: str | None, workers: int | None) -> bool:
     if ray.is_initialized():
         return False
     options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
+    address = address or os.environ.get("RAY_ADDRESS")  # set inside a RayJob or by `ray job submit`
     if address is None:
         options["num_cpus"] = max(os.cpu_count() or 1, workers or 1)
     ray.init(address=address, **options)
@@ -175,7 +186,7 @@ def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | 
             worker_class = ray.remote(ShardWorker).options(
                 num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"],
                 max_restarts=ACTOR_RETRIES, max_task_retries=ACTOR_RETRIES,
-                runtime_env={"env_vars": WORKER_ENV})
+                runtime_env={"env_vars": worker_env(spec)})
             actors = [worker_class.remote(spec, location.uri, builder_factory)
                       for _ in range(min(n_actors, len(pending)))]
             views_done = sum(records[k]["views"]["rows"] for k in records)

@@ -13,10 +13,12 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from species.errors import TreefarmError
+
 from .dataset import FLOAT_OUTPUTS
 from .image_codec import encode_map
 
-__all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
+__all__ = ["BuiltTree", "StageTimer", "TreeTooLargeError", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
            "tree_row", "view_rows", "failed_tree_row", "to_json"]
 
 
@@ -46,6 +48,10 @@ def to_json(value: Any) -> str:
         raise TypeError(f"{type(item).__name__} is not JSON-able")
 
     return json.dumps(value, sort_keys=True, separators=(",", ":"), default=plain)
+
+
+class TreeTooLargeError(TreefarmError):
+    """A tree exceeds the job's size limit (recorded as a failed tree; the job goes on)."""
 
 
 class StageTimer:
@@ -108,6 +114,9 @@ class SpeciesChain:
         built = BuiltTree(params=params, skeleton=None, mesh=None)
         with timer.stage("grow"):
             built.skeleton = species.grow(params, species.rng_for(params))
+            if built.skeleton.n_nodes > self.spec.max_nodes:
+                raise TreeTooLargeError(f"skeleton has {built.skeleton.n_nodes} nodes; the job allows "
+                                        f"max_nodes = {self.spec.max_nodes}")
         with timer.stage("mesh"):
             built.mesh = species.build_mesh(built.skeleton, params)
         if self.spec.render.outputs:

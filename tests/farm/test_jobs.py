@@ -22,6 +22,7 @@ def test_spec_round_trips_through_yaml(tmp_path):
     ("species", {"standin_a": -1}, "species.standin_a"),
     ("seed", -3, "seed"),
     ("shard_size", 0, "shard_size"),
+    ("max_nodes", 0, "max_nodes"),
     ("trees", "many", "trees"),
     ("render", {"outputs": ["oil_painting"]}, "render.outputs"),
     ("render", {"rig": "circle"}, "render.rig"),
@@ -76,3 +77,14 @@ def test_default_spec_has_every_preset_and_the_default_outputs():
     assert spec.render.outputs == tuple(renderers.DEFAULT_OUTPUTS)
     assert (spec.render.rig, spec.render.size) == ("tsn4", 256)
     assert yaml.safe_load(spec_to_yaml(spec))["shard_size"] == 8
+
+
+def test_kuberay_job_manifest_carries_a_valid_job_spec():
+    from pathlib import Path
+
+    from farm.jobs import parse_spec
+
+    manifest = Path(__file__).resolve().parents[2] / "infra/kuberay/rayjob.yaml"
+    config_map = next(d for d in yaml.safe_load_all(manifest.read_text()) if d["kind"] == "ConfigMap")
+    spec = parse_spec(yaml.safe_load(config_map["data"]["job.yaml"]))
+    assert spec.n_trees == 20000

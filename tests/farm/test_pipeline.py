@@ -113,3 +113,15 @@ def test_killed_worker_shard_is_retried_and_every_tree_is_present_once(tmp_path,
     ids = dataset.to_pandas(str(tmp_path / "out"), columns=["index"])["index"].tolist()
     assert sorted(ids) == list(range(spec.n_trees))
     assert manifest["counts"]["failed"] == 0
+
+
+def test_tree_over_the_node_limit_is_recorded_as_failed_before_meshing(tmp_path):
+    from farm.jobs import parse_spec
+    from farm.tree_chain import SpeciesChain
+
+    spec = parse_spec({"name": "limit", "species": {"maple": 1}, "max_nodes": 10,
+                       "render": {"rig": "two-view", "size": 32}})
+    record = run_shard(spec, plan_shards(spec)[0], Location.resolve(str(tmp_path)), SpeciesChain(spec))
+    (failure,) = record["failures"]
+    assert failure["stage"] == "grow" and "max_nodes = 10" in failure["error"]
+    assert "mesh" not in record["timings"]["trees"][0]
