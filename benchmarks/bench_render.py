@@ -42,14 +42,16 @@ def pick_tree():
     return best[1:]
 
 
-def time_outputs(renderer, mesh, skeleton, outputs, repeats: int) -> float:
-    """Median milliseconds per view of rendering `outputs` for the 4 tsn4 views."""
-    times = []
+def time_outputs(renderer, mesh, skeleton, outputs, repeats: int) -> tuple[float, float]:
+    """Median milliseconds per view (CPU time of this process, all threads; wall time) of rendering `outputs`
+    for the 4 tsn4 views. CPU time is the figure to compare: on a shared machine wall time includes waiting."""
+    cpu, wall = [], []
     for r in range(repeats):
-        start = time.perf_counter()
+        start_cpu, start_wall = time.process_time(), time.perf_counter()
         views = renderer.render(mesh, skeleton, "tsn4", list(outputs), np.random.default_rng(r))
-        times.append((time.perf_counter() - start) / len(views))
-    return 1000.0 * float(np.median(times))
+        cpu.append((time.process_time() - start_cpu) / len(views))
+        wall.append((time.perf_counter() - start_wall) / len(views))
+    return 1000.0 * float(np.median(cpu)), 1000.0 * float(np.median(wall))
 
 
 def cycles_ms(mesh, size: int, n_views: int) -> tuple[float | None, str]:
@@ -99,26 +101,29 @@ def main() -> int:
         else:
             cycles[size] = cycles_ms(mesh, size, args.cycles_views)
 
-    header = f"{'output':<22}" + "".join(f"{f'{s} px ms/view':>17}" for s in SIZES) + "   reference"
-    print(header)
-    print("-" * len(header))
+    header = f"{'ms per view':<22}" + "".join(f"{f'{s} px cpu':>13}{f'{s} px wall':>13}" for s in SIZES)
+    print(header + "   reference")
+    print("-" * (len(header) + 40))
     for name, by_size in rows.items():
         ref = f"<= {TARGET_MS:.0f} ms at 256 px (issue 4)" if name == "DEFAULT SET" else ""
-        print(f"{name:<22}" + "".join(f"{by_size[s]:>17.1f}" for s in SIZES) + f"   {ref}")
+        cells = "".join(f"{by_size[s][0]:>13.1f}{by_size[s][1]:>13.1f}" for s in SIZES)
+        print(f"{name:<22}{cells}   {ref}")
     line = f"{'Cycles photo (16 spp)':<22}"
     for size in SIZES:
         ms, why = cycles[size]
-        line += f"{ms:>17.0f}" if ms is not None else f"{'n/a':>17}"
-    print(line + "   Blender Cycles CPU, 1 thread")
+        line += f"{'':>13}{ms:>13.0f}" if ms is not None else f"{'':>13}{'n/a':>13}"
+    print(line + "   Blender Cycles CPU, 1 thread (wall, in the worker)")
     for size in SIZES:
         ms, why = cycles[size]
         if ms is None:
             print(f"  Cycles at {size} px: n/a ({why})")
         else:
-            speedup = ms / rows["DEFAULT SET"][size]
-            print(f"  {size} px: default set is {speedup:.0f}x faster than Cycles (target >= {TARGET_SPEEDUP:.0f}x)")
-    verdict = "meets" if rows["DEFAULT SET"][256] <= TARGET_MS else "misses"
-    print(f"default set at 256 px: {rows['DEFAULT SET'][256]:.0f} ms/view, {verdict} the {TARGET_MS:.0f} ms target")
+            speedup = ms / rows["DEFAULT SET"][size][1]
+            print(f"  {size} px: default set is {speedup:.0f}x faster than Cycles, wall to wall "
+                  f"(target >= {TARGET_SPEEDUP:.0f}x)")
+    cpu_ms, wall_ms = rows["DEFAULT SET"][256]
+    verdict = "meets" if cpu_ms <= TARGET_MS else "misses"
+    print(f"default set at 256 px: {cpu_ms:.0f} ms/view CPU ({wall_ms:.0f} wall), {verdict} the {TARGET_MS:.0f} ms target")
     return 0
 
 
