@@ -76,6 +76,7 @@ class LibrarySpec:
         out = asdict(self)
         for key in ("lod_budgets", "switch_px", "formats"):
             out[key] = list(out[key])
+        out["species"] = {name: int(count) for name, count in self.species.items()}
         out["kind"] = "library"
         out["render"] = {"rig": self.render.rig, "size": self.render.size, "outputs": []}
         out["store_glb"] = False

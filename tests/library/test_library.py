@@ -1,0 +1,135 @@
+"""The asset library end to end on a tiny job (small presets, 64 px textures): files pass real clients
+(Khronos glTF validator, trimesh, usd-core's UsdValidation), budgets, wind data, determinism, resume, bad input."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from farm.cli import main as farm_main
+from gltf_validator import assert_valid_glb
+
+SPEC = {"name": "tiny", "seed": 5, "species": {"maple": 1, "sc_young_sapling": 1, "lsystem_monopodial": 1},
+        "formats": ["glb", "usd", "obj", "collision"], "texture_size": 64, "impostor_tile": 32, "shard_size": 1}
+FARM = [sys.executable, "-m", "farm.cli"]
+
+
+def asset_bytes(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted((folder / "assets").rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def spec_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("spec") / "tiny.yaml"
+    path.write_text(yaml.safe_dump(SPEC))
+    return path
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory, spec_file, ray_session):
+    out = tmp_path_factory.mktemp("library")
+    assert farm_main(["library", str(spec_file), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    return out
+
+
+def test_every_asset_is_catalogued_with_its_files(library):
+    rows = json.loads((library / "catalog.json").read_text())
+    assert len(rows) == 3 and {r["species"] for r in rows} == set(SPEC["species"])
+    for row in rows:
+        for path in row["files_json"].values():
+            assert (library / path).is_file()
+    assert (library / "index.html").read_text().count('class="card"') == 3
+    assert farm_main(["library", "validate", str(library)]) == 0
+
+
+def test_every_glb_passes_the_khronos_validator_and_loads_in_trimesh(library, tmp_path):
+    import trimesh
+
+    for glb in sorted(library.glob("assets/*/*.glb")):
+        report = assert_valid_glb(glb.read_bytes(), tmp_path, glb.name)
+        assert set(report["info"]["extensionsUsed"]) >= {"MSFT_lod", "KHR_materials_variants"}
+        scene = trimesh.load(glb)
+        assert len(scene.geometry) >= 1
+
+
+def test_every_usd_opens_and_passes_usd_validation(library):
+    from pxr import Usd, UsdGeom, UsdValidation
+
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    for path in sorted(library.glob("assets/*/*.usdc")):
+        stage = Usd.Stage.Open(str(path))
+        assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+        errors = [e for e in UsdValidation.ValidationContext(validators).Validate(stage)
+                  if e.GetType() == UsdValidation.ValidationErrorType.Error]
+        assert not errors, [e.GetMessage() for e in errors]
+        sets = stage.GetDefaultPrim().GetVariantSets()
+        assert set(sets.GetNames()) == {"lod", "season"}
+        sets.GetVariantSet("season").SetVariantSelection("bare")
+        assert not stage.GetPrimAtPath(stage.GetDefaultPrim().GetPath().AppendPath("Geom/leaves")).IsActive()
+
+
+def test_catalog_triangles_and_iou_follow_the_budgets(library):
+    import pandas as pd
+
+    table = pd.read_parquet(library / "catalog.parquet")
+    for _, row in table.iterrows():
+        tris = np.asarray(row["triangles"])
+        assert list(row["switch_px"]) == [0, 512, 256, 128, 64]
+        assert np.all(tris[1:4] <= np.array([0.40, 0.12, 0.04]) * tris[0]) and tris[4] <= 16
+        assert np.all((np.asarray(row["iou_min"]) > 0) & (np.asarray(row["iou_min"]) <= 1))
+        assert row["glb_bytes"] < row["glb_bytes_without_instancing"]
+
+
+def test_same_spec_gives_byte_identical_assets_after_a_killed_driver(library, spec_file, tmp_path):
+    out = tmp_path / "out"
+    driver = subprocess.Popen(FARM + ["library", str(spec_file), "--out", str(out), "--workers", "1", "--quiet"],
+                              start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              env={**os.environ, "PYOPENGL_PLATFORM": "egl"})
+    deadline = time.monotonic() + 180
+    while not (out / "_shards/part-00000.json").exists():
+        assert driver.poll() is None and time.monotonic() < deadline, "the driver ended before its first shard"
+        time.sleep(0.05)
+    os.killpg(driver.pid, signal.SIGKILL)
+    driver.wait()
+    assert not (out / "catalog.json").exists()
+    assert farm_main(["library", str(spec_file), "--out", str(out), "--workers", "1", "--quiet"]) == 0
+    assert asset_bytes(out) == asset_bytes(library)
+
+
+def test_add_builds_one_more_asset_into_the_catalog(library, tmp_path):
+    import shutil
+
+    copy = tmp_path / "copy"
+    shutil.copytree(library, copy)
+    assert farm_main(["library", "add", str(copy), "--species", "sc_dome_shrub", "--seed", "7"]) == 0
+    rows = json.loads((copy / "catalog.json").read_text())
+    assert "sc_dome_shrub-0000000000000007" in {r["id"] for r in rows} and len(rows) == 4
+
+
+@pytest.mark.parametrize("change, named", [
+    ({"species": {"no_such_tree": 1}}, "no_such_tree"),
+    ({"lod_budgets": [0.4, 0.5, 0.04]}, "lod_budgets"),
+    ({"formats": ["glb", "stl"]}, "formats"),
+])
+def test_bad_spec_gives_one_line_error_and_writes_nothing(tmp_path, capsys, change, named):
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump({**SPEC, **change}))
+    assert farm_main(["library", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("farm: error:") and named in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_folder_that_is_not_a_library_is_refused(tmp_path, capsys):
+    assert farm_main(["library", "add", str(tmp_path), "--species", "maple", "--seed", "1"]) == 2
+    assert "not an asset library" in capsys.readouterr().err
+    assert farm_main(["library", "validate", str(tmp_path)]) == 1
+    assert list(tmp_path.iterdir()) == []

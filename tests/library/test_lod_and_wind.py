@@ -1,0 +1,52 @@
+"""LOD budgets on every Weber-Penn preset, wind attributes, collision capsules (no rendering)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import species
+from species.collision import collision_capsules
+from species.lod import build_lod
+from species.wind import wind_attributes
+
+
+def _tree(name: str, seed: int = 1):
+    params = species.sample(name, np.random.default_rng(seed))
+    skeleton = species.grow(params, species.rng_for(params))
+    return skeleton, species.build_mesh(skeleton, params)
+
+
+@pytest.mark.parametrize("name", [p.name for p in species.list_presets("weber_penn")])
+def test_lod_budgets_hold_on_every_weber_penn_preset(name):
+    skeleton, lod0 = _tree(name)
+    for level, budget in ((1, 0.40), (2, 0.12), (3, 0.04)):
+        lod = build_lod(skeleton, lod0, level, budget)
+        assert 0 < lod.n_triangles <= budget * lod0.n_faces
+        if skeleton.n_leaves:
+            assert lod.skeleton.n_leaves >= 1
+
+
+def test_wind_attributes_are_in_range_and_phase_is_constant_along_each_branch():
+    skeleton, mesh = _tree("maple")
+    branch = mesh.bark.attributes["branch"]
+    wind, pivot = wind_attributes(skeleton, mesh.bark.vertices, branch)
+    assert wind.shape == (mesh.bark.n_vertices, 4) and pivot.shape == (mesh.bark.n_vertices, 3)
+    assert np.all((wind[:, 1] >= 0) & (wind[:, 1] <= 1)) and np.all((wind[:, 2] >= 0) & (wind[:, 2] < 1))
+    assert np.all(wind[:, 0] == mesh.bark.attributes["order"])
+    for column in (2, 0):
+        lo = np.full(branch.max() + 1, np.inf)
+        hi = np.full(branch.max() + 1, -np.inf)
+        np.minimum.at(lo, branch, wind[:, column])
+        np.maximum.at(hi, branch, wind[:, column])
+        used = np.isfinite(lo)
+        assert np.array_equal(lo[used], hi[used])
+    # the trunk's pivot is the root at the origin
+    assert np.allclose(pivot[branch == 0], 0.0)
+
+
+def test_collision_capsules_cover_the_trunk_base_and_top():
+    skeleton, _ = _tree("maple")
+    capsules = collision_capsules(skeleton)
+    assert capsules.shape[1] == 7 and np.all(capsules[:, 6] > 0)
+    trunk = skeleton.branch_paths[0]
+    assert np.allclose(capsules[0, :3], skeleton.positions[trunk[0]])
