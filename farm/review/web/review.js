@@ -152,6 +152,7 @@ document.addEventListener('keydown', (event) => {
 function changeFilters() { state.page = 1; loadPage(0); }
 
 const viewer = new TreeViewer($('viewer'));
+window.reviewViewer = viewer;
 const vr = new VRMode(viewer, {
   verdict: (kind, treeId) => verdict(kind, treeId),
   page: (step) => { const page = state.page + step; if (page >= 1 && page <= state.pages) { state.page = page; return loadPage(0); } },

@@ -1,0 +1,158 @@
+"""The review page in headless Chromium: a tree drawn on the canvas, a keyboard verdict stored, VR entry and exit.
+
+WebGL runs on SwiftShader (CPU). VR runs against a stubbed `navigator.xr` that plays one headset frame per call.
+"""
+from __future__ import annotations
+
+import io
+import shutil
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from conftest import running_server
+
+if shutil.which("chromium") is None:
+    pytest.skip("chromium is not installed: run `make browser-env`", allow_module_level=True)
+sync_api = pytest.importorskip("playwright.sync_api")
+
+# A WebXR device stand-in: immersive-vr supported, a session whose frames the test plays with __xrStep().
+FAKE_XR = """
+(() => {
+  class FakeSession extends EventTarget {
+    constructor() { super(); this.renderState = {}; this.inputSources = []; this.enabledFeatures = ['local-floor'];
+                    this.environmentBlendMode = 'opaque'; this.visibilityState = 'visible'; this.callbacks = []; }
+    updateRenderState(state) { Object.assign(this.renderState, state); }
+    async requestReferenceSpace(type) {
+      const space = { type, getOffsetReferenceSpace: () => space, addEventListener() {}, removeEventListener() {} };
+      return space;
+    }
+    requestAnimationFrame(callback) { this.callbacks.push(callback); return this.callbacks.length; }
+    cancelAnimationFrame() {}
+    async end() { this.dispatchEvent(new Event('end')); }
+  }
+  const eye = { eye: 'left', transform: { matrix: new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, 0,1.6,0,1]) },
+                projectionMatrix: new Float32Array([1,0,0,0, 0,1.33,0,0, 0,0,-1.002,-1, 0,0,-0.2,0]) };
+  window.__xrStep = (n = 1) => {
+    for (let i = 0; i < n; i++) {
+      const session = window.__xrSession, pending = session.callbacks.splice(0);
+      const frame = { session, getViewerPose: () => ({ views: [eye] }), getPose: () => null };
+      for (const callback of pending) callback(performance.now(), frame);
+    }
+  };
+  window.XRWebGLLayer = class {
+    constructor() { this.framebuffer = null; this.framebufferWidth = 640; this.framebufferHeight = 480; this.ignoreDepthValues = true; }
+    getViewport() { return { x: 0, y: 0, width: 640, height: 480 }; }
+  };
+  delete window.XRWebGLBinding;
+  WebGL2RenderingContext.prototype.makeXRCompatible = async function () {};
+  const xr = new EventTarget();
+  xr.isSessionSupported = async (mode) => mode === 'immersive-vr';
+  xr.requestSession = async () => (window.__xrSession = new FakeSession());
+  Object.defineProperty(Navigator.prototype, 'xr', { get: () => xr, configurable: true });
+})();
+"""
+NO_XR = "Object.defineProperty(Navigator.prototype, 'xr', { get: () => undefined, configurable: true });"
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from farm.review.browser import launch_chromium
+
+    with sync_api.sync_playwright() as playwright:
+        browser = launch_chromium(playwright)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture(scope="module")
+def site(review_dataset, tmp_path_factory):
+    with running_server(review_dataset, tmp_path_factory.mktemp("browser") / "reviews.sqlite") as running:
+        yield running
+
+
+@pytest.fixture
+def open_page(browser, site):
+    """Opens the review page (with an optional init script); yields (page, problems, service)."""
+    pages = []
+
+    def opener(init_script: str | None = None, reviewer: str = "browser"):
+        base, token, service = site
+        page = browser.new_page(viewport={"width": 1100, "height": 700})
+        problems = []
+        page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
+        page.on("console", lambda message: problems.append(f"console: {message.text}") if message.type == "error" else None)
+        if init_script:
+            page.add_init_script(init_script)
+        page.goto(f"{base}/?token={token}&reviewer={reviewer}")
+        page.wait_for_function("window.firstTreeDrawnAt !== undefined", timeout=60_000)
+        pages.append(page)
+        return page, problems, service
+
+    yield opener
+    for page in pages:
+        page.close()
+
+
+def canvas_pixels(page) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(page.locator("#viewer canvas").screenshot())).convert("RGB"), np.int16)
+
+
+def next_frames(page, n: int = 3) -> None:
+    page.evaluate(f"new Promise((done) => {{ let k = {n}; const tick = () => (--k ? requestAnimationFrame(tick) : done()); requestAnimationFrame(tick); }})")
+
+
+def test_the_canvas_shows_the_first_tree(open_page):
+    page, problems, _ = open_page()
+    with_tree = canvas_pixels(page)
+    page.evaluate("window.reviewViewer.model.visible = false; window.reviewViewer.overlay.visible = false")
+    next_frames(page)
+    without_tree = canvas_pixels(page)
+    changed = np.abs(with_tree - without_tree).sum(axis=2) > 30
+    assert with_tree.shape[0] > 100 and changed.mean() > 0.02  # the tree covers a visible part of the canvas
+    assert without_tree.std() > 0 and problems == []
+
+
+def test_a_keyboard_approve_is_stored_on_the_server_and_moves_to_the_next_tree(open_page):
+    page, problems, service = open_page(reviewer="keyboard")
+    first = page.evaluate("window.reviewApp.trees[0].tree_id")
+    page.keyboard.press("a")
+    page.wait_for_function("window.lastVerdict !== undefined && window.reviewApp.selected === 1")
+    assert [(v["reviewer"], v["verdict"]) for v in service.store.verdicts(first)] == [("keyboard", "approve")]
+    assert page.locator(".card").first.locator(".badge.approve").count() == 1 and problems == []
+
+
+def test_vr_mode_lays_out_the_page_and_a_panel_press_stores_a_verdict(open_page):
+    page, problems, service = open_page(FAKE_XR, reviewer="headset")
+    button = page.locator("#enter-vr")
+    assert button.is_enabled() and button.inner_text() == "Enter VR"
+    button.click()
+    page.wait_for_function("window.reviewVR.state === 'presenting' && window.reviewVR.treeGroups.every((g) => g.userData.hit)")
+    assert page.evaluate("window.reviewApp.mode") == "vr" and page.evaluate("window.reviewVR.treeGroups.length") == 6
+    page.evaluate("window.__xrStep(3)")  # headset frames: layout, rays and panel drawn through three's XR path
+    # Point the first controller at the panel's Approve button and pull the trigger.
+    tree_id = page.evaluate("""async () => {
+        const THREE = await import('three');
+        const vr = window.reviewVR, panel = vr.panel, controller = vr.controllers[0];
+        const w = panel.geometry.parameters.width, h = panel.geometry.parameters.height;
+        const target = panel.localToWorld(new THREE.Vector3((145 / 800 - 0.5) * w, (0.5 - 355 / 440) * h, 0));
+        const eye = panel.localToWorld(new THREE.Vector3((145 / 800 - 0.5) * w, (0.5 - 355 / 440) * h, 0.4));
+        // XR controllers take their matrix from the pose, not from position/quaternion.
+        controller.matrix.lookAt(eye, target, new THREE.Vector3(0, 1, 0)).setPosition(eye);
+        controller.updateMatrixWorld(true);
+        vr.pick(controller);
+        return vr.selected.userData.treeId;
+    }""")
+    page.wait_for_function("window.lastVerdict && window.lastVerdict.reviewer === 'headset'")
+    assert {v["reviewer"]: v["verdict"] for v in service.store.verdicts(tree_id)}["headset"] == "approve"
+    page.evaluate("window.__xrSession.end()")
+    page.wait_for_function("window.reviewApp.mode === 'desktop' && window.reviewVR.state === 'ended'")
+    assert problems == []
+
+
+def test_without_webxr_the_page_stays_in_desktop_mode(open_page):
+    page, problems, _ = open_page(NO_XR)
+    button = page.locator("#enter-vr")
+    assert button.is_disabled() and button.inner_text() == "VR unavailable"
+    assert page.evaluate("window.reviewApp.mode") == "desktop" and problems == []
