@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -57,29 +58,38 @@ def test_failed_tree_is_recorded_with_seed_and_message_and_the_shard_goes_on(tmp
     assert record["views"]["rows"] == 2
 
 
-def test_one_and_two_workers_write_byte_identical_parts(tmp_path, ray_session):
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory, ray_session):
+    """A finished 1-worker stand-in job: (spec, folder, part bytes)."""
     spec = standin_spec()
-    run_job(spec, str(tmp_path / "one"), workers=1, builder_factory=StandinChain, progress=False)
-    run_job(spec, str(tmp_path / "two"), workers=2, builder_factory=StandinChain, progress=False)
-    one, two = part_bytes(tmp_path / "one"), part_bytes(tmp_path / "two")
-    assert len(one) == 2 * spec.n_shards and one == two
+    folder = tmp_path_factory.mktemp("finished")
+    run_job(spec, str(folder), workers=1, builder_factory=StandinChain, progress=False)
+    return spec, folder, part_bytes(folder)
 
 
-def test_rerun_skips_finished_shards(tmp_path, ray_session):
-    spec = standin_spec()
+def copy_of(finished, tmp_path) -> Path:
+    shutil.copytree(finished[1], tmp_path / "copy")
+    return tmp_path / "copy"
+
+
+def test_two_workers_write_the_same_bytes_as_one(finished, tmp_path):
+    spec, _, one = finished
     run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
-    stamps = {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/part-*")}
-    manifest = run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
-    assert {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/part-*")} == stamps
+    assert len(one) == 2 * spec.n_shards and part_bytes(tmp_path) == one
+
+
+def test_rerun_skips_finished_shards(finished, tmp_path):
+    spec, folder = finished[0], copy_of(finished, tmp_path)
+    stamps = {p: p.stat().st_mtime_ns for p in folder.glob("*/part-*")}
+    manifest = run_job(spec, str(folder), workers=2, builder_factory=StandinChain, progress=False)
+    assert {p: p.stat().st_mtime_ns for p in folder.glob("*/part-*")} == stamps
     assert manifest["counts"]["trees"] == spec.n_trees
 
 
 @pytest.mark.parametrize("damage", ["corrupt", "truncate", "delete"])
-def test_damaged_part_is_named_by_validate_and_regenerated_by_the_next_run(tmp_path, ray_session, damage):
-    spec = standin_spec()
-    run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
-    original = part_bytes(tmp_path)
-    victim = tmp_path / "views/part-00001.parquet"
+def test_damaged_part_is_named_by_validate_and_regenerated_by_the_next_run(finished, tmp_path, damage):
+    spec, folder = finished[0], copy_of(finished, tmp_path)
+    victim = folder / "views/part-00001.parquet"
     data = victim.read_bytes()
     if damage == "corrupt":
         victim.write_bytes(data[:100] + bytes([data[100] ^ 0xFF]) + data[101:])
@@ -87,17 +97,18 @@ def test_damaged_part_is_named_by_validate_and_regenerated_by_the_next_run(tmp_p
         victim.write_bytes(data[: len(data) // 2])
     else:
         victim.unlink()
-    problems = validate_dataset(str(tmp_path))
+    problems = validate_dataset(str(folder))
     assert [p.path for p in problems] == [str(victim)]
-    run_job(spec, str(tmp_path), workers=2, builder_factory=StandinChain, progress=False)
-    assert validate_dataset(str(tmp_path)) == []
-    assert part_bytes(tmp_path) == original
+    run_job(spec, str(folder), workers=1, builder_factory=StandinChain, progress=False)
+    assert validate_dataset(str(folder)) == []
+    assert part_bytes(folder) == finished[2]
 
 
-def test_output_folder_of_another_spec_is_refused(tmp_path, ray_session):
-    run_job(standin_spec(), str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+def test_output_folder_of_another_spec_is_refused(finished, tmp_path):
+    folder = copy_of(finished, tmp_path)
     with pytest.raises(JobError, match="another job spec"):
-        run_job(standin_spec(seed=99), str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+        run_job(standin_spec(seed=99), str(folder), workers=1, builder_factory=StandinChain, progress=False)
+    assert not list(folder.rglob(".tmp-*"))
 
 
 def test_killed_worker_shard_is_retried_and_every_tree_is_present_once(tmp_path, ray_session):
