@@ -130,3 +130,44 @@ def test_job_runs_across_a_two_node_ray_cluster(spec_file, tmp_path, reference):
     nodes = {json.loads(p.read_text())["worker"]["node"] for p in (out / "_shards").glob("part-*.json")}
     assert len(nodes) == 2
     assert part_bytes(out) == reference[1]
+
+
+def test_status_reports_counts_and_stage_timings(reference, capsys):
+    assert farm_main(["status", str(reference[0])]) == 0
+    out = capsys.readouterr().out
+    assert "trees 8  views 16  shards 4  failed 0" in out and "render" in out
+
+
+def test_inspect_prints_a_species_table_and_writes_a_contact_sheet(reference, tmp_path, capsys):
+    from PIL import Image
+
+    png = tmp_path / "sheet.png"
+    assert farm_main(["inspect", str(reference[0]), "--png", str(png), "--rows", "3"]) == 0
+    out = capsys.readouterr().out
+    assert all(name in out for name in SPEC["species"])
+    width, height = Image.open(png).size
+    assert width > height > 0  # 3 rows of 6 outputs
+
+
+def test_export_glb_writes_the_stored_mesh_of_every_tree(reference, tmp_path):
+    import trimesh
+
+    assert farm_main(["export", str(reference[0]), "--format", "glb", "--to", str(tmp_path), "--quiet"]) == 0
+    files = sorted(tmp_path.glob("*.glb"))
+    assert [f.stem for f in files] == [f"tiny-{i:08d}" for i in range(8)]
+    assert len(trimesh.load(files[0], force="scene").geometry) >= 1
+
+
+def test_export_obj_rebuilds_each_tree_from_its_parameters(reference, tmp_path):
+    assert farm_main(["export", str(reference[0]), "--format", "obj", "--to", str(tmp_path), "--quiet"]) == 0
+    objs = sorted(tmp_path.glob("*/*.obj"))
+    assert len(objs) == 8
+    trees = dataset.to_pandas(str(reference[0]), columns=["tree_id", "bark_triangles", "leaf_triangles"])
+    faces = {row.tree_id: row.bark_triangles + row.leaf_triangles for row in trees.itertuples()}
+    for obj in objs:
+        assert sum(line.startswith("f ") for line in obj.read_text().splitlines()) == faces[obj.parent.name]
+
+
+def test_export_rejects_an_unknown_format(reference, tmp_path, capsys):
+    assert farm_main(["export", str(reference[0]), "--format", "fbx", "--to", str(tmp_path)]) == 2
+    assert "allowed glb, obj" in capsys.readouterr().err
