@@ -7,10 +7,14 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import json
 import os
+import struct
+import tempfile
 import time
 
 import bpy
+import numpy as np
 
 from scene import JobError, import_glb, mesh_stats, require, reset_scene
 
@@ -37,14 +41,62 @@ def check_glb(path: str) -> None:
         raise JobError(f"{path!r} is not a GLB file: it starts with {magic!r}, a binary glTF starts with b'glTF'")
 
 
+def _importer_order(names: list) -> list:
+    """The order Blender 5.0's glTF importer walks a mesh's custom attributes in: a set's, which follows this
+    process's string hashes. It fills their data in the order the file lists them, so two custom attributes
+    of different widths (_WIND VEC4, _WIND_PIVOT VEC3) swap and the import fails in about half the runs.
+    Iterated to a fixed point because a set's order can depend on insertion order."""
+    order = list(names)
+    for _ in range(8):
+        seen = set()
+        seen.update(set(order))
+        if list(seen) == order:
+            break
+        order = list(seen)
+    return order
+
+
+def _glb_with_importer_order(path: str, folder: str) -> str:
+    """`path`, or a copy in `folder` whose primitives list their custom attributes in `_importer_order`."""
+    with open(path, "rb") as f:
+        data = f.read()
+    try:
+        (json_length,) = struct.unpack_from("<I", data, 12)
+        document = json.loads(data[20:20 + json_length])
+    except (struct.error, ValueError) as exc:
+        raise JobError(f"GLB {path!r} is broken: its JSON chunk cannot be read ({exc})") from None
+    changed = False
+    for mesh in document.get("meshes", []):
+        names = list(dict.fromkeys(k for p in mesh.get("primitives", []) for k in p.get("attributes", {})
+                                   if k.startswith("_")))
+        order = _importer_order(names)
+        for primitive in mesh.get("primitives", []):
+            attributes = primitive.get("attributes", {})
+            ordered = {k: v for k, v in attributes.items() if not k.startswith("_")}
+            ordered.update((k, attributes[k]) for k in order if k in attributes)
+            changed |= list(ordered) != list(attributes)
+            primitive["attributes"] = ordered
+    if not changed:
+        return path
+    text = json.dumps(document, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + json_length:]
+    copy = os.path.join(folder, os.path.basename(path))
+    with open(copy, "wb") as f:
+        f.write(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(text) + len(rest)))
+        f.write(struct.pack("<II", len(text), 0x4E4F534A) + text + rest)
+    return copy
+
+
 def import_checked_glb(path: str) -> list:
     """Import a GLB into the current scene after checking it is one; the importer's complaint about a broken
     file (a RuntimeError) becomes a JobError naming the file. Returns the new objects."""
     check_glb(path)
-    try:
-        return import_glb(path)
-    except RuntimeError as exc:
-        raise JobError(f"Blender's glTF importer could not read {path!r}: {str(exc).strip()}") from exc
+    with tempfile.TemporaryDirectory(prefix="treefarm-glb-") as folder:
+        try:
+            return import_glb(_glb_with_importer_order(path, folder))
+        except RuntimeError as exc:
+            raise JobError(f"Blender's glTF importer could not read {path!r}: {str(exc).strip()}") from exc
 
 
 def load_glb(path: str) -> list:
@@ -69,42 +121,83 @@ def subtree(objects: list, node: str | None) -> list:
     return [roots[0]] + list(roots[0].children_recursive)
 
 
+def _repeated_mesh(source, matrices: np.ndarray, name: str):
+    """A new mesh: `source` placed by each of `matrices` ((n, 4, 4) float64, into the new mesh's space), with
+    its UV maps and materials repeated; built from arrays (bpy's join of thousands of objects takes minutes)."""
+    n, k = len(matrices), len(source.vertices)
+    co = np.empty(k * 3, np.float64)
+    source.vertices.foreach_get("co", co)
+    co = co.reshape(k, 3)
+    placed = np.einsum("nij,kj->nki", matrices[:, :3, :3], co) + matrices[:, None, :3, 3]
+    loops = np.empty(len(source.loops), np.int32)
+    source.loops.foreach_get("vertex_index", loops)
+    starts = np.empty(len(source.polygons), np.int32)
+    source.polygons.foreach_get("loop_start", starts)
+    material_index = np.empty(len(source.polygons), np.int32)
+    source.polygons.foreach_get("material_index", material_index)
+    copies = np.arange(n)[:, None]
+    mesh = bpy.data.meshes.new(name)
+    mesh.vertices.add(n * k)
+    mesh.vertices.foreach_set("co", placed.astype(np.float32).ravel())
+    mesh.loops.add(n * len(loops))
+    mesh.loops.foreach_set("vertex_index", (loops[None, :] + k * copies).astype(np.int32).ravel())
+    mesh.polygons.add(n * len(starts))
+    mesh.polygons.foreach_set("loop_start", (starts[None, :] + len(loops) * copies).astype(np.int32).ravel())
+    mesh.polygons.foreach_set("material_index", np.tile(material_index, n))
+    for layer in source.uv_layers:
+        uv = np.empty(len(source.loops) * 2, np.float32)
+        layer.data.foreach_get("uv", uv)
+        mesh.uv_layers.new(name=layer.name).data.foreach_set("uv", np.tile(uv, n))
+    for material in source.materials:
+        mesh.materials.append(material)
+    mesh.update()
+    return mesh
+
+
 def merge_instances(objects: list) -> list:
     """Objects sharing one mesh (what the importer makes of glTF EXT_mesh_gpu_instancing: one object per
-    instance) joined into one mesh object; FBX has no instancing engines read, and thousands of leaf objects
-    would swamp a library. The joined object takes the place and name of the instances' parent node when
+    instance) merged into one mesh object; FBX has no instancing engines read, and thousands of leaf objects
+    would swamp a library. The merged object takes the place and name of the instances' parent node when
     that node holds nothing else. Returns the objects left (the same list when nothing was instanced)."""
     groups: dict = {}
     for obj in objects:
         if obj.type == "MESH":
             groups.setdefault(obj.data, []).append(obj)
+    if all(len(group) < 2 for group in groups.values()):
+        return list(objects)
+    bpy.context.view_layer.update()  # the importer set locations; matrix_world needs an update to follow
     pointers = [obj.as_pointer() for obj in objects]  # removed objects cannot be asked anything afterwards
-    removed = set()
-    for group in groups.values():
+    removed, added = set(), []
+    for source, group in groups.items():
         if len(group) < 2:
             continue
-        target = group[0]
-        removed.update(obj.as_pointer() for obj in group[1:])
-        target.data = target.data.copy()  # the join writes into the active object's mesh: make it its own
-        with bpy.context.temp_override(active_object=target, object=target, selected_objects=group,
-                                       selected_editable_objects=group):
-            bpy.ops.object.join()
-        holder = target.parent
-        if holder is not None and holder.type == "EMPTY" and list(holder.children) == [target]:
-            world, name = target.matrix_world.copy(), holder.name
-            target.parent = holder.parent
-            target.matrix_world = world
-            removed.add(holder.as_pointer())
-            bpy.data.objects.remove(holder)
-            target.name = target.data.name = name
-    return [obj for obj, pointer in zip(objects, pointers) if pointer not in removed]
+        holder = group[0].parent
+        holds_only_these = holder is not None and holder.type == "EMPTY" and set(holder.children) == set(group)
+        owner = holder.parent if holds_only_these else holder
+        into_owner = np.linalg.inv(np.array(owner.matrix_world)) if owner is not None else np.eye(4)
+        matrices = np.einsum("ij,njk->nik", into_owner, np.array([np.array(o.matrix_world) for o in group]))
+        name = holder.name if holds_only_these else group[0].name
+        gone = list(group) + ([holder] if holds_only_these else [])
+        removed.update(obj.as_pointer() for obj in gone)
+        collections = list(group[0].users_collection)
+        bpy.data.batch_remove(gone)
+        merged = bpy.data.objects.new(name, _repeated_mesh(source, matrices, name))
+        merged.parent = owner
+        for collection in collections:
+            collection.objects.link(merged)
+        added.append(merged)
+    return [obj for obj, pointer in zip(objects, pointers) if pointer not in removed] + added
 
 
 def rename(objects: list, name: str) -> None:
-    """The top object of `objects` becomes `name`, the others `name_<old name>` (FBX node names)."""
+    """The top object of `objects` becomes `name`, the others `name_<old name>` unless their name already starts
+    with `name` (FBX node names)."""
     chosen = set(objects)
     for obj in objects:
-        obj.name = name if obj.parent not in chosen else f"{name}_{obj.name}"
+        if obj.parent not in chosen:
+            obj.name = name
+        elif not obj.name.startswith(name):
+            obj.name = f"{name}_{obj.name}"
         if obj.type == "MESH":
             obj.data.name = obj.name
 
