@@ -7,10 +7,7 @@ from __future__ import annotations
 
 import datetime
 import hashlib
-import json
 import os
-import struct
-import tempfile
 import time
 
 import bpy
@@ -41,62 +38,36 @@ def check_glb(path: str) -> None:
         raise JobError(f"{path!r} is not a GLB file: it starts with {magic!r}, a binary glTF starts with b'glTF'")
 
 
-def _importer_order(names: list) -> list:
-    """The order Blender 5.0's glTF importer walks a mesh's custom attributes in: a set's, which follows this
-    process's string hashes. It fills their data in the order the file lists them, so two custom attributes
-    of different widths (_WIND VEC4, _WIND_PIVOT VEC3) swap and the import fails in about half the runs.
-    Iterated to a fixed point because a set's order can depend on insertion order."""
-    order = list(names)
-    for _ in range(8):
-        seen = set()
-        seen.update(set(order))
-        if list(seen) == order:
-            break
-        order = list(seen)
-    return order
+class _InsertionOrderedSet(dict):
+    """The two things Blender 5.0's glTF mesh importer does with a set (update, iterate), in insertion order."""
+
+    def __init__(self, items=()) -> None:
+        super().__init__((item, None) for item in items)
+
+    def update(self, items) -> None:
+        for item in items:
+            self[item] = None
 
 
-def _glb_with_importer_order(path: str, folder: str) -> str:
-    """`path`, or a copy in `folder` whose primitives list their custom attributes in `_importer_order`."""
-    with open(path, "rb") as f:
-        data = f.read()
-    try:
-        (json_length,) = struct.unpack_from("<I", data, 12)
-        document = json.loads(data[20:20 + json_length])
-    except (struct.error, ValueError) as exc:
-        raise JobError(f"GLB {path!r} is broken: its JSON chunk cannot be read ({exc})") from None
-    changed = False
-    for mesh in document.get("meshes", []):
-        names = list(dict.fromkeys(k for p in mesh.get("primitives", []) for k in p.get("attributes", {})
-                                   if k.startswith("_")))
-        order = _importer_order(names)
-        for primitive in mesh.get("primitives", []):
-            attributes = primitive.get("attributes", {})
-            ordered = {k: v for k, v in attributes.items() if not k.startswith("_")}
-            ordered.update((k, attributes[k]) for k in order if k in attributes)
-            changed |= list(ordered) != list(attributes)
-            primitive["attributes"] = ordered
-    if not changed:
-        return path
-    text = json.dumps(document, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 4)
-    rest = data[20 + json_length:]
-    copy = os.path.join(folder, os.path.basename(path))
-    with open(copy, "wb") as f:
-        f.write(struct.pack("<III", 0x46546C67, 2, 12 + 8 + len(text) + len(rest)))
-        f.write(struct.pack("<II", len(text), 0x4E4F534A) + text + rest)
-    return copy
+def _patch_gltf_importer() -> None:
+    """Blender 5.0's glTF importer keeps a mesh's custom attribute names in a set but their data in a list in
+    file order, then pairs them by walking the set, whose order follows this process's string hashes: with
+    two custom attributes of different widths (the library's _WIND VEC4 and _WIND_PIVOT VEC3) the import
+    fails in some runs and not others. Its module's `set` (used only there) becomes insertion-ordered."""
+    from io_scene_gltf2.blender.imp import mesh
+
+    mesh.set = _InsertionOrderedSet
 
 
 def import_checked_glb(path: str) -> list:
     """Import a GLB into the current scene after checking it is one; the importer's complaint about a broken
     file (a RuntimeError) becomes a JobError naming the file. Returns the new objects."""
     check_glb(path)
-    with tempfile.TemporaryDirectory(prefix="treefarm-glb-") as folder:
-        try:
-            return import_glb(_glb_with_importer_order(path, folder))
-        except RuntimeError as exc:
-            raise JobError(f"Blender's glTF importer could not read {path!r}: {str(exc).strip()}") from exc
+    _patch_gltf_importer()
+    try:
+        return import_glb(path)
+    except RuntimeError as exc:
+        raise JobError(f"Blender's glTF importer could not read {path!r}: {str(exc).strip()}") from exc
 
 
 def load_glb(path: str) -> list:
