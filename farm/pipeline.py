@@ -149,6 +149,8 @@ def _connect_ray(address: str | None, workers: int | None) -> bool:
     options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
     address = address or os.environ.get("RAY_ADDRESS")  # set inside a RayJob or by `ray job submit`
     if address is None:
+        # "local": always a fresh Ray of our own, never a cluster some other process left running here.
+        address = "local"
         options["num_cpus"] = max(os.cpu_count() or 1, workers or 1)
     ray.init(address=address, **options)
     return True

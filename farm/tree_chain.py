@@ -5,6 +5,7 @@ process); `tree_row` / `view_rows` turn its result into rows of the trees and vi
 """
 from __future__ import annotations
 
+import functools
 import json
 import time
 from contextlib import contextmanager
@@ -154,10 +155,15 @@ def tree_row(spec, index: int, shard: int, species_name: str, seed: int, built: 
     return row
 
 
-def _base_row(spec, index, shard, species_name, seed, params) -> dict:
+@functools.cache
+def _tree_columns() -> tuple[str, ...]:
     from .dataset import trees_schema
 
-    row = dict.fromkeys(trees_schema().names)
+    return tuple(trees_schema().names)
+
+
+def _base_row(spec, index, shard, species_name, seed, params) -> dict:
+    row = dict.fromkeys(_tree_columns())
     row.update({"tree_id": tree_id(spec.name, index), "index": index, "shard": shard, "species": species_name,
                 "seed": seed, "n_views": 0})
     if params is not None:
