@@ -20,6 +20,9 @@ def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--assets", type=int, default=4, help="trees per preset (default 4)")
     parser.add_argument("--presets", nargs="+", default=list(PRESETS))
+    parser.add_argument("--library-assets", type=int, default=2,
+                        help="library asset GLBs (all LODs, instanced leaves) to time as the farm job uses them")
+    parser.add_argument("--library-species", default="maple")
     args = parser.parse_args(argv)
     header = (f"{'preset':<18} {'trees':>5} {'triangles':>9} {'start-up s':>10} {'FBX s/file':>10} "
               f"{'FBX MB':>7} {'.blend s/asset':>14} {'.blend MB':>9} {'target s':>8}")
@@ -30,9 +33,55 @@ def main(argv=None) -> None:
         print(f"{preset:<18} {row['n_assets']:>5} {row['triangles_mean']:>9.0f} {row['startup_seconds']:>10.2f} "
               f"{row['fbx_seconds_each']:>10.2f} {row['fbx_bytes_mean'] / 1e6:>7.2f} "
               f"{row['asset_seconds_each']:>14.2f} {row['blend_bytes'] / 1e6:>9.2f} {TARGET_S_PER_ASSET:>8.1f}")
+    if args.library_assets:
+        library_asset_rows(args.library_assets, args.library_species)
     print("start-up: wall time of the FBX batch less the exports inside Blender (process, bpy import, job I/O);\n"
           "FBX s/file: import + export per GLB inside one Blender process; .blend s/asset: import, mark, preview,\n"
           "tags per asset plus its share of the save (previews drawn from the mesh, none given).")
+
+
+def library_asset_rows(n_assets: int, species_name: str) -> None:
+    """What the library job asks of Blender per asset: one FBX per level from the asset GLB (one batch), and
+    the asset's LOD0 in a .blend; from the instanced GLB and from the one with leaves baked (instanced=False)."""
+    import tempfile
+    import time
+    from pathlib import Path
+
+    from farm.library.asset import build_asset
+    from farm.library.gltf_asset import asset_to_glb
+    from farm.library.spec import parse_library_spec
+    from farm.tree_chain import StageTimer
+    from renderers.blender_assets import export_fbx_batch, write_asset_library
+    from renderers.impostor import CoverageRenderer
+
+    spec = parse_library_spec({"species": [species_name], "per_species": n_assets})
+    renderer = CoverageRenderer(64)
+    try:
+        # Seeds from 3: maple seed 0 trips the LOD3 budget check of species.lod (LodBudgetError; reported).
+        assets = [build_asset(species_name, seed, spec, renderer, StageTimer()) for seed in range(3, 3 + n_assets)]
+    finally:
+        renderer.close()
+    print(f"\nlibrary asset GLBs ({species_name}, {n_assets} assets, levels "
+          f"{', '.join(lv.name for lv in assets[0].levels)}; LOD0 {assets[0].levels[0].n_triangles} triangles)")
+    print(f"{'GLB':<12} {'batch wall s':>12} {'FBX s/asset':>11} {'.blend wall s':>13} {'.blend s/asset':>14}")
+    for instanced in (True, False):
+        with tempfile.TemporaryDirectory() as tmp:
+            jobs, library = [], []
+            for asset in assets:
+                glb = Path(tmp) / f"{asset.asset_id}.glb"
+                glb.write_bytes(asset_to_glb(asset, instanced=instanced))
+                jobs += [{"glb": glb, "fbx": Path(tmp) / f"{asset.asset_id}_{lv.name}.fbx",
+                          "node": f"{asset.asset_id}_{lv.name}", "name": f"{asset.asset_id}_{lv.name}"}
+                         for lv in asset.levels]
+                library.append({"id": asset.asset_id, "glb_path": glb, "node": f"{asset.asset_id}_LOD0",
+                                "tags": [species_name], "catalog_path": f"Trees/{species_name}"})
+            start = time.perf_counter()
+            rows = export_fbx_batch(jobs)
+            fbx_wall = time.perf_counter() - start
+            written = write_asset_library(library, Path(tmp) / "library.blend")
+            per_asset = (sum(r["seconds"] for r in written["assets"]) + written["save_seconds"]) / n_assets
+            print(f"{'instanced' if instanced else 'baked':<12} {fbx_wall:>12.2f} "
+                  f"{sum(r['seconds'] for r in rows) / n_assets:>11.2f} {written['seconds']:>13.2f} {per_asset:>14.2f}")
 
 
 if __name__ == "__main__":
