@@ -2,6 +2,7 @@
 
 `fbx` keys: exports, a list of {glb, fbx, name (optional), node (optional: keep that glTF node's subtree)}.
 Result: per export the FBX path, its objects (name, part, vertices, triangles), bounds and seconds.
+Also the GLB import shared with `asset_library`: checked, importer bug patched, instanced meshes merged.
 """
 from __future__ import annotations
 
