@@ -139,7 +139,8 @@ class DatasetIndex:
     def glb(self, tree_id: str) -> bytes:
         data = self._cell(self.ref(tree_id), "glb")
         if data is None:
-            raise NotFound(f"tree {tree_id!r} has no stored GLB (the job ran with store_glb: false, or the build failed)")
+            raise NotFound(f"tree {tree_id!r} has no stored GLB (the job ran with store_glb: false, "
+                           f"or the build failed)")
         return data
 
     def params(self, tree_id: str) -> dict | None:
@@ -150,8 +151,7 @@ class DatasetIndex:
         """Node positions (N*3 floats, m, Z up), parents (N ints) and branch orders (N ints) as JSON lists."""
         ref = self.ref(tree_id)
         table = self._cache.read(ref, ("positions", "parent", "order"))
-        return {"positions": table["positions"][ref.row].as_py() or [], "parent": table["parent"][ref.row].as_py() or [],
-                "order": table["order"][ref.row].as_py() or []}
+        return {name: table[name][ref.row].as_py() or [] for name in ("positions", "parent", "order")}
 
     def view_image(self, tree_id: str, view: int, output: str) -> bytes:
         """One stored map of one view as a PNG a browser shows (8-bit; float maps rescaled for the eye)."""

@@ -45,10 +45,12 @@ class TreeQuery:
         self.generator = params.get("generator") or None
         self.verdict = params.get("verdict") or None
         if self.verdict is not None and self.verdict not in (*VERDICTS, NO_VERDICT):
-            raise ReviewError(f"verdict filter {self.verdict!r} is invalid: allowed {', '.join(VERDICTS)}, {NO_VERDICT}")
+            raise ReviewError(f"verdict filter {self.verdict!r} is invalid: "
+                              f"allowed {', '.join(VERDICTS)}, {NO_VERDICT}")
         self.flag = params.get("flag") or None
         if self.flag is not None and self.flag not in (*FLAGS, ANY_FLAG, NO_FLAG):
-            raise ReviewError(f"flag filter {self.flag!r} is invalid: allowed {', '.join(FLAGS)}, {ANY_FLAG}, {NO_FLAG}")
+            raise ReviewError(f"flag filter {self.flag!r} is invalid: "
+                              f"allowed {', '.join(FLAGS)}, {ANY_FLAG}, {NO_FLAG}")
         self.reviewer = params.get("reviewer") or None
         self.page = _int_field("page", params.get("page", "1"), 1, 10**9)
         self.per_page = _int_field("per_page", params.get("per_page", "24"), 1, MAX_PER_PAGE)

@@ -42,7 +42,9 @@ FAKE_XR = """
     }
   };
   window.XRWebGLLayer = class {
-    constructor() { this.framebuffer = null; this.framebufferWidth = 640; this.framebufferHeight = 480; this.ignoreDepthValues = true; }
+    constructor() {
+      this.framebuffer = null; this.framebufferWidth = 640; this.framebufferHeight = 480; this.ignoreDepthValues = true;
+    }
     getViewport() { return { x: 0, y: 0, width: 640, height: 480 }; }
   };
   delete window.XRWebGLBinding;
@@ -82,7 +84,8 @@ def open_page(browser, site):
         page = browser.new_page(viewport={"width": 1100, "height": 700})
         problems = []
         page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
-        page.on("console", lambda message: problems.append(f"console: {message.text}") if message.type == "error" else None)
+        page.on("console", lambda message: problems.append(f"console: {message.text}")
+                if message.type == "error" else None)
         if init_script:
             page.add_init_script(init_script)
         page.goto(f"{base}/?token={token}&reviewer={reviewer}")
@@ -100,7 +103,10 @@ def canvas_pixels(page) -> np.ndarray:
 
 
 def next_frames(page, n: int = 3) -> None:
-    page.evaluate(f"new Promise((done) => {{ let k = {n}; const tick = () => (--k ? requestAnimationFrame(tick) : done()); requestAnimationFrame(tick); }})")
+    page.evaluate("""(n) => new Promise((done) => {
+        const tick = () => (--n ? requestAnimationFrame(tick) : done());
+        requestAnimationFrame(tick);
+    })""", n)
 
 
 def test_the_canvas_shows_the_first_tree(open_page):
