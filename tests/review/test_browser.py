@@ -132,7 +132,8 @@ def test_a_keyboard_approve_is_stored_on_the_server_and_moves_to_the_next_tree(o
 def test_vr_mode_lays_out_the_page_and_a_panel_press_stores_a_verdict(open_page):
     page, problems, service = open_page(FAKE_XR, reviewer="headset")
     button = page.locator("#enter-vr")
-    assert button.is_enabled() and button.inner_text() == "Enter VR"
+    page.wait_for_function("!document.getElementById('enter-vr').disabled")
+    assert button.inner_text() == "Enter VR"
     button.click()
     page.wait_for_function("window.reviewVR.state === 'presenting' && window.reviewVR.treeGroups.every((g) => g.userData.hit)")
     assert page.evaluate("window.reviewApp.mode") == "vr" and page.evaluate("window.reviewVR.treeGroups.length") == 6

@@ -28,8 +28,8 @@ function badges(entry) {
   return out.join('');
 }
 
-async function loadPage(selectIndex = 0) {
-  const result = await api.trees(filters());
+async function loadPage(selectIndex = 0, pending = null) {
+  const result = await (pending || api.trees(filters()));
   state.trees = result.trees;
   state.pages = result.pages;
   state.page = result.page;
@@ -38,20 +38,25 @@ async function loadPage(selectIndex = 0) {
   $('page-next').disabled = result.page >= result.pages;
   const grid = $('grid');
   grid.replaceChildren();
-  state.trees.forEach((entry, i) => {
+  const cards = state.trees.map((entry, i) => {
     const card = document.createElement('div');
     card.className = 'card';
     card.dataset.treeId = entry.tree_id;
     card.innerHTML = `<img alt=""><div class="id">${entry.index} ${entry.species}</div><div class="badges">${badges(entry)}</div>`;
     card.addEventListener('click', () => select(i));
     grid.appendChild(card);
-    const thumb = state.summary.sketch_output || state.summary.outputs[0];
-    if (thumb && entry.n_views > 0) {
-      api.imageURL(entry.tree_id, 0, thumb).then((url) => { card.querySelector('img').src = url; })
-        .catch((error) => console.warn(`thumbnail of ${entry.tree_id}: ${error.message}`));
-    }
+    return card;
   });
-  if (state.trees.length) await select(Math.min(selectIndex < 0 ? state.trees.length - 1 : selectIndex, state.trees.length - 1));
+  // The selected tree's requests go out first: thumbnails queue behind them on the browser's few connections.
+  const selecting = state.trees.length ? select(Math.min(selectIndex < 0 ? state.trees.length - 1 : selectIndex,
+                                                         state.trees.length - 1)) : null;
+  const thumb = state.summary.sketch_output || state.summary.outputs[0];
+  state.trees.forEach((entry, i) => {
+    if (!thumb || entry.n_views === 0) return;
+    api.imageURL(entry.tree_id, 0, thumb).then((url) => { cards[i].querySelector('img').src = url; })
+      .catch((error) => console.warn(`thumbnail of ${entry.tree_id}: ${error.message}`));
+  });
+  if (selecting) await selecting;
   else { state.selected = -1; $('tree-title').textContent = 'no trees match'; }
   if (state.mode === 'vr') await vr.layout(state.trees);
 }
@@ -163,6 +168,7 @@ state.vr = vr;
 async function start() {
   $('reviewer').value = params.get('reviewer') || localStorage.getItem('treefarm.reviewer') || '';
   $('reviewer').addEventListener('change', () => { localStorage.setItem('treefarm.reviewer', reviewer()); loadPage(state.selected); });
+  const firstPage = api.trees(filters());  // in parallel with the summary: the first tree sooner on screen
   state.summary = await api.batches();
   $('dataset').textContent = `${state.summary.dataset} · ${state.summary.trees} trees`;
   fillSelect($('filter-batch'), state.summary.batches.map((b) => b.id));
@@ -179,13 +185,14 @@ async function start() {
   $('flag').addEventListener('click', () => verdict('flag'));
   $('show-skeleton').addEventListener('change', (e) => viewer.setSkeletonVisible(e.target.checked));
   const button = $('enter-vr');
-  if (await vr.supported()) {
+  vr.supported().then((supported) => {
+    if (!supported) return;
     button.disabled = false;
     button.textContent = 'Enter VR';
     button.title = 'review this page in a VR headset';
     button.addEventListener('click', () => vr.enter(state.trees).catch((error) => status(`VR failed: ${error.message}`)));
-  }
-  await loadPage(0);
+  });
+  await loadPage(0, firstPage);
 }
 
 start().catch((error) => { status(`cannot load: ${error.message}`); console.error(error); });
