@@ -27,15 +27,21 @@ REFERENCE_FOV_DEG = 60.0
 # Silhouettes are compared after closing gaps of about this radius (pixels at the switch size): leaves smaller
 # than a pixel make a speckle whose exact pixels no simplification can (or should) reproduce.
 SILHOUETTE_CLOSING_PX = 2
-# Vertical planes crossed at 180 / IMPOSTOR_PLANES degrees, two triangles each (8 triangles for 4).
-IMPOSTOR_PLANES = 4
-# Silhouettes are compared from these azimuths (degrees): 8 views, half of them between the impostor's planes.
-QUALITY_AZIMUTHS = tuple(float(a) for a in np.arange(8) * 45.0 + 22.5)
+# Vertical planes crossed at 180 / IMPOSTOR_PLANES degrees, two triangles each (16 triangles for 8): with 8, a
+# view is never more than 11.25 deg off a plane, so no plane's silhouette shows narrower than cos 11.25 = 0.98.
+IMPOSTOR_PLANES = 8
+# Silhouettes are compared from these azimuths (degrees): 8 views 45 deg apart, each exactly between two of the
+# impostor's planes (its worst case) and off every LOD card's axis.
+QUALITY_AZIMUTHS = tuple(float(a) for a in np.arange(8) * 45.0 + 11.25)
+# Atlas tiles per row (planes fill rows of this many tiles).
+_ATLAS_COLUMNS = 4
 # The planes' square spans the tree's horizontal radius and half height about the box centre, plus this margin.
 _PLANE_MARGIN = 1.02
 # Alpha of the impostor is grown by this many texels: views between planes see each plane foreshortened, and
 # a slightly fuller silhouette keeps the far tree from thinning (measured: IoU at 64 px rises by ~0.02).
 _ALPHA_DILATE_TEXELS = 1
+# Faces this close to the vertical axis (share of the planes' half side) go on every plane: seen from any side.
+_AXIS_SHARE = 0.04
 
 
 class ImpostorError(TreefarmError):
@@ -46,8 +52,9 @@ class ImpostorError(TreefarmError):
 class ImpostorAtlas:
     """A crossed-plane impostor.
 
-    albedo  : (2T, 2T, 4) uint8 sRGB + alpha (alpha 255 where the tree covers the texel), tiles in a 2x2 grid.
-    normal  : (2T, 2T, 3) uint8 tangent-space normals (+x along u, +y image up, +z toward the viewer).
+    albedo  : (R T, C T, 4) uint8 sRGB + alpha (alpha 255 where the tree covers the texel), one tile per plane
+              in rows of C = min(P, 4) tiles.
+    normal  : (R T, C T, 3) uint8 tangent-space normals (+x along u, +y image up, +z toward the viewer).
     centre  : (3,) float64 metres, where the planes cross (the tree's box centre).
     half    : metres, half side of every plane's square.
     azimuths: (P,) float64 degrees, each plane faces the camera of that azimuth.
@@ -70,7 +77,8 @@ class ImpostorAtlas:
 
     def tile_origin(self, plane: int) -> tuple[int, int]:
         """(row, column) of the top-left texel of a plane's tile in the atlas."""
-        return (plane // 2) * self.tile, (plane % 2) * self.tile
+        columns = self.albedo.shape[1] // self.tile
+        return (plane // columns) * self.tile, (plane % columns) * self.tile
 
     def mesh(self) -> MeshPart:
         """The billboard: one two-triangle square per plane (single-sided geometry; the material is double-sided),
@@ -81,12 +89,12 @@ class ImpostorAtlas:
         corners_local = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])  # (x along right, y up)
         vertices = (self.centre[None, None, :] + corners_local[None, :, 0, None] * right[:, None, :]
                     + corners_local[None, :, 1, None] * up[None, None, :])
-        size = 2 * self.tile
+        height, width = self.albedo.shape[:2]
         uvs = []
         for plane in range(len(self.azimuths)):
             row, col = self.tile_origin(plane)
-            u0, u1 = col / size, (col + self.tile) / size
-            v1, v0 = 1.0 - row / size, 1.0 - (row + self.tile) / size  # image rows run down, v runs up
+            u0, u1 = col / width, (col + self.tile) / width
+            v1, v0 = 1.0 - row / height, 1.0 - (row + self.tile) / height  # image rows run down, v runs up
             uvs.append([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
         faces = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(len(self.azimuths))[:, None, None])
         return MeshPart(vertices.reshape(-1, 3), faces.reshape(-1, 3), np.repeat(normal, 4, axis=0),
@@ -168,24 +176,52 @@ def _dilate(mask: np.ndarray, texels: int) -> np.ndarray:
     return out
 
 
+def _sector_part(part: MeshPart, centre: np.ndarray, azimuth: float, planes: int, axis_radius: float,
+                 keep: np.ndarray | None = None) -> MeshPart:
+    """The faces of `part` whose centroid lies in the plane's two azimuth sectors (within 90 / planes degrees
+    of the plane's line, either side of the axis), or within `axis_radius` of the vertical axis, or `keep`."""
+    if part.n_faces == 0:
+        return part
+    centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
+    angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
+    right = np.cross(-view_direction(azimuth, 0.0), [0.0, 0.0, 1.0])  # the plane's line in the ground plane
+    line = np.degrees(np.arctan2(right[1], right[0]))
+    offset = np.abs((angle - line + 90.0) % 180.0 - 90.0)  # angle to the line, either direction
+    chosen = (offset <= 90.0 / planes) | (np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius)
+    if keep is not None:
+        chosen |= keep
+    return MeshPart(part.vertices, part.faces[chosen], part.normals, part.uvs, dict(part.attributes))
+
+
 def render_impostor(renderer: DepthRenderer, tree: TreeMesh, tile: int = 128,
                     planes: int = IMPOSTOR_PLANES) -> ImpostorAtlas:
-    """Render a tree's impostor atlas: for each plane an orthographic view along its normal, giving albedo
-    (bark or leaf colour by the rendered mask, sRGB), alpha (coverage, grown by one texel) and tangent-space
-    normals (from the rendered depth). `renderer` is the process's DepthRenderer (or a subclass)."""
+    """Render a tree's impostor atlas: for each plane an orthographic view along its normal of the slice of the
+    tree nearest that plane (the faces within 90 / planes degrees of azimuth of it, the trunk and the axis in
+    every plane), giving albedo (bark or leaf colour by the rendered mask, sRGB), alpha (coverage, grown by
+    one texel) and tangent-space normals (from the rendered depth). Slicing puts every part of the crown on
+    one plane only, so a view between planes sees the crown once, not the union of every plane's whole view
+    (which fills in a sparse crown). `renderer` is the process's DepthRenderer (or a subclass)."""
     if not 8 <= tile <= 2048:
         raise ImpostorError(f"impostor tile {tile} px is invalid: allowed 8..2048")
-    if not 1 <= planes <= 4:
-        raise ImpostorError(f"impostor planes {planes} is invalid: allowed 1..4 (a 2x2 atlas)")
+    if not 1 <= planes <= 8:
+        raise ImpostorError(f"impostor planes {planes} is invalid: allowed 1..8 (at most 16 triangles)")
     centre, half, reach = _plane_frame(tree)
     azimuths = np.arange(planes) * (180.0 / planes)
-    albedo = np.zeros((2 * tile, 2 * tile, 4), np.uint8)
-    normal = np.zeros((2 * tile, 2 * tile, 3), np.uint8)
+    columns = min(planes, _ATLAS_COLUMNS)
+    rows = -(-planes // columns)
+    albedo = np.zeros((rows * tile, columns * tile, 4), np.uint8)
+    normal = np.zeros((rows * tile, columns * tile, 3), np.uint8)
     normal[...] = (128, 128, 255)
     bark_rgb = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
     leaf_rgb = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
-    renderer.load(tree)
+    order = tree.bark.attributes.get("order")
+    trunk = (np.zeros(tree.bark.n_faces, bool) if order is None
+             else np.asarray(order)[tree.bark.faces[:, 0]] == 0)
+    axis_radius = _AXIS_SHARE * half
     for plane, azimuth in enumerate(azimuths):
+        renderer.load(TreeMesh(bark=_sector_part(tree.bark, centre, float(azimuth), planes, axis_radius, trunk),
+                               leaves=_sector_part(tree.leaves, centre, float(azimuth), planes, axis_radius),
+                               bark_color=tree.bark_color, leaf_color=tree.leaf_color, name=tree.name))
         camera = _plane_camera(centre, half, reach, float(azimuth), tile)
         depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
         camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
@@ -199,7 +235,7 @@ def render_impostor(renderer: DepthRenderer, tree: TreeMesh, tile: int = 128,
         tile_albedo[grown & ~covered, :3] = leaf_rgb if (mask == 2).any() else bark_rgb
         tile_albedo[grown, 3] = 255
         tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
-        row, col = (plane // 2) * tile, (plane % 2) * tile
+        row, col = (plane // columns) * tile, (plane % columns) * tile
         albedo[row:row + tile, col:col + tile] = tile_albedo
         normal[row:row + tile, col:col + tile] = np.clip(tile_normal, 0, 255).astype(np.uint8)
     return ImpostorAtlas(albedo, normal, centre, half, azimuths.astype(np.float64), tile)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -41,6 +42,12 @@ class BarkMaps:
 
 
 def bark_maps(species_name: str, color, size: int = 256) -> BarkMaps:
+    """Tileable bark maps for a species (see `_bark_maps`); cached per species, colour and size, read-only."""
+    return _bark_maps(species_name, tuple(float(c) for c in color), int(size))
+
+
+@lru_cache(maxsize=32)
+def _bark_maps(species_name: str, color: tuple[float, float, float], size: int) -> BarkMaps:
     """Tileable bark maps (height `size`, width size / 2, as the bark UVs expect) for a species.
 
     The species name picks the look (fissure depth and spacing, plate size) from a fixed seed plus the name's
@@ -69,22 +76,51 @@ def bark_maps(species_name: str, color, size: int = 256) -> BarkMaps:
     normal8 = np.round((normal + 1.0) * 127.5).astype(np.uint8)
     roughness = np.clip(0.75 + 0.2 * fissure - 0.05 * plates, 0.0, 1.0)
     packed = np.stack([np.full_like(roughness, 1.0), roughness, np.zeros_like(roughness)], axis=-1)
-    return BarkMaps(base, normal8, np.round(packed * 255).astype(np.uint8))
+    maps = BarkMaps(base, normal8, np.round(packed * 255).astype(np.uint8))
+    for image in (maps.base_color, maps.normal, maps.roughness_metallic):
+        image.setflags(write=False)
+    return maps
+
+
+# The cluster tile: leaves on rings (count, radius and scale as fractions of the tile) around a shaded core of
+# this radius, tips outward, so a merged card reads as a dense, round clump whose outline is nearly convex.
+_CLUMP_RINGS = ((14, 0.22, 0.29), (8, 0.11, 0.29), (1, 0.0, 0.29))
+_CLUMP_CORE = 0.26
+
+
+@lru_cache(maxsize=32)
+def _leaf_atlas(color: tuple[float, float, float], size: int) -> np.ndarray:
+    import cv2
+
+    leaf = leaf_texture(color, size)
+    core = leaf.copy()
+    pixel = (np.arange(size) + 0.5) / size - 0.5
+    disc = np.hypot(pixel[None, :], pixel[:, None]) <= _CLUMP_CORE
+    core[...] = 0
+    core[disc, :3] = np.round(linear_to_srgb(0.7 * np.asarray(color)) * 255).astype(np.uint8)
+    core[disc, 3] = 255
+    clump = core
+    stem = (size / 2 - 0.5, size * 0.95)
+    for count, radius, shrink in _CLUMP_RINGS:
+        for k in range(count):
+            angle = 360.0 * k / count + 11.0 * radius * count  # rings staggered
+            matrix = cv2.getRotationMatrix2D(stem, angle, shrink)
+            direction = np.radians(angle)
+            target = np.array([size / 2, size / 2]) + radius * size * np.array([-np.sin(direction), -np.cos(direction)])
+            matrix[:, 2] += target - np.asarray(stem)
+            turned = cv2.warpAffine(leaf, matrix, (size, size), flags=cv2.INTER_LINEAR, borderValue=(0, 0, 0, 0))
+            over = turned[..., 3] >= 128
+            clump[over] = turned[over]
+    clump.setflags(write=False)
+    out = np.concatenate([leaf, clump], axis=1)
+    out.setflags(write=False)
+    return out
 
 
 def leaf_atlas(color, size: int = 128) -> np.ndarray:
-    """(size, 2 size, 4) uint8 sRGB + alpha: left tile one leaf (LOD0 cards), right tile a clump of three
-    leaves (the merged cluster cards of coarser levels), both with the stem at the bottom."""
-    import cv2
-
+    """(size, 2 size, 4) uint8 sRGB + alpha, read-only (cached per colour and size): left tile one leaf (LOD0
+    cards, stem at the bottom), right tile a round clump of many leaves around a shaded core (the merged
+    cluster cards of coarser levels, centred on the tile)."""
     if not 16 <= size <= 4096:
         raise ParameterError("texture_size", size, "an integer in [16, 4096]")
-    leaf = leaf_texture(color, size)
-    clump = np.zeros_like(leaf)
-    centre = (size / 2 - 0.5, size * 0.95)
-    for angle, shrink in ((0.0, 0.85), (38.0, 0.7), (-38.0, 0.7)):
-        matrix = cv2.getRotationMatrix2D(centre, angle, shrink)
-        turned = cv2.warpAffine(leaf, matrix, (size, size), flags=cv2.INTER_LINEAR, borderValue=(0, 0, 0, 0))
-        over = turned[..., 3] > clump[..., 3]
-        clump[over] = turned[over]
-    return np.concatenate([leaf, clump], axis=1)
+    return _leaf_atlas(tuple(float(c) for c in color), int(size))

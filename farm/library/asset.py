@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances"]
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "measure_chain"]
 
 
 def asset_id(species_name: str, seed: int) -> str:
@@ -107,11 +107,46 @@ def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
     return bark_wind, bark_pivot, leaf_wind, leaf_pivot
 
 
+def leaf_alphas(atlas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(h, h) bool opaque texels of a leaf atlas's two tiles: the single leaf (LOD0 cards) and the clump
+    (cluster cards), at the alpha cutoff of the files' materials (0.5)."""
+    tile = atlas.shape[0]
+    opaque = atlas[..., 3] >= 128
+    return opaque[:, :tile], opaque[:, tile:2 * tile]
+
+
+def measure_chain(renderer, levels: list[LevelData], atlas, lod0_alpha: np.ndarray, card_alpha: np.ndarray,
+                  lod0_cover=None) -> None:
+    """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
+    both drawn through the same camera with leaves alpha-tested by the texture their cards use (LOD0 by the
+    single leaf, coarser levels by the clump), the impostor by its atlas alpha."""
+    from renderers.alpha_coverage import alpha_tested, triangle_coverage
+    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
+
+    lod0 = levels[0].mesh
+    lod0_cover = lod0_cover or alpha_tested(lod0, lod0_alpha)
+    points = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
+    cameras = [[switch_camera(points, azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
+               for level in levels[1:]]
+    # LOD0 first for every camera, then each level: the renderer uploads each mesh once.
+    references = [[closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in row] for row in cameras]
+    for level, row, refs in zip(levels[1:], cameras, references):
+        if level.name == "IMPOSTOR":
+            billboard, opaque = level.mesh.bark, atlas.albedo[..., 3] >= 128
+            draw = lambda camera: triangle_coverage(camera, billboard.vertices, billboard.faces,  # noqa: E731
+                                                    billboard.uvs, opaque)
+        else:
+            cover = alpha_tested(level.mesh, card_alpha)
+            draw = lambda camera: renderer.coverage(cover, camera)  # noqa: E731
+        level.iou = [silhouette_iou(reference, closed_silhouette(draw(camera)))
+                     for camera, reference in zip(row, refs)]
+
+
 def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryAsset:
-    """Grow, simplify, measure and texture one asset (no files written)."""
+    """Grow, simplify, texture and measure one asset (no files written)."""
     import species
-    from renderers.impostor import (QUALITY_AZIMUTHS, closed_silhouette, impostor_coverage, render_impostor,
-                                    silhouette_iou, switch_camera)
+    from renderers.alpha_coverage import alpha_tested
+    from renderers.impostor import render_impostor
     from species.collision import collision_capsules
     from species.lod import build_lod
     from species.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
@@ -133,29 +168,20 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
             levels.append(LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
                                     *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px)))
         capsules = collision_capsules(skeleton)
+    with timer.stage("textures"):  # cached per species, colour and size: most assets hit the cache
+        maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
+        atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
+                   for season in SEASONS if season != "bare"}
+        lod0_alpha, card_alpha = leaf_alphas(atlases["summer"])
     with timer.stage("impostor"):
-        atlas = render_impostor(renderer, lod0, tile=spec.impostor_tile)
+        lod0_cover = alpha_tested(lod0, lod0_alpha)  # what LOD0 shows once its leaf cards are alpha-tested
+        atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
         levels.append(LevelData("IMPOSTOR", billboard, None, np.zeros((billboard.bark.n_vertices, 4), np.float32),
                                 np.zeros((billboard.bark.n_vertices, 3), np.float32), empty4, empty3,
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
-        points = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
-        cameras = [[switch_camera(points, azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
-                   for level in levels[1:]]
-        # LOD0 first for every camera, then each level: the renderer uploads each mesh once.
-        references = [[closed_silhouette(renderer.coverage(lod0, camera)) for camera in row] for row in cameras]
-        for level, row, refs in zip(levels[1:], cameras, references):
-            for camera, reference in zip(row, refs):
-                if level.name == "IMPOSTOR":
-                    candidate = impostor_coverage(atlas, camera)
-                else:
-                    candidate = renderer.coverage(level.mesh, camera)
-                level.iou.append(silhouette_iou(reference, closed_silhouette(candidate)))
-    with timer.stage("textures"):
-        maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
-        atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
-                   for season in SEASONS if season != "bare"}
+        measure_chain(renderer, levels, atlas, lod0_alpha, card_alpha, lod0_cover)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
                         levels, atlas, capsules, maps, atlases)

@@ -14,7 +14,11 @@ from ..manifest import Problem
 from ..storage import Location, sha256_hex
 from ..tree_chain import to_json, tree_seed
 
-__all__ = ["catalog_rows", "write_catalog", "validate_library", "CATALOG_COLUMNS"]
+__all__ = ["catalog_rows", "write_catalog", "validate_library", "quality_shortfalls", "CATALOG_COLUMNS",
+           "IOU_TARGET"]
+
+# Silhouette IoU against LOD0 every level should reach at its switch size (issue 11's target).
+IOU_TARGET = 0.9
 
 CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_m", "crown_radius_m",
                    "level_names", "triangles", "switch_px", "iou_min", "iou_mean", "file_sizes_json", "files_json",
@@ -152,4 +156,19 @@ def validate_library(path: str) -> list[Problem]:
                     read_glb_chunks(data)
                 except GlbError as exc:
                     problems.append(Problem(location.path(relative), f"unreadable GLB: {exc}"))
+    return problems
+
+
+def quality_shortfalls(path: str, target: float = IOU_TARGET) -> list[Problem]:
+    """One Problem per asset level whose worst silhouette IoU (of the 8 azimuths) is below `target`, naming
+    the asset, the level, its switch size and the figure. Reads catalog.json of a library folder."""
+    location = Location.resolve(path)
+    if not location.exists("catalog.json"):
+        return []
+    problems = []
+    for row in json.loads(location.read_bytes("catalog.json")):
+        for name, px, iou in zip(row["level_names"], row["switch_px"], row["iou_min"]):
+            if iou < target:
+                problems.append(Problem(location.path(f"assets/{row['id']}/asset.json"),
+                                        f"{name} at {px} px: silhouette IoU {iou:.3f} is below the target {target}"))
     return problems

@@ -12,15 +12,15 @@ import struct
 
 import numpy as np
 
-from species.gltf import _BinaryBuffer, z_up_to_y_up
+from species.gltf import _FLOAT, _UNSIGNED_INT, _UNSIGNED_SHORT, _BinaryBuffer, z_up_to_y_up
 from species.mesh import _CARD_FACES, _CARD_UVS
 from species.pbr_textures import SEASONS
 from species.skeleton import LEAF_CARD_CORNERS
-from species.textures import png_bytes
+from .png_cache import encode_png
 
 from .asset import LibraryAsset, leaf_instances
 
-__all__ = ["asset_to_glb", "SCREEN_HEIGHT_PX", "EXTENSIONS"]
+__all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS"]
 
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 _LINEAR, _LINEAR_MIPMAP_LINEAR, _REPEAT, _CLAMP = 9729, 9987, 10497, 33071
@@ -40,15 +40,42 @@ def _quaternions(rotation: np.ndarray) -> np.ndarray:
     return (quat / np.linalg.norm(quat, axis=1, keepdims=True)).astype(np.float32)
 
 
+class _SizeOnlyBuffer(_BinaryBuffer):
+    """The views and accessors a _BinaryBuffer would hold, counting bytes without copying any."""
+
+    def view(self, data: bytes | int, target: int | None = None) -> int:
+        length = data if isinstance(data, int) else len(data)
+        entry = {"buffer": 0, "byteOffset": self.size, "byteLength": length}
+        if target is not None:
+            entry["target"] = target
+        self.size += length + (-length) % 4
+        self.views.append(entry)
+        return len(self.views) - 1
+
+    def accessor(self, array: np.ndarray, kind: str, target: int, with_bounds: bool = False) -> int:
+        component = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _UNSIGNED_SHORT,
+                     np.dtype(np.uint32): _UNSIGNED_INT}[array.dtype]
+        entry = {"bufferView": self.view(int(array.nbytes), target), "componentType": component,
+                 "count": int(len(array)), "type": kind}
+        if with_bounds:
+            entry["min"] = [float(x) for x in array.min(axis=0)]
+            entry["max"] = [float(x) for x in array.max(axis=0)]
+        self.accessors.append(entry)
+        return len(self.accessors) - 1
+
+    def tobytes(self) -> bytes:
+        raise TypeError("a size-only buffer holds no bytes")
+
+
 class _Writer:
-    def __init__(self) -> None:
-        self.buffer = _BinaryBuffer()
+    def __init__(self, size_only: bool = False) -> None:
+        self.buffer = _SizeOnlyBuffer() if size_only else _BinaryBuffer()
         self.images, self.textures, self.samplers, self.materials = [], [], [], []
         self.meshes, self.nodes = [], []
 
     def texture(self, name: str, image: np.ndarray, wrap: int) -> int:
         self.samplers.append({"magFilter": _LINEAR, "minFilter": _LINEAR_MIPMAP_LINEAR, "wrapS": wrap, "wrapT": wrap})
-        self.images.append({"name": name, "bufferView": self.buffer.view(png_bytes(image)), "mimeType": "image/png"})
+        self.images.append({"name": name, "bufferView": self.buffer.view(encode_png(image)), "mimeType": "image/png"})
         self.textures.append({"sampler": len(self.samplers) - 1, "source": len(self.images) - 1})
         return len(self.textures) - 1
 
@@ -123,7 +150,23 @@ def _leaf_tile_uvs(uvs: np.ndarray, level: int) -> np.ndarray:
 def asset_to_glb(asset: LibraryAsset, instanced: bool = True) -> bytes:
     """GLB bytes of the asset (see the module docstring). Scene: the LOD0 node; LOD1.. and IMPOSTOR are nodes
     outside the scene, listed by the root's MSFT_lod in order of decreasing detail."""
-    writer = _Writer()
+    json_bytes, writer = _document(asset, instanced, size_only=False)
+    binary = writer.buffer.tobytes()
+    chunks = struct.pack("<II", len(json_bytes), 0x4E4F534A) + json_bytes
+    chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
+    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+
+
+def glb_size(asset: LibraryAsset, instanced: bool = True) -> int:
+    """len(asset_to_glb(asset, instanced)), exactly, without packing the binary chunk (the same JSON is
+    built; buffer views are counted, not copied): what the catalog reports for the file without instancing."""
+    json_bytes, writer = _document(asset, instanced, size_only=True)
+    return 12 + 8 + len(json_bytes) + 8 + writer.buffer.size
+
+
+def _document(asset: LibraryAsset, instanced: bool, size_only: bool) -> tuple[bytes, _Writer]:
+    """The padded JSON chunk and the writer holding the binary chunk's views."""
+    writer = _Writer(size_only)
     materials = _materials(writer, asset)
     variant_maps = [{"material": materials[season], "variants": [i]} for i, season in enumerate(SEASONS)]
     level_nodes = []
@@ -151,7 +194,6 @@ def asset_to_glb(asset: LibraryAsset, instanced: bool = True) -> bytes:
     # Screen coverage at which each level stops being drawn: the next level's switch size over the screen.
     coverages = [lv.switch_px / SCREEN_HEIGHT_PX for lv in asset.levels[1:]] + [0.0]
     root["extras"].update({"MSFT_screencoverage": coverages, "asset_id": asset.asset_id})
-    binary = writer.buffer.tobytes()
     document = {"asset": {"version": "2.0", "generator": "treefarm farm.library"},
                 "extensionsUsed": EXTENSIONS if instanced else [e for e in EXTENSIONS if e != "EXT_mesh_gpu_instancing"],
                 "extensions": {"KHR_materials_variants": {"variants": [{"name": s} for s in SEASONS]}},
@@ -159,12 +201,10 @@ def asset_to_glb(asset: LibraryAsset, instanced: bool = True) -> bytes:
                 "nodes": writer.nodes, "meshes": writer.meshes, "materials": writer.materials,
                 "textures": writer.textures, "images": writer.images, "samplers": writer.samplers,
                 "accessors": writer.buffer.accessors, "bufferViews": writer.buffer.views,
-                "buffers": [{"byteLength": len(binary)}]}
+                "buffers": [{"byteLength": writer.buffer.size}]}
     json_bytes = json.dumps(document, separators=(",", ":"), ensure_ascii=True).encode("ascii")
     json_bytes += b" " * ((-len(json_bytes)) % 4)
-    chunks = struct.pack("<II", len(json_bytes), 0x4E4F534A) + json_bytes
-    chunks += struct.pack("<II", len(binary), 0x004E4942) + binary
-    return struct.pack("<III", 0x46546C67, 2, 12 + len(chunks)) + chunks
+    return json_bytes, writer
 
 
 def _leaves_node(writer: _Writer, asset, index: int, level, materials, variant_maps, instanced: bool) -> int:

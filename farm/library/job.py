@@ -56,9 +56,8 @@ def _obj_text(part, name: str) -> bytes:
 def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
     """Write every file of one asset under assets/<id>/ (each atomically; asset.json last) and return the
     asset record: metadata plus files {kind: relative path}, sizes {kind: bytes} and sha256 {path: hex}."""
-    from species.textures import png_bytes
-
-    from .gltf_asset import asset_to_glb
+    from .gltf_asset import asset_to_glb, glb_size
+    from .png_cache import encode_png
     from .previews import thumbnail, turntable
     from .usd_asset import TEXTURE_FILES, asset_to_usdc
 
@@ -79,11 +78,11 @@ def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
                   **{f"leaf_atlas_{s}": image for s, image in asset.leaf_atlases.items()}}
         if "usd" in spec.formats:
             for name, relative in TEXTURE_FILES.items():
-                put(f"texture_{name}", relative, png_bytes(images[name]))
+                put(f"texture_{name}", relative, encode_png(images[name]))
     if "glb" in spec.formats:
         with timer.stage("glb"):
             put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset))
-            sizes["glb_without_instancing"] = len(asset_to_glb(asset, instanced=False))
+            sizes["glb_without_instancing"] = glb_size(asset, instanced=False)
     if "usd" in spec.formats:
         with timer.stage("usd"):
             put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
@@ -98,8 +97,8 @@ def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
         put("collision", f"{asset.asset_id}_collision.obj", _obj_text(capsule_mesh(asset.capsules),
                                                                        f"{asset.asset_id}_collision"))
     with timer.stage("previews"):
-        put("thumbnail", "thumbnail.png", png_bytes(thumbnail(renderer, asset.lod0)))
-        put("turntable", "turntable.png", png_bytes(turntable(renderer, asset.lod0)))
+        put("thumbnail", "thumbnail.png", encode_png(thumbnail(renderer, asset.lod0)))
+        put("turntable", "turntable.png", encode_png(turntable(renderer, asset.lod0)))
     with timer.stage("write"):
         for relative, data in files.items():
             location.write_atomic(relative, data)

@@ -1,0 +1,105 @@
+"""Quality of the LOD chain as the library measures it: alpha-tested coverage (outlines, software raster), the
+sliced impostor, exact GLB size without instancing, validate's IoU report, and the IoU target per preset."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from farm.library.asset import build_asset, leaf_alphas
+from farm.library.catalog import IOU_TARGET, quality_shortfalls
+from farm.library.gltf_asset import asset_to_glb, glb_size
+from farm.library.spec import parse_library_spec
+from farm.tree_chain import StageTimer, tree_seed
+from renderers.alpha_coverage import alpha_outline, triangle_coverage
+from renderers.camera import orthographic_camera
+from species.pbr_textures import leaf_atlas
+
+REPRESENTATIVE = ["maple", "pine", "cherry", "douglas_fir", "sc_young_sapling", "lsystem_monopodial"]
+
+
+@pytest.fixture(scope="module")
+def renderer():
+    from renderers.impostor import CoverageRenderer
+
+    r = CoverageRenderer(64)
+    yield r
+    r.close()
+
+
+def _area(triangles: np.ndarray) -> float:
+    e1, e2 = triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+
+
+@pytest.mark.parametrize("tile", [0, 1])
+def test_alpha_outline_covers_the_opaque_share_of_each_leaf_tile(tile):
+    alpha = leaf_alphas(leaf_atlas((0.2, 0.4, 0.1), 64))[tile]
+    triangles = alpha_outline(alpha)
+    assert len(triangles) <= 40
+    assert abs(_area(triangles) - alpha.mean()) < 0.03
+
+
+def test_alpha_outline_of_a_ring_falls_back_to_row_runs_with_the_hole_open():
+    yy, xx = np.mgrid[0:64, 0:64]
+    radius = np.hypot(yy - 31.5, xx - 31.5)
+    ring = (radius < 30) & (radius > 15)
+    assert abs(_area(alpha_outline(ring)) - ring.mean()) < 0.03
+
+
+def test_triangle_coverage_cuts_a_card_to_its_alpha():
+    vertices = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 2.0], [-1.0, 0.0, 2.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uvs = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    left_half = np.zeros((8, 8), bool)
+    left_half[:, :4] = True
+    camera = orthographic_camera(vertices, 0.0, 0.0, 64)
+    opaque = triangle_coverage(camera, vertices, faces)
+    cut = triangle_coverage(camera, vertices, faces, uvs, left_half)
+    assert cut.sum() == pytest.approx(opaque.sum() / 2, rel=0.1)
+    assert not (cut & ~opaque).any()
+
+
+@pytest.fixture(scope="module")
+def sapling(renderer):
+    spec = parse_library_spec({"species": {"sc_young_sapling": 1}, "texture_size": 64, "impostor_tile": 32})
+    return build_asset("sc_young_sapling", tree_seed(3, 0), spec, renderer, StageTimer())
+
+
+def test_glb_size_without_instancing_is_the_length_of_that_file(sapling):
+    assert glb_size(sapling, instanced=False) == len(asset_to_glb(sapling, instanced=False))
+    assert glb_size(sapling) == len(asset_to_glb(sapling))
+
+
+def test_impostor_has_at_most_16_triangles_and_a_tile_per_plane(sapling):
+    atlas = sapling.impostor
+    assert sapling.levels[-1].n_triangles <= 16
+    tiles = (atlas.albedo.shape[0] // atlas.tile) * (atlas.albedo.shape[1] // atlas.tile)
+    assert tiles >= len(atlas.azimuths) == sapling.levels[-1].n_triangles // 2
+    for plane in range(len(atlas.azimuths)):
+        row, col = atlas.tile_origin(plane)
+        assert (atlas.albedo[row:row + atlas.tile, col:col + atlas.tile, 3] > 0).any()
+
+
+def test_every_level_carries_eight_iou_figures_in_range(sapling):
+    for level in sapling.levels[1:]:
+        assert len(level.iou) == 8 and all(0.0 <= v <= 1.0 for v in level.iou)
+
+
+def test_validate_names_each_level_below_the_iou_target(tmp_path):
+    rows = [{"id": "a", "level_names": ["LOD0", "LOD1", "IMPOSTOR"], "switch_px": [0, 512, 64],
+             "iou_min": [1.0, 0.95, 0.5]}]
+    (tmp_path / "catalog.json").write_text(json.dumps(rows))
+    problems = quality_shortfalls(str(tmp_path))
+    assert len(problems) == 1 and "IMPOSTOR" in str(problems[0]) and "0.500" in str(problems[0])
+
+
+@pytest.mark.xfail(strict=True, reason="issue 11 target not met yet: sparse and needle crowns fall below 0.9 "
+                                        "at LOD2/LOD3 and the impostor (see benchmarks/bench_library.py)")
+@pytest.mark.parametrize("name", REPRESENTATIVE)
+def test_silhouette_iou_reaches_the_target_at_every_switch(name, renderer):
+    spec = parse_library_spec({"species": {name: 1}, "texture_size": 64, "impostor_tile": 64})
+    asset = build_asset(name, tree_seed(0, 0), spec, renderer, StageTimer())
+    worst = {level.name: min(level.iou) for level in asset.levels[1:]}
+    assert min(worst.values()) >= IOU_TARGET, worst
