@@ -131,8 +131,9 @@ BuilderFactory = Callable[[Any], TreeBuilder]
 
 
 # ---------------------------------------------------------------------- rows
-def _list(array, dtype) -> list:
-    return np.ascontiguousarray(array, dtype).ravel().tolist()
+def _list(array, dtype) -> np.ndarray:
+    # A flat numpy array, not a Python list: pyarrow converts it to a list cell without a per-element loop.
+    return np.ascontiguousarray(array, dtype).ravel()
 
 
 def tree_row(spec, index: int, shard: int, species_name: str, seed: int, built: BuiltTree) -> dict:
