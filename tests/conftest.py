@@ -10,7 +10,7 @@ def ray_session():
     import ray
 
     if not ray.is_initialized():
-        ray.init(num_cpus=2, include_dashboard=False, object_store_memory=100 * 2**20, logging_level="WARNING",
-                 runtime_env={"env_vars": {"PYOPENGL_PLATFORM": "egl"}})
+        ray.init(address="local", num_cpus=2, include_dashboard=False, object_store_memory=100 * 2**20,
+                 logging_level="WARNING", runtime_env={"env_vars": {"PYOPENGL_PLATFORM": "egl"}})
     yield ray
     ray.shutdown()

@@ -88,3 +88,21 @@ def test_kuberay_job_manifest_carries_a_valid_job_spec():
     config_map = next(d for d in yaml.safe_load_all(manifest.read_text()) if d["kind"] == "ConfigMap")
     spec = parse_spec(yaml.safe_load(config_map["data"]["job.yaml"]))
     assert spec.n_trees == 20000
+
+
+def test_print_spec_gives_yaml_that_loads_back_to_the_default_job(tmp_path, capsys):
+    from farm.cli import main
+    from farm.jobs import default_spec
+
+    assert main(["generate", "--print-spec"]) == 0
+    path = tmp_path / "default.yaml"
+    path.write_text(capsys.readouterr().out)
+    assert load_spec(path) == default_spec()
+
+
+def test_trees_option_overrides_the_total_in_the_printed_spec(capsys):
+    from farm.cli import main
+
+    assert main(["generate", "--trees", "5", "--print-spec"]) == 0
+    printed = yaml.safe_load(capsys.readouterr().out)
+    assert printed["trees"] == 5 and all(weight == 1.0 for weight in printed["species"].values())
