@@ -5,6 +5,7 @@ timings). The driver writes manifest.json last, from those records. Validation r
 """
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import subprocess
@@ -68,8 +69,9 @@ def finished_shards(location: Location, spec_digest: str, n_shards: int) -> dict
     return done
 
 
+@functools.cache
 def code_version() -> str:
-    """`git describe` of the source tree when it is a checkout, else the package version."""
+    """`git describe` of the source tree when it is a checkout, else the package version (once per process)."""
     root = Path(__file__).resolve().parent.parent
     try:
         out = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=root, capture_output=True,
@@ -113,6 +115,8 @@ def build_manifest(spec, records: dict[int, dict], wall_seconds: float) -> dict:
         "job": spec.to_dict(),
         "spec_digest": spec.digest(),
         "code_version": code_version(),
+        # A resumed job whose shards were written by different code: same spec, maybe not the same bytes.
+        "shard_code_versions": sorted({r.get("code_version", "unknown") for r in shards}),
         "packages": package_versions(),
         "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "counts": {"trees": n_trees, "views": n_views, "failed": sum(len(r["failures"]) for r in shards),

@@ -13,7 +13,7 @@ from species.errors import TreefarmError
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
 from .jobs import JobSpec, species_of_trees
-from .manifest import (SHARDS_FOLDER, build_manifest, file_entry, finished_shards, read_shard_record,
+from .manifest import (SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
 from .storage import Location
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
@@ -99,7 +99,7 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worke
                 stages[stage] = stages.get(stage, 0.0) + seconds
     stages["write"] = time.perf_counter() - start
     record = {"shard": plan.shard, "first_index": plan.first_index, "n_trees": plan.n_trees,
-              "spec_digest": spec.digest(),
+              "spec_digest": spec.digest(), "code_version": code_version(),
               "trees": file_entry("trees", plan.shard, trees_bytes, len(tree_rows)),
               "views": file_entry("views", plan.shard, views_bytes, len(all_view_rows)),
               "failures": failures, "timings": {"stages": stages, "trees": tree_timings},

@@ -34,6 +34,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"trees {counts['trees']}  views {counts['views']}  shards {counts['shards']}  "
               f"failed {counts['failed']}")
         print(f"wall {manifest['timings']['wall_seconds']:.1f} s (last run)")
+        if len(manifest.get("shard_code_versions", [])) > 1:
+            print(f"warning: shards written by different code versions: {', '.join(manifest['shard_code_versions'])}")
         _print_stages(manifest["timings"]["stage_seconds"], counts["trees"])
         failures = manifest["failures"]
     else:

@@ -136,3 +136,13 @@ def test_tree_over_the_node_limit_is_recorded_as_failed_before_meshing(tmp_path)
     (failure,) = record["failures"]
     assert failure["stage"] == "grow" and "max_nodes = 10" in failure["error"]
     assert "mesh" not in record["timings"]["trees"][0]
+
+
+def test_job_writes_to_a_filesystem_uri_and_reads_back(finished, tmp_path):
+    spec = finished[0]
+    uri = f"file://{tmp_path}/by-uri"
+    manifest = run_job(spec, uri, workers=1, builder_factory=StandinChain, progress=False)
+    assert manifest["counts"]["trees"] == spec.n_trees
+    assert part_bytes(tmp_path / "by-uri") == finished[2]
+    assert dataset.to_pandas(uri, columns=["tree_id"])["tree_id"].is_unique
+    assert validate_dataset(uri) == []
