@@ -1,5 +1,5 @@
-"""Reliability of real jobs (real species and renderer chain, tiny settings): killed workers and drivers,
-1 vs 2 workers, damaged parts, bad specs, and a multi-node Ray cluster on this machine."""
+"""Reliability of real jobs (the real species and renderer chain, all three generators, tiny settings):
+killed workers and drivers, 1 vs 2 workers, damaged parts, bad specs, a multi-node Ray cluster on this machine."""
 from __future__ import annotations
 
 import os
@@ -21,7 +21,7 @@ from farm.tree_chain import SpeciesChain
 from farm_standins import KillOnce
 
 SPEC = {"name": "tiny", "seed": 3, "shard_size": 2,
-        "species": {"maple": 2, "palm": 2, "douglas_fir": 2, "sassafras": 2},
+        "species": {"maple": 2, "palm": 2, "sc_young_sapling": 2, "lsystem_fractal_plant": 2},
         "render": {"rig": "two-view", "size": 64}}
 FARM = [sys.executable, "-m", "farm.cli"]
 
