@@ -77,7 +77,9 @@ def make_preset(name: str, description: str, overrides: dict, *, scale_var: floa
         "rLastAng": lambda rng, params: rng.uniform(0, 360, 4).tolist(),
         "choiceNegPos1": lambda rng, params: int(rng.choice([-1, 1])),
         "choiceNegPos2": lambda rng, params: int(rng.choice([-1, 1])),
-        "rSplits2": lambda rng, params: float(rng.uniform(0, 1)),
+        # rSplits2 is left out on purpose: as one threshold for every split decision of the tree, a small value
+        # makes every segment split and the tree grows exponentially; without it each decision is drawn from
+        # the dictionary's seed, as Sapling does.
     })
     fixed = {k: v for k, v in base.items() if k not in ranges}
     return Preset(name=name, generator="weber_penn", description=description, fixed=fixed, ranges=ranges)
@@ -170,10 +172,10 @@ def _presets() -> list[Preset]:
             leaf=(0.20, 0.40, 0.13), bark=(0.33, 0.28, 0.24)),
         make_preset("weeping_willow", "Weeping willow: short forked trunk, long whips hanging to the ground", {
             "downAngleV": [0, 10, 10, 10], "lengthV": [0, 0.1, 0, 0], "shape": "3", "splitAngle": [3, 30, 45, 0],
-            "baseSize": 0.05, "baseSplits": 2, "scale": 15.0, "ratio": 0.03, "segSplits": [0.1, 0.2, 0.2, 0],
+            "baseSize": 0.05, "baseSplits": 2, "scale": 15.0, "ratio": 0.03, "segSplits": [0.1, 0.1, 0.05, 0],
             "ratioPower": 2.0, "length": [0.8, 0.5, 1.5, 0.1], "rotateV": [0, 30, 30, 0],
             "attractUp": [0, -3, -3, -3], "levels": 3, "downAngle": [0, 20, 30, 20], "leafScaleX": 0.2,
-            "curveRes": [8, 16, 12, 1], "rotate": [0, -120, -120, 140], "branches": [0, 25, 10, 300], "leaves": 15,
+            "curveRes": [8, 10, 10, 1], "rotate": [0, -120, -120, 140], "branches": [0, 25, 10, 300], "leaves": 15,
             "curve": [0, 40, 0, 0], "leafScale": 0.12, "curveBack": [20, 80, 0, 0], "leafShape": "rect",
             "prune": True, "pruneRatio": 1.0, "pruneWidth": 0.4, "pruneWidthPeak": 0.6, "pruneBase": 0.05,
             "splitHeight": 0.4}, scale_var=3.0, curve_var=[40, 60, 0, 0], split_var=[0, 10, 20, 0], fork_max=2,

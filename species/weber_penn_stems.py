@@ -10,12 +10,18 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 from . import rotations as rot
+from .errors import TreefarmError
 from .weber_penn_shapes import shape_ratio
 
 __all__ = ["Level", "grow_level"]
 
 TAU = 2 * np.pi
 Z_AXIS = np.array([0.0, 0.0, 1.0])
+MAX_STEMS_PER_LEVEL = 100_000  # beyond this a tree no longer fits a farm worker's memory or a GLB reader
+
+
+class TreeTooLargeError(TreefarmError):
+    """A dictionary whose splits or branch counts grow more stems than a tree can hold."""
 
 
 @dataclass
@@ -212,6 +218,10 @@ def _grow_once(stems: Level, p, draws, n, scale_val, close_tip, scale, rng) -> L
             r_last = np.concatenate([r_last, new_rows.pop("_r_last")])
             seg_family = np.concatenate([seg_family, new_rows.pop("_seg_family")])
             s = level.n_splines
+            if s > MAX_STEMS_PER_LEVEL:
+                raise TreeTooLargeError(
+                    f"level {n} grew {s} stems (limit {MAX_STEMS_PER_LEVEL}): segSplits[{n}] = "
+                    f"{p['segSplits'][n]} and curveRes[{n}] = {k_max} split too often; lower them")
     return level
 
 

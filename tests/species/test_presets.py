@@ -37,9 +37,10 @@ def test_sampling_is_deterministic_and_seeds_differ():
 def test_sampled_dictionary_records_sapling_draws_and_fixed_keys():
     preset = species.get_preset("pine")
     params = species.sample(preset, np.random.default_rng(0))
-    for key in ("curveV1", "curveV2", "splitAngleV1", "splitAngleV2", "rLastAng", "choiceNegPos1", "rSplits2",
+    for key in ("curveV1", "curveV2", "splitAngleV1", "splitAngleV2", "rLastAng", "choiceNegPos1",
                 "scaleV", "scaleV0", "seed"):
         assert key in params
+    assert "rSplits2" not in params  # one threshold for every split decision: left to the seed's rng
     for key in ("curve", "downAngle", "nrings" if "nrings" in preset.fixed else "levels"):
         if key in preset.fixed:
             assert params[key] == preset.fixed[key]
@@ -68,3 +69,11 @@ def test_range_specs_draw_scalars_and_lists():
     assert Choice(("a", "b")).draw(rng) in ("a", "b")
     drawn = Jitter([10, 0], rel=0.25, integer=True).draw(rng)
     assert 7 <= drawn[0] <= 13 and drawn[1] == 0
+
+
+@pytest.mark.parametrize("name", WEBER_PENN)
+def test_preset_size_stays_bounded_over_many_seeds(name):
+    nodes = [species.grow(p, species.rng_for(p)).n_nodes
+             for p in (species.sample(name, np.random.default_rng(seed)) for seed in range(10, 22))]
+    assert max(nodes) < 60_000, f"{name}: node counts {sorted(nodes)}"
+    assert max(nodes) < 8 * np.median(nodes), f"{name}: a seed grows far more than the typical tree: {nodes}"

@@ -147,3 +147,9 @@ def test_a_dictionary_without_generator_is_weber_penn():
     params = sapling_dict("3_palm_3")
     assert "generator" not in params
     assert isinstance(species.grow(params, np.random.default_rng(0)), species.Skeleton)
+
+
+def test_runaway_splitting_raises_a_clear_error_instead_of_exhausting_memory():
+    params = simple_params(curveRes=[8, 30, 3, 1], segSplits=[0, 2.0, 0, 0], rSplits2=0.0, branches=[0, 10, 0, 0])
+    with pytest.raises(species.TreefarmError, match=r"level 1 grew \d+ stems .*segSplits\[1\]"):
+        grow(params, np.random.default_rng(0))
