@@ -123,7 +123,10 @@ def build_manifest(spec, records: dict[int, dict], wall_seconds: float) -> dict:
                    "shards": len(shards)},
         "shards": [{key: r[key] for key in ("shard", "first_index", "n_trees", "trees", "views")} for r in shards],
         "failures": [failure for r in shards for failure in r["failures"]],
+        # Summed over shards: CPU well below wall means the workers waited for a CPU (an oversubscribed machine).
         "timings": {"wall_seconds": wall_seconds, "stage_seconds": stage_seconds,
+                    "shard_wall_seconds": sum(r["timings"].get("wall_seconds", 0.0) for r in shards),
+                    "shard_cpu_seconds": sum(r["timings"].get("cpu_seconds", 0.0) for r in shards),
                     "trees_per_second": n_trees / wall_seconds if wall_seconds > 0 else None},
     }
 

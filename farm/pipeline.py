@@ -68,6 +68,7 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worke
     worker : facts about the process to note in the record (the Ray node id).
     A tree whose build raises becomes a row with its error (and a failure entry); the shard goes on.
     """
+    shard_start, shard_cpu_start = time.perf_counter(), time.process_time()
     tree_rows, all_view_rows, failures, tree_timings = [], [], [], []
     for index, species_name in zip(plan.indices, plan.species):
         seed = tree_seed(spec.seed, index)
@@ -102,7 +103,9 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worke
               "spec_digest": spec.digest(), "code_version": code_version(),
               "trees": file_entry("trees", plan.shard, trees_bytes, len(tree_rows)),
               "views": file_entry("views", plan.shard, views_bytes, len(all_view_rows)),
-              "failures": failures, "timings": {"stages": stages, "trees": tree_timings},
+              "failures": failures, "timings": {"stages": stages, "trees": tree_timings,
+                                                "wall_seconds": time.perf_counter() - shard_start,
+                                                "cpu_seconds": time.process_time() - shard_cpu_start},
               "worker": {"pid": os.getpid(), "host": os.uname().nodename, **(worker or {})}}
     write_shard_record(location, record)
     return record
