@@ -5,6 +5,7 @@ Same spec and seed, same part-file bytes, whatever the number of workers or thei
 """
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass
@@ -13,7 +14,7 @@ from species.errors import TreefarmError
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
 from .jobs import JobSpec, species_of_trees
-from .manifest import (SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
+from .manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
 from .storage import Location
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
@@ -131,16 +132,20 @@ class ShardWorker:
         return os.getpid()
 
 
-def _check_output_belongs_to(spec: JobSpec, location: Location, n_shards: int) -> None:
-    """Refuse to mix two jobs in one folder: every existing shard record must carry this spec's digest."""
+def _check_output_belongs_to(spec: JobSpec, location: Location) -> None:
+    """Refuse to mix two jobs in one folder: the job record and every shard record must carry this spec's digest."""
     digest = spec.digest()
+    digests = []
+    if location.exists(JOB_RECORD):
+        digests.append(json.loads(location.read_bytes(JOB_RECORD)).get("spec_digest"))
     for name in location.list(SHARDS_FOLDER):
-        if not name.startswith("part-"):
-            continue
-        record = read_shard_record(location, int(name[5:10]))
-        if record is not None and record.get("spec_digest") != digest:
-            raise JobError(f"{location.uri} holds shards of another job spec (digest "
-                           f"{record.get('spec_digest', '?')[:12]}); write this job to another --out")
+        record = read_shard_record(location, int(name[5:10])) if name.startswith("part-") else None
+        if record is not None:
+            digests.append(record.get("spec_digest"))
+    other = next((d for d in digests if d != digest), None)
+    if other is not None:
+        raise JobError(f"{location.uri} holds shards of another job spec (digest {str(other)[:12]}); "
+                       f"write this job to another --out")
 
 
 def _connect_ray(address: str | None, workers: int | None) -> bool:
@@ -159,6 +164,46 @@ def _connect_ray(address: str | None, workers: int | None) -> bool:
     return True
 
 
+def _run_pending(spec: JobSpec, location: Location, pending: list[ShardPlan], records: dict[int, dict],
+                 workers: int | None, builder_factory: BuilderFactory, bar) -> None:
+    """Start the actors, keep each one busy with one shard at a time, collect the records as they land."""
+    import ray
+
+    if workers is None:
+        cpus_per_actor = max(spec.resources["num_cpus"], 1e-3)
+        workers = max(1, int(ray.cluster_resources().get("CPU", 1) // cpus_per_actor))
+    worker_class = ray.remote(ShardWorker).options(
+        num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"],
+        max_restarts=ACTOR_RETRIES, max_task_retries=ACTOR_RETRIES, runtime_env={"env_vars": worker_env(spec)})
+    actors = [worker_class.remote(spec, location.uri, builder_factory) for _ in range(min(workers, len(pending)))]
+    views_done = sum(record["views"]["rows"] for record in records.values())
+    queue = list(reversed(pending))
+    in_flight = {}
+
+    def submit(actor) -> None:
+        if queue:
+            plan = queue.pop()
+            in_flight[actor.run.remote(plan)] = (actor, plan)
+
+    for actor in actors:
+        submit(actor)
+    while in_flight:
+        ready, _ = ray.wait(list(in_flight), num_returns=1)
+        actor, plan = in_flight.pop(ready[0])
+        try:
+            record = ray.get(ready[0])
+        except ray.exceptions.RayError as exc:  # Ray's own restarts and retries are exhausted by now
+            raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
+                           f"{' '.join(str(exc).split())[:300]}") from exc
+        records[plan.shard] = record
+        views_done += record["views"]["rows"]
+        bar.update(record["n_trees"])
+        bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
+        submit(actor)
+    for actor in actors:
+        ray.kill(actor)
+
+
 def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | None = None,
             builder_factory: BuilderFactory = SpeciesChain, progress: bool = True) -> dict:
     """Run (or resume) a job into `out` and return its manifest.
@@ -174,7 +219,7 @@ def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | 
         raise JobError(f"--workers {workers} is invalid: allowed an integer >= 1")
     location = Location.resolve(out)
     plans = plan_shards(spec)
-    _check_output_belongs_to(spec, location, len(plans))
+    _check_output_belongs_to(spec, location)
     for folder in ("trees", "views", SHARDS_FOLDER):
         location.remove_temporaries(folder)
     records = finished_shards(location, spec.digest(), len(plans))
@@ -187,37 +232,7 @@ def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | 
     try:
         if pending:
             started_ray = _connect_ray(address, workers)
-            n_actors = workers or max(1, int(ray.cluster_resources().get("CPU", 1) // max(spec.resources["num_cpus"], 1e-3)))
-            worker_class = ray.remote(ShardWorker).options(
-                num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"],
-                max_restarts=ACTOR_RETRIES, max_task_retries=ACTOR_RETRIES,
-                runtime_env={"env_vars": worker_env(spec)})
-            actors = [worker_class.remote(spec, location.uri, builder_factory)
-                      for _ in range(min(n_actors, len(pending)))]
-            views_done = sum(records[k]["views"]["rows"] for k in records)
-            queue = list(reversed(pending))
-            in_flight = {}
-            for actor in actors:
-                if queue:
-                    plan = queue.pop()
-                    in_flight[actor.run.remote(plan)] = (actor, plan)
-            while in_flight:
-                ready, _ = ray.wait(list(in_flight), num_returns=1)
-                actor, plan = in_flight.pop(ready[0])
-                try:
-                    record = ray.get(ready[0])
-                except ray.exceptions.RayError as exc:
-                    raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
-                                   f"{' '.join(str(exc).split())[:300]}") from exc
-                records[plan.shard] = record
-                views_done += record["views"]["rows"]
-                bar.update(record["n_trees"])
-                bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
-                if queue:
-                    next_plan = queue.pop()
-                    in_flight[actor.run.remote(next_plan)] = (actor, next_plan)
-            for actor in actors:
-                ray.kill(actor)
+            _run_pending(spec, location, pending, records, workers, builder_factory, bar)
         manifest_exists = location.exists("manifest.json")
         if pending or not manifest_exists:
             manifest = build_manifest(spec, records, time.perf_counter() - start)
