@@ -263,8 +263,8 @@ class Skeleton:
 
     def leaf_corners(self) -> np.ndarray:
         """(M, 4, 3) float32, world positions of each leaf card's four corners."""
-        homo = np.concatenate([LEAF_CARD_CORNERS, np.ones((4, 1), np.float32)], axis=1)  # (4, 4)
-        return np.einsum("mij,kj->mki", self.leaves, homo)[..., :3].astype(np.float32)
+        linear = self.leaves[:, :3, :3] @ LEAF_CARD_CORNERS.T  # (M, 3, 4); matmul beats einsum here
+        return (linear.transpose(0, 2, 1) + self.leaves[:, None, :3, 3]).astype(np.float32)
 
     def order_counts(self) -> np.ndarray:
         """(max_order + 1,) int64, number of branches of each order."""
