@@ -10,7 +10,7 @@ import json
 import re
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -246,10 +246,12 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
                    shard_size=shard_size, max_nodes=max_nodes, output=output, resources=resources)
 
 
-def load_spec(path: str | Path, **known) -> JobSpec:
-    """Read and validate a YAML job spec file."""
+def load_spec(path: str | Path, parse: Callable[..., Any] | None = None, **known):
+    """Read a YAML spec file and validate it with `parse` (default `parse_spec`, giving a JobSpec; the asset
+    library passes its own parser): the one loader of every farm spec file."""
     import yaml
 
+    parse = parse_spec if parse is None else parse
     path = Path(path)
     if not path.is_file():
         raise JobSpecError("spec file", str(path), "an existing YAML file")
@@ -257,7 +259,7 @@ def load_spec(path: str | Path, **known) -> JobSpec:
         raw = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
         raise JobSpecError("spec file", str(path), f"valid YAML ({' '.join(str(exc).split())})") from None
-    return parse_spec(raw, **known)
+    return parse(raw, **known)
 
 
 def default_spec() -> JobSpec:

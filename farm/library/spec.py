@@ -11,7 +11,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from farm.jobs import JobSpecError, RenderSpec, _check_int, _check_keys, _known_species, species_of_trees
+from farm.jobs import (JobSpecError, RenderSpec, _check_int, _check_keys, _known_species, load_spec,
+                       species_of_trees)
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "species_of_trees"]
@@ -150,16 +151,8 @@ def parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
 
 
 def load_library_spec(path: str | Path, **known) -> LibrarySpec:
-    import yaml
-
-    path = Path(path)
-    if not path.is_file():
-        raise LibrarySpecError("spec file", str(path), "an existing YAML file")
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise LibrarySpecError("spec file", str(path), f"valid YAML ({' '.join(str(exc).split())})") from None
-    return parse_library_spec(raw, **known)
+    """Read and validate a YAML library spec file with the farm's spec loader (`farm.jobs.load_spec`)."""
+    return load_spec(path, parse=parse_library_spec, **known)
 
 
 def default_library_spec(per_species: int = 4) -> LibrarySpec:
