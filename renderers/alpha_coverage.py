@@ -1,7 +1,13 @@
-"""Alpha-tested coverage of triangle meshes, rasterized in numpy: which pixel centres a mesh covers when its
-texture's alpha cuts the cards (leaf cards, cluster cards, impostor planes) the way an engine's alpha test does.
+"""Alpha-tested coverage of leaf cards for the library's silhouette measurements: cards shrunk to the area their
+texture's alpha covers (one rule for leaves and cluster cards), and a numpy rasterizer for the alpha-cut impostor.
 
-In: a `Camera`, triangles (vertices, faces) with optional UVs and an alpha mask. Out: (H, W) bool coverage.
+In: a `Camera`, triangles (vertices, faces) with optional UVs and an alpha mask, or cards and an alpha tile.
+Out: (H, W) bool coverage, or plain opaque cards (MeshPart / TreeMesh) that depth-only GL passes draw.
+
+Measurement rule (the same for LOD0 leaves, LOD cluster cards and every level, so the comparison is fair): a
+card textured with alpha tile A is drawn as its own two triangles shrunk about the card's centre by sqrt(f) in
+both axes, f = the share of texels of A at or above the files' alpha cutoff (0.5), measured once per tile. The
+shrunk card covers the same area as the alpha-tested card; only where inside the card that area lies differs.
 """
 from __future__ import annotations
 
@@ -12,16 +18,15 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import Camera
 
-__all__ = ["triangle_coverage", "alpha_outline", "outlined_cards", "alpha_tested", "CoverageError", "MAX_SAMPLES_PER_CHUNK"]
+__all__ = ["triangle_coverage", "opaque_fraction", "shrunk_cards", "coverage_tree", "CoverageError",
+           "MAX_SAMPLES_PER_CHUNK"]
 
 # Candidate (triangle, pixel) pairs tested at once; bounds memory to a few hundred MB whatever the mesh.
 MAX_SAMPLES_PER_CHUNK = 2_000_000
-# A traced outline keeps at most this many vertices (one fan triangle each).
-MAX_OUTLINE_VERTICES = 12
 
 
 class CoverageError(TreefarmError):
-    """Coverage asked of triangles behind the camera, or with UVs/alpha of the wrong shape."""
+    """Coverage asked of triangles behind the camera, or with UVs/alpha of the wrong shape, or an empty tile."""
 
 
 def _check(vertices, faces, uvs, alpha) -> None:
@@ -40,8 +45,8 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     vertices : (V, 3) float, metres, world; faces : (F, 3) int; uvs : (V, 2) float, OBJ convention (v = 0 at the
     bottom row of `alpha`); alpha : (h, w) bool, True where the texture is opaque (nearest texel, no filtering).
     Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated affinely in screen space: the
-    triangles these views meet (leaves, cluster cards, impostor planes seen from afar) are small against their
-    distance, so perspective correction would move a texel by far less than one.
+    triangles these views meet (impostor planes seen from afar) are small against their distance, so
+    perspective correction would move a texel by far less than one.
     """
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
@@ -98,72 +103,34 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     return covered.reshape(camera.height, camera.width)
 
 
-def alpha_outline(alpha: np.ndarray, max_rows: int = 32) -> np.ndarray:
-    """(K, 3, 2) float64 UV triangles (OBJ convention, v up) covering the opaque texels of `alpha` (h, w) bool.
-
-    A star-shaped shape without holes (a leaf, a round clump of leaves) becomes its outer contour, traced a quarter texel
-    inside the texel edges (where bilinear alpha at a 0.5 cutoff puts the edge), simplified to at most
-    MAX_OUTLINE_VERTICES vertices and fanned from its centroid; any other shape becomes one rectangle per run of
-    opaque texels per row, at most `max_rows` rows (rows merged by majority). Coverage of alpha-tested cards
-    stays close to exact while the GL renderer draws a few plain opaque triangles per card.
-    """
-    import cv2
-
-    mask = np.asarray(alpha, bool)
-    h, w = mask.shape
-    if not mask.any():
-        return np.zeros((0, 3, 2))
-    fine = np.repeat(np.repeat(mask, 2, axis=0), 2, axis=1).astype(np.uint8)
-    contours, _ = cv2.findContours(fine, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    xy = None
-    if len(contours) == 1:
-        contour = contours[0]
-        epsilon = 0.5
-        polygon = cv2.approxPolyDP(contour, epsilon, True)
-        while len(polygon) > MAX_OUTLINE_VERTICES:  # coarser until few triangles: GL cost scales with them
-            epsilon *= 1.2
-            polygon = cv2.approxPolyDP(contour, epsilon, True)
-        polygon = (polygon[:, 0, :].astype(np.float64) + 0.5) / 2.0
-        centre = polygon.mean(axis=0)
-        fan = np.stack([np.broadcast_to(centre, polygon.shape), polygon, np.roll(polygon, -1, axis=0)], axis=1)
-        e1, e2 = fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]
-        cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        star = np.all(cross > 0) or np.all(cross < 0)  # star-shaped about the centroid
-        if star and abs(0.5 * np.abs(cross).sum() - mask.sum()) <= 0.05 * mask.sum():  # and without holes
-            xy = fan
-    if xy is None:
-        step = -(-h // max_rows)
-        coarse = np.stack([mask[r:r + step].mean(axis=0) >= 0.5 for r in range(0, h, step)])
-        padded = np.pad(coarse.astype(np.int8), ((0, 0), (1, 1)))
-        change = np.diff(padded, axis=1)
-        run_row, run_start = np.nonzero(change == 1)
-        _, run_stop = np.nonzero(change == -1)
-        top, bottom = run_row * step, np.minimum((run_row + 1) * step, h)
-        quad = np.stack([np.stack([run_start, top], 1), np.stack([run_stop, top], 1),
-                         np.stack([run_stop, bottom], 1), np.stack([run_start, bottom], 1)], axis=1)
-        xy = np.concatenate([quad[:, [0, 1, 2]], quad[:, [0, 2, 3]]]).astype(np.float64)
-    return np.stack([xy[..., 0] / w, 1.0 - xy[..., 1] / h], axis=-1)
+def opaque_fraction(alpha: np.ndarray) -> float:
+    """Share in (0, 1] of opaque texels of an alpha tile (h, w) bool; CoverageError for a tile with none."""
+    alpha = np.asarray(alpha, bool)
+    if alpha.ndim != 2 or not alpha.any():
+        raise CoverageError(f"alpha tile of shape {alpha.shape} with {int(alpha.sum())} opaque texels is "
+                            f"invalid: allowed a 2-D tile with at least one opaque texel")
+    return float(alpha.mean())
 
 
-def outlined_cards(cards: MeshPart, outline: np.ndarray) -> MeshPart:
-    """The opaque triangles of alpha-tested cards: `outline` (K, 3, 2) UV triangles (from `alpha_outline`)
-    placed on every card of `cards` (four corners per card at UV (0,0), (1,0), (1,1), (0,1), as `leaf_part`
-    makes them). Returns a MeshPart of C x K x 3 vertices (normals and UVs carried over)."""
+def shrunk_cards(cards: MeshPart, fraction: float) -> MeshPart:
+    """Cards (four corners each, as `leaf_part` makes them) shrunk about their centres by sqrt(fraction) in both
+    axes, so each covers `fraction` of its area: the opaque area of an alpha-tested card as two triangles.
+    Faces, normals, UVs and attributes are kept; vertices (V, 3) float32 metres."""
+    if not 0.0 < fraction <= 1.0:
+        raise CoverageError(f"coverage fraction {fraction!r} is invalid: allowed (0, 1]")
+    if cards.n_vertices % 4:
+        raise CoverageError(f"{cards.n_vertices} card vertices are invalid: allowed four per card")
     corners = np.asarray(cards.vertices, np.float64).reshape(-1, 4, 3)
-    origin, along_u, along_v = corners[:, 0], corners[:, 1] - corners[:, 0], corners[:, 3] - corners[:, 0]
-    uv = outline.reshape(-1, 2)
-    vertices = (origin[:, None] + uv[None, :, 0, None] * along_u[:, None] + uv[None, :, 1, None] * along_v[:, None])
-    count = vertices.shape[0] * vertices.shape[1]
-    normals = np.repeat(np.asarray(cards.normals, np.float64).reshape(-1, 4, 3)[:, 0], uv.shape[0], axis=0)
-    return MeshPart(vertices.reshape(-1, 3), np.arange(count).reshape(-1, 3), normals,
-                    np.tile(uv, (len(corners), 1)))
+    centre = corners.mean(axis=1, keepdims=True)
+    shrunk = centre + np.sqrt(fraction) * (corners - centre)
+    return MeshPart(shrunk.reshape(-1, 3).astype(np.float32), cards.faces, cards.normals, cards.uvs,
+                    dict(cards.attributes))
 
 
-def alpha_tested(tree: TreeMesh, leaf_alpha: np.ndarray) -> TreeMesh:
-    """The tree with its leaf cards cut to the opaque texels of `leaf_alpha` (h, w) bool (the tile the card
-    UVs span), for opaque renderers (GL coverage passes)."""
+def coverage_tree(tree: TreeMesh, fraction: float) -> TreeMesh:
+    """The tree with its leaf cards shrunk to `fraction` of their area (see `shrunk_cards`), for opaque
+    depth-only coverage passes; the bark is kept as it is."""
     if tree.leaves.n_faces == 0:
         return tree
-    leaves = outlined_cards(tree.leaves, alpha_outline(leaf_alpha))
-    return TreeMesh(bark=tree.bark, leaves=leaves, bark_color=tree.bark_color, leaf_color=tree.leaf_color,
-                    name=tree.name)
+    return TreeMesh(bark=tree.bark, leaves=shrunk_cards(tree.leaves, fraction), bark_color=tree.bark_color,
+                    leaf_color=tree.leaf_color, name=tree.name)

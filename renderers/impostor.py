@@ -1,11 +1,14 @@
 """Far-distance impostors and LOD silhouettes: a crossed-plane billboard whose albedo/normal/alpha atlas is rendered
-with the farm's depth renderer, and silhouette coverage (GL for meshes, ray casting for the alpha-tested impostor).
+with the farm's depth renderer, and silhouette coverage (depth-only GL passes for meshes, ray casting for the
+alpha-tested impostor). Leaf cards are measured by the rule of `renderers.alpha_coverage` (cards shrunk to the
+opaque share of their alpha tile).
 
 In: TreeMesh (LOD0) and a tile size; out: `ImpostorAtlas` (atlas images, plane geometry, a MeshPart of <= 16
 triangles), and (H, W) bool coverage masks and IoU figures at a given screen size.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +18,7 @@ from species.textures import linear_to_srgb
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import DepthRenderer, combine_parts, normals_from_depth
+from .maps import LEAVES, DepthRenderer, PartDepths, combine_parts, normals_from_depth
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
@@ -102,12 +105,72 @@ class ImpostorAtlas:
 
 
 class CoverageRenderer(DepthRenderer):
-    """The farm's depth renderer with one more pass: the whole tree's coverage in a single depth-only draw."""
+    """The farm's depth renderer for coverage: the whole tree in a single depth-only draw, and named groups of
+    faces uploaded once and drawn in any combination (the impostor's azimuth sectors).
+
+    Its depth-only passes draw without back-face culling, so leaf cards go in once, not once per winding
+    (pyrender culls in depth-only passes; for leafy trees that halves the triangles drawn). The nearest surface
+    still wins per pixel; only `back_depth`, which relies on culling, is not available here.
+    """
+
+    def __init__(self, size: int = 256):
+        super().__init__(size)
+        self._renderer._renderer = _unculled_renderer_class()(size, size)
+
+    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool):
+        return super()._mesh(vertices, faces, False)  # no culling: one winding is seen from both sides
+
+    def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
+        raise ImpostorError("back_depth needs back-face culling: use renderers.maps.DepthRenderer for it")
 
     def coverage(self, tree: TreeMesh, camera: Camera) -> np.ndarray:
         """(H, W) bool, pixels whose centre a triangle of `tree` covers (leaf cards as opaque quads)."""
         self.load(tree)
         return self._pass(camera, set(self.part_names)) > 0
+
+    def load_groups(self, groups: dict[str, tuple[np.ndarray, np.ndarray, bool]]) -> None:
+        """Replace the scene's meshes by named face groups: name -> (vertices (V, 3) float metres, faces (F, 3)
+        int, double_sided); empty groups are left out."""
+        for node in self._mesh_nodes.values():
+            self._scene.remove_node(node)
+        self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided))
+                            for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
+        self._tree = None  # the next `load` uploads its tree again
+
+    def group_depth(self, camera: Camera, names) -> np.ndarray:
+        """(H, W) float32 metres, the nearest surface of the named groups (those loaded), 0 where none."""
+        visible = set(names) & set(self.part_names)
+        if not visible:
+            return np.zeros((camera.height, camera.width), np.float32)
+        return self._pass(camera, visible)
+
+
+@functools.cache
+def _unculled_renderer_class():
+    """The single-sample pyrender Renderer of `renderers.maps` whose depth-only draws keep both windings.
+
+    pyrender 0.1.45 (pinned) enables GL_CULL_FACE for every depth-only primitive; this draw binds the same
+    buffers and model matrix, turns culling off and draws the indexed triangles. Other passes are unchanged.
+    """
+    import ctypes
+
+    from OpenGL import GL
+    from pyrender.constants import RenderFlags
+
+    from .maps import _single_sample_renderer_class
+
+    class UnculledDepthRenderer(_single_sample_renderer_class()):
+        def _bind_and_draw_primitive(self, primitive, pose, program, flags):
+            if not flags & RenderFlags.DEPTH_ONLY or primitive.indices is None or primitive.poses is not None:
+                return super()._bind_and_draw_primitive(primitive, pose, program, flags)
+            program.set_uniform("M", pose)
+            primitive._bind()
+            GL.glDisable(GL.GL_CULL_FACE)
+            GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
+            GL.glDrawElements(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT, ctypes.c_void_p(0))
+            primitive._unbind()
+
+    return UnculledDepthRenderer
 
 
 def switch_camera(points: np.ndarray, azimuth_deg: float, screen_px: int) -> Camera:
@@ -176,31 +239,49 @@ def _dilate(mask: np.ndarray, texels: int) -> np.ndarray:
     return out
 
 
-def _sector_part(part: MeshPart, centre: np.ndarray, azimuth: float, planes: int, axis_radius: float,
-                 keep: np.ndarray | None = None) -> MeshPart:
-    """The faces of `part` whose centroid lies in the plane's two azimuth sectors (within 90 / planes degrees
-    of the plane's line, either side of the axis), or within `axis_radius` of the vertical axis, or `keep`."""
-    if part.n_faces == 0:
-        return part
-    centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
-    angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
-    right = np.cross(-view_direction(azimuth, 0.0), [0.0, 0.0, 1.0])  # the plane's line in the ground plane
-    line = np.degrees(np.arctan2(right[1], right[0]))
-    offset = np.abs((angle - line + 90.0) % 180.0 - 90.0)  # angle to the line, either direction
-    chosen = (offset <= 90.0 / planes) | (np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius)
-    if keep is not None:
-        chosen |= keep
-    return MeshPart(part.vertices, part.faces[chosen], part.normals, part.uvs, dict(part.attributes))
+def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices the faces use, and the faces renumbered into them."""
+    used, inverse = np.unique(faces, return_inverse=True)
+    return np.asarray(vertices, np.float32)[used], inverse.reshape(faces.shape).astype(np.int32)
 
 
-def render_impostor(renderer: DepthRenderer, tree: TreeMesh, tile: int = 128,
+def _sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int,
+                   axis_radius: float) -> dict[str, tuple[np.ndarray, np.ndarray, bool]]:
+    """Faces grouped by the plane they are drawn on: "bark_p"/"leaves_p" hold the faces whose centroid lies in
+    plane p's two azimuth sectors (within 90 / planes degrees of the plane's line, either side of the axis);
+    "bark_axis"/"leaves_axis" the faces within `axis_radius` of the vertical axis and the trunk, drawn on every
+    plane. Every face is in one group."""
+    order = tree.bark.attributes.get("order")
+    # Plane p's line in the ground plane is at angle line0 + p * 180 / planes (it turns with its azimuth).
+    right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
+    line0 = np.degrees(np.arctan2(right[1], right[0]))
+    width = 180.0 / planes
+    groups = {}
+    for kind, part in (("bark", tree.bark), ("leaves", tree.leaves)):
+        if part.n_faces == 0:
+            continue
+        centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
+        angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
+        sector = np.floor(((angle - line0 + 0.5 * width) % 180.0) / width).astype(np.int64) % planes
+        axis = np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius
+        if kind == "bark" and order is not None:
+            axis |= np.asarray(order)[part.faces[:, 0]] == 0
+        sector[axis] = -1
+        for index in range(-1, planes):
+            name = f"{kind}_{'axis' if index < 0 else index}"
+            groups[name] = (*_compact(part.vertices, part.faces[sector == index]), kind == "leaves")
+    return groups
+
+
+def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
                     planes: int = IMPOSTOR_PLANES) -> ImpostorAtlas:
     """Render a tree's impostor atlas: for each plane an orthographic view along its normal of the slice of the
     tree nearest that plane (the faces within 90 / planes degrees of azimuth of it, the trunk and the axis in
     every plane), giving albedo (bark or leaf colour by the rendered mask, sRGB), alpha (coverage, grown by
     one texel) and tangent-space normals (from the rendered depth). Slicing puts every part of the crown on
     one plane only, so a view between planes sees the crown once, not the union of every plane's whole view
-    (which fills in a sparse crown). `renderer` is the process's DepthRenderer (or a subclass)."""
+    (which fills in a sparse crown). The slices are uploaded once, two depth-only passes (bark, leaves) per
+    plane. `renderer` is the process's CoverageRenderer."""
     if not 8 <= tile <= 2048:
         raise ImpostorError(f"impostor tile {tile} px is invalid: allowed 8..2048")
     if not 1 <= planes <= 8:
@@ -214,16 +295,12 @@ def render_impostor(renderer: DepthRenderer, tree: TreeMesh, tile: int = 128,
     normal[...] = (128, 128, 255)
     bark_rgb = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
     leaf_rgb = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
-    order = tree.bark.attributes.get("order")
-    trunk = (np.zeros(tree.bark.n_faces, bool) if order is None
-             else np.asarray(order)[tree.bark.faces[:, 0]] == 0)
-    axis_radius = _AXIS_SHARE * half
+    renderer.load_groups(_sector_groups(tree, centre, planes, _AXIS_SHARE * half))
     for plane, azimuth in enumerate(azimuths):
-        renderer.load(TreeMesh(bark=_sector_part(tree.bark, centre, float(azimuth), planes, axis_radius, trunk),
-                               leaves=_sector_part(tree.leaves, centre, float(azimuth), planes, axis_radius),
-                               bark_color=tree.bark_color, leaf_color=tree.leaf_color, name=tree.name))
         camera = _plane_camera(centre, half, reach, float(azimuth), tile)
-        depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
+        parts = PartDepths({"bark": renderer.group_depth(camera, ("bark_axis", f"bark_{plane}")),
+                            LEAVES: renderer.group_depth(camera, ("leaves_axis", f"leaves_{plane}"))})
+        depth, mask, _ = combine_parts(parts)
         camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
         tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
         covered = mask > 0

@@ -9,7 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "measure_chain"]
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
+           "measure_chain"]
 
 
 def asset_id(species_name: str, seed: int) -> str:
@@ -115,37 +116,46 @@ def leaf_alphas(atlas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return opaque[:, :tile], opaque[:, tile:2 * tile]
 
 
-def measure_chain(renderer, levels: list[LevelData], atlas, lod0_alpha: np.ndarray, card_alpha: np.ndarray,
+def leaf_fractions(atlas: np.ndarray) -> tuple[float, float]:
+    """Opaque shares of a leaf atlas's two tiles (single leaf, clump): how much of its card each leaf or
+    cluster card covers, the rule `renderers.alpha_coverage` measures silhouettes by."""
+    from renderers.alpha_coverage import opaque_fraction
+
+    return tuple(opaque_fraction(alpha) for alpha in leaf_alphas(atlas))
+
+
+def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float, card_fraction: float,
                   lod0_cover=None) -> None:
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
-    both drawn through the same camera with leaves alpha-tested by the texture their cards use (LOD0 by the
-    single leaf, coarser levels by the clump), the impostor by its atlas alpha."""
-    from renderers.alpha_coverage import alpha_tested, triangle_coverage
+    both drawn through the same camera in one depth-only pass each, every leaf card shrunk to the opaque share
+    of the tile it uses (LOD0 cards: `lod0_fraction` of the single leaf; coarser levels: `card_fraction` of the
+    clump), the impostor cut by its atlas alpha. Each LOD0 reference (azimuth, size) is rendered once."""
+    from renderers.alpha_coverage import coverage_tree, triangle_coverage
     from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 
     lod0 = levels[0].mesh
-    lod0_cover = lod0_cover or alpha_tested(lod0, lod0_alpha)
+    lod0_cover = lod0_cover or coverage_tree(lod0, lod0_fraction)
     points = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
-    cameras = [[switch_camera(points, azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
-               for level in levels[1:]]
+    cameras = {(azimuth, level.switch_px): switch_camera(points, azimuth, level.switch_px)
+               for level in levels[1:] for azimuth in QUALITY_AZIMUTHS}
     # LOD0 first for every camera, then each level: the renderer uploads each mesh once.
-    references = [[closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in row] for row in cameras]
-    for level, row, refs in zip(levels[1:], cameras, references):
+    references = {key: closed_silhouette(renderer.coverage(lod0_cover, camera)) for key, camera in cameras.items()}
+    for level in levels[1:]:
         if level.name == "IMPOSTOR":
             billboard, opaque = level.mesh.bark, atlas.albedo[..., 3] >= 128
             draw = lambda camera: triangle_coverage(camera, billboard.vertices, billboard.faces,  # noqa: E731
                                                     billboard.uvs, opaque)
         else:
-            cover = alpha_tested(level.mesh, card_alpha)
+            cover = coverage_tree(level.mesh, card_fraction)
             draw = lambda camera: renderer.coverage(cover, camera)  # noqa: E731
-        level.iou = [silhouette_iou(reference, closed_silhouette(draw(camera)))
-                     for camera, reference in zip(row, refs)]
+        keys = [(azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
+        level.iou = [silhouette_iou(references[key], closed_silhouette(draw(cameras[key]))) for key in keys]
 
 
 def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryAsset:
     """Grow, simplify, texture and measure one asset (no files written)."""
     import species
-    from renderers.alpha_coverage import alpha_tested
+    from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import render_impostor
     from species.collision import collision_capsules
     from species.lod import build_lod
@@ -172,9 +182,9 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
         atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
                    for season in SEASONS if season != "bare"}
-        lod0_alpha, card_alpha = leaf_alphas(atlases["summer"])
+        lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("impostor"):
-        lod0_cover = alpha_tested(lod0, lod0_alpha)  # what LOD0 shows once its leaf cards are alpha-tested
+        lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
         atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
@@ -182,6 +192,6 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
                                 np.zeros((billboard.bark.n_vertices, 3), np.float32), empty4, empty3,
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
-        measure_chain(renderer, levels, atlas, lod0_alpha, card_alpha, lod0_cover)
+        measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
                         levels, atlas, capsules, maps, atlases)

@@ -1,5 +1,5 @@
-"""Quality of the LOD chain as the library measures it: alpha-tested coverage (outlines, software raster), the
-sliced impostor, exact GLB size without instancing, validate's IoU report, and the IoU target per preset."""
+"""Quality of the LOD chain as the library measures it: alpha-tested coverage (cards shrunk to their texture's
+opaque share, unculled depth-only GL passes, software raster for the impostor), the sliced impostor, exact GLB size without instancing, validate's IoU report, and the IoU target per preset."""
 from __future__ import annotations
 
 import json
@@ -12,9 +12,13 @@ from farm.library.catalog import IOU_TARGET, quality_shortfalls
 from farm.library.gltf_asset import asset_to_glb, glb_size
 from farm.library.spec import parse_library_spec
 from farm.tree_chain import StageTimer, tree_seed
-from renderers.alpha_coverage import alpha_outline, triangle_coverage
+from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
 from renderers.camera import orthographic_camera
+from renderers.impostor import switch_camera
+from species.mesh import leaf_part
 from species.pbr_textures import leaf_atlas
+from species.skeleton import Skeleton
+from species.tree_mesh import MeshPart, TreeMesh
 
 REPRESENTATIVE = ["maple", "pine", "cherry", "douglas_fir", "sc_young_sapling", "lsystem_monopodial"]
 
@@ -28,24 +32,57 @@ def renderer():
     r.close()
 
 
-def _area(triangles: np.ndarray) -> float:
-    e1, e2 = triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
-    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+def _cards(rng: np.random.Generator, count: int) -> MeshPart:
+    """`count` randomly placed and turned leaf cards (0.1 m wide, 0.2 m long) as `leaf_part` makes them."""
+    transforms = np.tile(np.eye(4), (count, 1, 1))
+    for i in range(count):
+        q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+        transforms[i, :3, :3] = q * np.array([0.1, 0.1, 0.2])
+        transforms[i, :3, 3] = rng.uniform(-1.0, 1.0, 3) + [0.0, 0.0, 2.0]
+    skeleton = Skeleton(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]), np.array([-1, 0]), np.array([0.1, 0.05]),
+                        np.array([0, 0]), leaves=transforms, leaf_node=np.ones(count, np.int32))
+    return leaf_part(skeleton)
+
+
+def _card_areas(cards: MeshPart) -> np.ndarray:
+    corners = np.asarray(cards.vertices, np.float64).reshape(-1, 4, 3)
+    return np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1)
 
 
 @pytest.mark.parametrize("tile", [0, 1])
-def test_alpha_outline_covers_the_opaque_share_of_each_leaf_tile(tile):
+def test_shrunk_cards_cover_the_opaque_share_of_each_leaf_tile_about_the_same_centre(tile):
     alpha = leaf_alphas(leaf_atlas((0.2, 0.4, 0.1), 64))[tile]
-    triangles = alpha_outline(alpha)
-    assert len(triangles) <= 40
-    assert abs(_area(triangles) - alpha.mean()) < 0.03
+    fraction = opaque_fraction(alpha)
+    cards = _cards(np.random.default_rng(tile), 5)
+    shrunk = shrunk_cards(cards, fraction)
+    assert 0.0 < fraction < 1.0
+    assert _card_areas(shrunk) == pytest.approx(fraction * _card_areas(cards), rel=1e-5)
+    np.testing.assert_allclose(shrunk.vertices.reshape(-1, 4, 3).mean(axis=1),
+                               cards.vertices.reshape(-1, 4, 3).mean(axis=1), atol=1e-5)
+    assert np.array_equal(shrunk.faces, cards.faces) and shrunk.n_faces == 2 * 5
 
 
-def test_alpha_outline_of_a_ring_falls_back_to_row_runs_with_the_hole_open():
-    yy, xx = np.mgrid[0:64, 0:64]
-    radius = np.hypot(yy - 31.5, xx - 31.5)
-    ring = (radius < 30) & (radius > 15)
-    assert abs(_area(alpha_outline(ring)) - ring.mean()) < 0.03
+def test_opaque_fraction_rejects_a_tile_without_opaque_texels():
+    with pytest.raises(CoverageError, match="opaque"):
+        opaque_fraction(np.zeros((8, 8), bool))
+
+
+def test_coverage_renderer_without_culling_covers_the_pixels_of_double_sided_cards(renderer):
+    from renderers.maps import DepthRenderer
+
+    cards = _cards(np.random.default_rng(7), 40)
+    tree = TreeMesh(bark=MeshPart.empty(), leaves=cards, name="cards")
+    points = np.asarray(cards.vertices, np.float64)
+    culled = DepthRenderer(64)
+    try:
+        culled.load(tree)
+        for azimuth in (0.0, 100.0, 250.0):
+            camera = switch_camera(points, azimuth, 128)
+            expected = culled.part_depths(camera, split_orders=False).leaves > 0
+            assert expected.any()
+            assert np.array_equal(renderer.coverage(tree, camera), expected)
+    finally:
+        culled.close()
 
 
 def test_triangle_coverage_cuts_a_card_to_its_alpha():
