@@ -115,7 +115,9 @@ def write_catalog(location: Location, spec) -> dict:
             from renderers.blender_assets import write_asset_library
 
             for name, group in by_species.items():
-                assets = [{"id": r["id"][:60], "glb_path": location.path(r["files"]["glb"]), "node": f"{r['id']}_LOD0",
+                # The non-instanced GLB when there is one: Blender imports instanced leaves ~14x slower.
+                assets = [{"id": r["id"][:60], "node": f"{r['id']}_LOD0",
+                           "glb_path": location.path(r["files"].get("glb_flat", r["files"]["glb"])),
                            "preview_png": location.path(r["thumbnail"]), "tags": r["tags"],
                            "catalog_path": f"Trees/{name}", "description": f"{name} ({r['generator']})"}
                           for r in group if "glb" in r["files"]]

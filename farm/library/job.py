@@ -19,7 +19,8 @@ from ..storage import Location, sha256_hex
 from ..tree_chain import BuiltTree, StageTimer, to_json
 from .asset import LibraryAsset, build_asset
 
-__all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "LibraryError", "LIBRARY_RECORD",
+__all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
+           "LibraryError", "LIBRARY_RECORD",
            "blender_available", "BLENDER_PENDING"]
 
 LIBRARY_RECORD = "library.json"
@@ -56,6 +57,18 @@ def _obj_text(part, name: str) -> bytes:
 def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
     """Write every file of one asset under assets/<id>/ (each atomically; asset.json last) and return the
     asset record: metadata plus files {kind: relative path}, sizes {kind: bytes} and sha256 {path: hex}."""
+    return finish_assets([stage_asset_files(asset, location, spec, renderer, timer)], location, spec, timer)[0]
+
+
+def _wants_blender(spec, location: Location) -> bool:
+    return bool({"fbx", "blend"} & set(spec.formats)) and "glb" in spec.formats and location.is_local \
+        and blender_available()
+
+
+def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
+    """Write every file of one asset but its FBX files and asset.json; return the pending asset: its record
+    (without FBX entries), the asset and the folder. `finish_assets` exports the FBX files of many pending
+    assets in one Blender process and writes each asset.json."""
     from .gltf_asset import asset_to_glb, glb_size
     from .png_cache import encode_png
     from .previews import thumbnail, turntable
@@ -83,6 +96,10 @@ def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
         with timer.stage("glb"):
             put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset))
             sizes["glb_without_instancing"] = glb_size(asset, instanced=False)
+            if _wants_blender(spec, location):
+                # Blender's input: leaves baked, not instanced (it imports instanced leaves ~14x slower, and FBX
+                # has no instancing an engine reads anyway).
+                put("glb_flat", f"blender/{asset.asset_id}_flat.glb", asset_to_glb(asset, instanced=False))
     if "usd" in spec.formats:
         with timer.stage("usd"):
             put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
@@ -102,34 +119,46 @@ def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
     with timer.stage("write"):
         for relative, data in files.items():
             location.write_atomic(relative, data)
-    fbx = _write_fbx(asset, location, spec, kinds, timer)
     record = asset.metadata()
     record.update({"files": {k: v for k, v in kinds.items() if not k.startswith(("texture_", "obj_"))},
-                   "all_files": sorted(files) + sorted(fbx),
-                   "sizes": {**{k: len(files[v]) for k, v in kinds.items() if v in files}, **sizes,
-                             **{k: v for k, v in fbx.items()}},
+                   "all_files": sorted(files),
+                   "sizes": {**{k: len(files[v]) for k, v in kinds.items() if v in files}, **sizes},
                    "sha256": {path: sha256_hex(data) for path, data in sorted(files.items())},
-                   "tags": _tags(asset), "blender": "written" if fbx else (
-                       BLENDER_PENDING if ("fbx" in spec.formats and not blender_available()) else "not asked")})
-    location.write_atomic(f"{folder}/asset.json", to_json(record).encode())
-    return record
+                   "tags": _tags(asset), "blender": "not asked"})
+    if "fbx" in spec.formats:
+        record["blender"] = "pending" if "glb_flat" in kinds else BLENDER_PENDING
+    return {"record": record, "level_names": [lv.name for lv in asset.levels], "folder": folder}
 
 
-def _write_fbx(asset, location: Location, spec, kinds: dict, timer) -> dict:
-    """One FBX per LOD through the Blender worker when asked and available; {} otherwise (pending)."""
-    if "fbx" not in spec.formats or "glb" not in kinds or not blender_available() or not location.is_local:
-        return {}
-    from renderers.blender_assets import export_fbx_batch
+def finish_assets(pending: list[dict], location: Location, spec, timer: StageTimer) -> list[dict]:
+    """Export the FBX files (one per LOD) of every pending asset in ONE Blender process, from each asset's
+    non-instanced GLB, then write each asset.json (atomically, last); returns the finished records."""
+    jobs, owners = [], []
+    for index, item in enumerate(pending):
+        record = item["record"]
+        if "fbx" not in spec.formats or "glb_flat" not in record["files"]:
+            continue
+        ident = record["id"]
+        for name in item["level_names"]:
+            jobs.append({"glb": location.path(record["files"]["glb_flat"]),
+                         "fbx": location.path(f"{item['folder']}/fbx/{ident}_{name}.fbx"),
+                         "node": f"{ident}_{name}", "name": f"{ident}_{name}"})
+            owners.append((index, name))
+    if jobs:
+        from renderers.blender_assets import export_fbx_batch
 
-    with timer.stage("blender"):
-        glb = location.path(kinds["glb"])
-        jobs = [{"glb": glb, "fbx": location.path(f"{ASSETS}/{asset.asset_id}/fbx/{asset.asset_id}_{lv.name}.fbx"),
-                 "node": f"{asset.asset_id}_{lv.name}", "name": f"{asset.asset_id}_{lv.name}"}
-                for lv in asset.levels]
-        rows = export_fbx_batch(jobs)
-    for lv, job in zip(asset.levels, jobs):
-        kinds[f"fbx_{lv.name}"] = os.path.relpath(job["fbx"], location.root)
-    return {f"fbx_{lv.name}": int(row["bytes"]) for lv, row in zip(asset.levels, rows)}
+        with timer.stage("blender"):
+            rows = export_fbx_batch(jobs)
+        for (index, name), job, row in zip(owners, jobs, rows):
+            record = pending[index]["record"]
+            relative = os.path.relpath(job["fbx"], location.root)
+            record["files"][f"fbx_{name}"] = relative
+            record["sizes"][f"fbx_{name}"] = int(row["bytes"])
+            record["all_files"] = sorted([*record["all_files"], relative])
+            record["blender"] = "written"
+    for item in pending:
+        location.write_atomic(f"{item['folder']}/asset.json", to_json(item["record"]).encode())
+    return [item["record"] for item in pending]
 
 
 def _tags(asset: LibraryAsset) -> list[str]:
@@ -140,11 +169,21 @@ def _tags(asset: LibraryAsset) -> list[str]:
 
 class LibraryChain:
     """A farm tree builder: one asset per call, files written as a side effect, the tree returned for the
-    pipeline's trees table. One CoverageRenderer per worker process."""
+    pipeline's trees table. One CoverageRenderer per worker process. The Blender outputs of a shard's assets
+    are made together, in one Blender process, when the shard's last tree has been built."""
 
     def __init__(self, spec, out: str) -> None:
+        from ..tree_chain import tree_seed
+        from .spec import species_of_trees
+
         self.spec, self.location = spec, Location.resolve(out)
         self._renderer = None
+        self._pending: list[dict] = []
+        names = species_of_trees(spec)
+        size = spec.shard_size
+        # (species, seed) of each shard's last tree: the pipeline builds a shard's trees in index order.
+        self._shard_ends = {(names[i], tree_seed(spec.seed, i)) for i in range(len(names))
+                            if i % size == size - 1 or i == len(names) - 1}
 
     def renderer(self):
         if self._renderer is None:
@@ -154,8 +193,13 @@ class LibraryChain:
         return self._renderer
 
     def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree:
-        asset = build_asset(species_name, seed, self.spec, self.renderer(), timer)
-        write_asset_files(asset, self.location, self.spec, self.renderer(), timer)
+        try:
+            asset = build_asset(species_name, seed, self.spec, self.renderer(), timer)
+            self._pending.append(stage_asset_files(asset, self.location, self.spec, self.renderer(), timer))
+        finally:  # a failed last tree still finishes the shard's other assets
+            if (species_name, seed) in self._shard_ends:
+                pending, self._pending = self._pending, []
+                finish_assets(pending, self.location, self.spec, timer)
         return BuiltTree(params=asset.params, skeleton=asset.skeleton, mesh=asset.lod0)
 
 

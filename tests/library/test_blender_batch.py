@@ -1,0 +1,60 @@
+"""The library job's Blender outputs: one Blender batch per shard, fed the non-instanced GLB (the worker is
+replaced by a recorder here; tests/library/test_blender_outputs.py drives the real one)."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from farm.library import job
+from farm.library.spec import parse_library_spec
+from farm.pipeline import plan_shards, run_shard
+from farm.storage import Location
+from species.gltf import read_glb_chunks
+
+SPEC = {"species": {"sc_young_sapling": 3}, "formats": ["glb", "fbx"], "texture_size": 64, "impostor_tile": 32,
+        "shard_size": 2}
+
+
+@pytest.fixture(scope="module")
+def shard_run(tmp_path_factory):
+    batches = []
+
+    def record_batch(jobs, timeout=0.0):
+        batches.append(list(jobs))
+        return [{"bytes": 100 + i} for i in range(len(jobs))]
+
+    patch = pytest.MonkeyPatch()
+    patch.setattr(job, "blender_available", lambda: True)
+    patch.setattr("renderers.blender_assets.export_fbx_batch", record_batch)
+    try:
+        spec = parse_library_spec(SPEC)
+        out = tmp_path_factory.mktemp("library")
+        chain = job.LibraryChain(spec, str(out))
+        records = [run_shard(spec, plan, Location.resolve(str(out)), chain) for plan in plan_shards(spec)]
+    finally:
+        patch.undo()
+    return out, batches, records
+
+
+def test_each_shard_exports_its_assets_fbx_in_one_blender_batch(shard_run):
+    out, batches, records = shard_run
+    assert [len(batch) for batch in batches] == [2 * 5, 1 * 5]  # assets x (4 LODs + impostor), per shard
+    assert all(not record["failures"] for record in records)
+
+
+def test_blender_batches_read_the_glb_without_leaf_instancing(shard_run):
+    _, batches, _ = shard_run
+    for item in (item for batch in batches for item in batch):
+        document, _ = read_glb_chunks(open(item["glb"], "rb").read())
+        assert "EXT_mesh_gpu_instancing" not in document.get("extensionsUsed", [])
+
+
+def test_every_asset_record_lists_its_fbx_files_with_their_sizes(shard_run):
+    out, _, _ = shard_run
+    records = [json.loads(path.read_text()) for path in sorted(out.glob("assets/*/asset.json"))]
+    assert len(records) == 3
+    for record in records:
+        fbx = {k: v for k, v in record["sizes"].items() if k.startswith("fbx_")}
+        assert sorted(fbx) == sorted(f"fbx_{name}" for name in ("LOD0", "LOD1", "LOD2", "LOD3", "IMPOSTOR"))
+        assert record["blender"] == "written" and all(v >= 100 for v in fbx.values())
