@@ -84,12 +84,17 @@ def _branch_parent(skeleton: Skeleton) -> np.ndarray:
     return np.where(junction >= 0, skeleton.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
 
 
-def _dropped_branches(skeleton: Skeleton, share: float) -> np.ndarray:
-    """(B,) bool: branches shorter than `share` of the longest non-trunk branch, and everything on them."""
+def _dropped_branches(skeleton: Skeleton, share: float, max_order: int | None = None,
+                      clones: bool = False) -> np.ndarray:
+    """(B,) bool: branches shorter than `share` of the longest non-trunk branch (with `clones`, the trunk's
+    split clones too: every branch but branch 0), branches above `max_order`, and everything on them."""
     lengths = _branch_lengths(skeleton)
     order = skeleton.order[skeleton.branch_starts]
-    longest = lengths[order > 0].max() if (order > 0).any() else 0.0
-    drop = (order > 0) & (lengths < share * longest)
+    candidate = (order > 0) | (clones & (np.arange(len(order)) > 0))
+    longest = lengths[candidate].max() if candidate.any() else 0.0
+    drop = candidate & (lengths < share * longest)
+    if max_order is not None:
+        drop |= order > max_order
     parent = _branch_parent(skeleton)
     while True:
         inherited = drop | ((parent >= 0) & drop[np.maximum(parent, 0)])
@@ -98,10 +103,12 @@ def _dropped_branches(skeleton: Skeleton, share: float) -> np.ndarray:
         drop = inherited
 
 
-def _keep_mask(skeleton: Skeleton, share: float, node_step: int) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) bool nodes kept and (B,) bool branches dropped, for a pruning share and node step."""
+def _keep_mask(skeleton: Skeleton, share: float, node_step: int, max_order: int | None = None,
+               clones: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) bool nodes kept and (B,) bool branches dropped, for a pruning share and node step (and the
+    fallbacks of `_dropped_branches`)."""
     bid = skeleton.branch_id
-    drop = _dropped_branches(skeleton, share)
+    drop = _dropped_branches(skeleton, share, max_order, clones)
     alive = ~drop[bid]
     starts = skeleton.branch_starts
     along = skeleton.depth - skeleton.depth[starts][bid]
@@ -219,6 +226,22 @@ def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
         size *= 1.05
 
 
+def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_step: int, variants):
+    """The first (simplified skeleton, original_node, leaf_anchor) whose bark estimate fits `bark_target`,
+    trying node steps from `first_step` doubling up to `max_step`, each with the prune ladder under each
+    (max_order, clones) variant; None when nothing fits."""
+    step = first_step
+    while True:
+        for max_order, clones in variants:
+            for share in _PRUNE_LADDER:
+                keep, drop = _keep_mask(skeleton, share, step, max_order, clones)
+                if _bark_triangle_estimate(skeleton, keep, drop, sides) <= bark_target:
+                    return _skeleton_from_mask(skeleton, keep)
+        if step >= max_step:
+            return None
+        step = min(2 * step, max_step)
+
+
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> LodLevel:
     """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles).
 
@@ -239,15 +262,15 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> 
     bark_target = max(int(target * bark_share), 0)
     if skeleton.n_leaves:
         bark_target = min(bark_target, target - min_leaf_tris)
-    chosen = None
-    step = LOD_NODE_STEPS[level - 1]
-    while chosen is None and step <= _MAX_NODE_STEP:
-        for share in _PRUNE_LADDER:
-            keep, drop = _keep_mask(skeleton, share, step)
-            if _bark_triangle_estimate(skeleton, keep, drop, sides) <= bark_target:
-                chosen = _skeleton_from_mask(skeleton, keep)
-                break
-        step *= 2
+    chosen = _fit_bark(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1], _MAX_NODE_STEP, ((None, False),))
+    if chosen is None:
+        # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
+        # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones
+        # pruned like branches; the leaves go into the few cluster cards left.
+        sides = (3,) * len(sides)
+        bark_target = target - min_leaf_tris
+        chosen = _fit_bark(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1],
+                           max(_MAX_NODE_STEP, int(skeleton.depth.max()) + 1), ((1, False), (1, True)))
     if chosen is None:
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
                              f"room for the trunk alone; raise the LOD{level} budget")

@@ -26,6 +26,23 @@ def test_lod_budgets_hold_on_every_weber_penn_preset(name):
             assert lod.skeleton.n_leaves >= 1
 
 
+@pytest.mark.parametrize("name", [p.name for p in species.list_presets("weber_penn")])
+def test_every_weber_penn_preset_goes_through_the_lod_chain_with_several_seeds(name):
+    for seed in (0, 9, 23):
+        skeleton, lod0 = _tree(name, seed)
+        for level, budget in ((1, 0.40), (2, 0.12), (3, 0.04)):
+            assert build_lod(skeleton, lod0, level, budget).n_triangles <= budget * lod0.n_faces
+
+
+@pytest.mark.parametrize("budget", [0.01, 0.002])
+def test_a_tiny_lod3_budget_is_met_with_three_sided_trunk_and_few_cards(budget):
+    skeleton, lod0 = _tree("maple", 0)
+    lod = build_lod(skeleton, lod0, 3, budget)
+    assert 0 < lod.n_triangles <= budget * lod0.n_faces
+    assert lod.mesh.bark.n_faces > 0 and 1 <= lod.n_clusters
+    assert set(np.unique(lod.skeleton.order)) <= {0, 1}
+
+
 def test_wind_attributes_are_in_range_and_phase_is_constant_along_each_branch():
     skeleton, mesh = _tree("maple")
     branch = mesh.bark.attributes["branch"]
