@@ -3,7 +3,7 @@ the pipeline's overhead against the same shard function called in a plain loop i
 
 Job: 2 presets of each generator x 4 trees (24 trees), rig tsn4, 256 px, default outputs, shards of 2.
 Each figure is the best of --repeats runs (other work on the machine only ever slows a run down).
-Usage: python benchmarks/bench_farm.py [--trees-per-species N] [--size PX] [--repeats N] [--keep DIR]
+Usage: python benchmarks/bench_farm.py [--trees-per-species N] [--size PX] [--repeats N] [--keep DIR] [--default-job]
 """
 from __future__ import annotations
 
@@ -74,11 +74,18 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--keep", help="keep the datasets in this folder")
+    parser.add_argument("--default-job", action="store_true",
+                        help="time the built-in default job (every preset, what `make run` makes) instead")
     args = parser.parse_args()
 
     import ray
 
-    spec = bench_spec(args.trees_per_species, args.size)
+    if args.default_job:
+        from farm.jobs import default_spec
+
+        spec = default_spec()
+    else:
+        spec = bench_spec(args.trees_per_species, args.size)
     root = Path(args.keep or tempfile.mkdtemp(prefix="bench_farm_"))
     os.nice(RAY_WORKER_NICENESS - os.nice(0))
     print(f"job: {spec.n_trees} trees of {', '.join(spec.species)}; {spec.render.rig} at {spec.render.size} px, "
