@@ -19,12 +19,13 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from PIL import Image, ImageDraw  # noqa: E402
+from PIL import Image  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
+from skeleton_drawing import front_view  # noqa: E402
 from species.colonization import grow  # noqa: E402
 
 # About 5,000 internodes from 20,000 markers: an ellipsoid crown of ~31,000 IL^3 at 0.65 markers per IL^3.
@@ -43,20 +44,6 @@ REFERENCES = [
     ("Palubicki et al. 2009 (C++), space colonization", "~3,600 internodes/s (about 3x slower)"),
     ("target here, one core", ">= 10,000 internodes/s"),
 ]
-
-
-def _front_view(skeleton: species.Skeleton, title: str, size: int = 420) -> Image.Image:
-    image = Image.new("RGB", (size, size), "white")
-    draw = ImageDraw.Draw(image)
-    xz = skeleton.positions[:, [0, 2]]
-    low, span = xz.min(0), max(float(np.ptp(xz, axis=0).max()), 1e-6)
-    pixels = (xz - low) / span * (size - 20) + 10
-    pixels[:, 1] = size - pixels[:, 1]
-    widths = np.maximum(1, (skeleton.radius / span * (size - 20) * 2).astype(int))
-    for child, parent in zip(range(1, len(skeleton)), skeleton.parent[1:].tolist()):
-        draw.line([tuple(pixels[parent]), tuple(pixels[child])], fill=(90, 60, 30), width=int(widths[child]))
-    draw.text((4, 4), title, fill="black")
-    return image
 
 
 def _time_case(params: dict, runs: int) -> tuple[list[float], list[float], list[int], species.Skeleton]:
@@ -86,7 +73,7 @@ def main() -> int:
         rows.append((name, int(np.median(internodes)), float(np.median(wall)), float(np.median(cpu)),
                      float(np.median(np.array(internodes) / np.array(wall))),
                      float(np.median(np.array(internodes) / np.array(cpu)))))
-        tiles.append(_front_view(skeleton, f"{name}: {len(skeleton) - 1} internodes"))
+        tiles.append(front_view(skeleton, f"{name}: {len(skeleton) - 1} internodes", size=420, leaves=False))
     preset_seconds = []
     for preset in tqdm(species.list_presets("colonization"), desc="presets", unit="preset"):
         params = preset.sample(np.random.default_rng(0))

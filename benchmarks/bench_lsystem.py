@@ -10,12 +10,13 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image, ImageDraw
+from PIL import Image
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
+from skeleton_drawing import front_view  # noqa: E402
 from species.lsystem import grow  # noqa: E402
 from species.lsystem_presets import PRESETS  # noqa: E402
 
@@ -23,24 +24,6 @@ from species.lsystem_presets import PRESETS  # noqa: E402
 # (i7-7700HQ); the task asks for under ~20k nodes per preset tree so trees mesh and render fast.
 REFERENCE_GROW_S = 1.1
 NODE_LIMIT = 20_000
-
-
-def _sketch(skeleton: species.Skeleton, title: str, size: int = 320) -> Image.Image:
-    """Front view (x, z) of the branches, widths to scale, leaf centres as green dots."""
-    image = Image.new("RGB", (size, size), "white")
-    draw = ImageDraw.Draw(image)
-    xz = skeleton.positions[:, [0, 2]]
-    low, span = xz.min(0), max(float(np.ptp(xz, axis=0).max()), 1e-6)
-    pixels = (xz - low) / span * (size - 20) + 10
-    pixels[:, 1] = size - pixels[:, 1]
-    widths = np.maximum(1, (skeleton.radius / span * (size - 20) * 2).astype(int))
-    for child, parent in zip(range(1, len(skeleton)), skeleton.parent[1:].tolist()):
-        draw.line([tuple(pixels[parent]), tuple(pixels[child])], fill=(90, 60, 30), width=int(widths[child]))
-    leaves = (skeleton.leaf_corners().mean(1)[:, [0, 2]] - low) / span * (size - 20) + 10
-    leaves[:, 1] = size - leaves[:, 1]
-    draw.point([tuple(p) for p in leaves], fill=(0, 140, 0))
-    draw.text((4, 4), title, fill="black")
-    return image
 
 
 def main() -> int:
@@ -63,7 +46,7 @@ def main() -> int:
             nodes.append(len(skeleton))
             leaves.append(skeleton.n_leaves)
             if seed < 2:
-                tiles.append(_sketch(skeleton, f"{preset.name} #{seed}"))
+                tiles.append(front_view(skeleton, f"{preset.name} #{seed}"))
         rows.append((preset.name, min(nodes), max(nodes), int(np.median(leaves)), np.median(grow_s) * 1e3,
                      max(grow_s) * 1e3, np.median(mesh_s) * 1e3))
 
