@@ -30,6 +30,8 @@ CARDS_PER_CLUSTER = 1
 _PRUNE_LADDER = (0.0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.85, 1.01)
 # The budget is filled to this fraction at most: merging of close rings can only lower counts, never raise.
 _BUDGET_MARGIN = 0.97
+# Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
+_SPREAD_SPAN = 2.0 * np.sqrt(3.0)
 
 class LodBudgetError(TreefarmError):
     """A level of detail cannot meet its triangle budget (the budget is too small for this tree)."""
@@ -187,13 +189,44 @@ def cluster_leaves(leaves: np.ndarray, anchor: np.ndarray, n_clusters: int) -> t
     total = np.bincount(labels, weights=areas, minlength=n)
     d = 0.5 * total / (cell * cell)
     covered = np.where(count > 1, total * -np.expm1(-d) / np.maximum(d, 1e-12), total)
-    scale = np.sqrt(covered / np.maximum(areas[representative], 1e-12))
     cards = leaves[representative].copy()
-    cards[:, :3, :3] *= scale[:, None, None]
-    # Centre the scaled card on the cluster: the card's centre is its origin + half its length axis.
-    cards[:, :3, 3] = mid - 0.5 * cards[:, :3, 2]
+    merged = count[labels] > 1
+    if merged.any():
+        fitted = _fitted_cards(corners[merged].reshape(-1, 3), np.repeat(labels[merged], 4), n, covered)
+        many = count > 1
+        cards[many] = fitted[many]
     card_node = np.asarray(anchor)[representative]
     return cards.astype(np.float32), card_node.astype(np.int32)
+
+
+def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) float64 card transforms fitted to each cluster's points (P, 3) metres (labels (P,) int in
+    [0, n)): centred on the points' mean, length along their principal axis, width along the second, normal
+    along the least spread; length and width span the points as a uniform spread would (2 sqrt(3) std)."""
+    count = np.maximum(np.bincount(labels, minlength=n), 1).astype(np.float64)
+    mean = np.stack([np.bincount(labels, weights=points[:, k], minlength=n) for k in range(3)], axis=1)
+    mean /= count[:, None]
+    rel = points - mean[labels]
+    outer = (rel[:, :, None] * rel[:, None, :]).reshape(-1, 9)
+    cov = np.stack([np.bincount(labels, weights=outer[:, k], minlength=n) for k in range(9)], axis=1)
+    cov = cov.reshape(n, 3, 3) / count[:, None, None]
+    variance, axes = np.linalg.eigh(cov)  # ascending: axes[:, :, 2] the principal axis
+    span = _SPREAD_SPAN * np.sqrt(np.maximum(variance, 0.0))
+    length, width = np.maximum(span[:, 2], 1e-4), np.maximum(span[:, 1], 1e-4)
+    # The card's area is the area the leaves cover (`area`), in the spread's proportions, never beyond it.
+    shrink = np.minimum(np.sqrt(area / (length * width)), 1.0)
+    length, width = length * shrink, width * shrink
+    along, across, normal = axes[:, :, 2], axes[:, :, 1], axes[:, :, 0]
+    # Right-handed (width, normal, length) as the unit card's (x, y, z).
+    flip = np.einsum("ci,ci->c", np.cross(across, normal), along) < 0
+    normal = np.where(flip[:, None], -normal, normal)
+    cards = np.zeros((n, 4, 4))
+    cards[:, :3, 0] = across * width[:, None]
+    cards[:, :3, 1] = normal * width[:, None]
+    cards[:, :3, 2] = along * length[:, None]
+    cards[:, :3, 3] = mean - 0.5 * cards[:, :3, 2]
+    cards[:, 3, 3] = 1.0
+    return cards
 
 
 def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
@@ -242,6 +275,17 @@ def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_
         step = min(2 * step, max_step)
 
 
+def _widened(skeleton: Skeleton, sides_by_order) -> Skeleton:
+    """The skeleton with each node's radius raised so an S-sided tube shows, on average over view directions,
+    the width of the round branch it stands for: a convex outline's mean width is its perimeter / pi, so the
+    S-gon's circumradius is r pi / (S sin(pi / S)) (x 1.21 for 3 sides, x 1.11 for 4)."""
+    table = np.asarray(sides_by_order, np.float64)
+    sides = table[np.minimum(skeleton.order, len(table) - 1)]
+    widen = np.pi / (sides * np.sin(np.pi / sides))
+    return Skeleton(skeleton.positions, skeleton.parent, (skeleton.radius * widen).astype(np.float32),
+                    skeleton.order)
+
+
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> LodLevel:
     """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles).
 
@@ -275,6 +319,7 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> 
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
                              f"room for the trunk alone; raise the LOD{level} budget")
     simplified, original, leaf_anchor = chosen
+    simplified = _widened(simplified, sides)
     bark = bark_part(simplified, sides, 3, thick_more=False)
     leaf_budget = target - bark.n_faces
     n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
