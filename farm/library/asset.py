@@ -9,8 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
-           "measure_chain"]
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "framing_points", "leaf_instances", "leaf_alphas",
+           "leaf_fractions", "measure_chain"]
 
 
 def asset_id(species_name: str, seed: int) -> str:
@@ -124,6 +124,20 @@ def leaf_fractions(atlas: np.ndarray) -> tuple[float, float]:
     return tuple(opaque_fraction(alpha) for alpha in leaf_alphas(atlas))
 
 
+def framing_points(tree) -> np.ndarray:
+    """(K, 3) float32 metres: the vertices of the convex hull of a TreeMesh's vertices, or all of them when they
+    span no volume. Cameras fitted to points (box centre, the distance at which all fit, near/far) depend only
+    on extremes of linear or linear-fractional functions of the points, which convex hull vertices attain, so
+    they come out bit-identical from a few hundred points instead of every vertex (32 cameras per asset)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
+    try:
+        return points[np.sort(ConvexHull(points.astype(np.float64)).vertices)]
+    except QhullError:  # flat or too few points: no hull, and no cheaper set of extremes to take
+        return points
+
+
 def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float, card_fraction: float,
                   lod0_cover=None) -> None:
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
@@ -135,7 +149,7 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
 
     lod0 = levels[0].mesh
     lod0_cover = lod0_cover or coverage_tree(lod0, lod0_fraction)
-    points = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
+    points = framing_points(lod0)
     cameras = {(azimuth, level.switch_px): switch_camera(points, azimuth, level.switch_px)
                for level in levels[1:] for azimuth in QUALITY_AZIMUTHS}
     # LOD0 first for every camera, then each level: the renderer uploads each mesh once.

@@ -24,10 +24,12 @@ _LIGHT = np.array([-0.4, -0.6, -0.7]) / np.linalg.norm([-0.4, -0.6, -0.7])
 _AMBIENT = 0.35
 
 
-def shaded_view(renderer, tree, azimuth_deg: float, size: int) -> np.ndarray:
+def shaded_view(renderer, tree, azimuth_deg: float, size: int, points: np.ndarray | None = None) -> np.ndarray:
     """(size, size, 3) uint8 sRGB: the tree from `azimuth_deg` (10 deg elevation), bark and leaves in their base
-    colours under one directional light, on white."""
-    points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
+    colours under one directional light, on white. `points` (K, 3) metres frame the view (default: every
+    vertex; `framing_points(tree)` gives the same camera)."""
+    if points is None:
+        points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
     camera = perspective_camera(points, azimuth_deg, 10.0, size)
     renderer.load(tree)
     depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
@@ -48,8 +50,11 @@ def thumbnail(renderer, tree) -> np.ndarray:
 
 def turntable(renderer, tree) -> np.ndarray:
     """(128, 8 x 128, 3) uint8: eight views 45 deg apart, side by side."""
-    return np.concatenate([shaded_view(renderer, tree, 45.0 * k, TURNTABLE_PX) for k in range(TURNTABLE_FRAMES)],
-                          axis=1)
+    from .asset import framing_points
+
+    points = framing_points(tree)
+    return np.concatenate([shaded_view(renderer, tree, 45.0 * k, TURNTABLE_PX, points)
+                           for k in range(TURNTABLE_FRAMES)], axis=1)
 
 
 def gallery_html(rows: list[dict]) -> str:

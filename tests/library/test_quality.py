@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from farm.library.asset import build_asset, leaf_alphas
+from farm.library.asset import build_asset, framing_points, leaf_alphas
 from farm.library.catalog import IOU_TARGET, quality_shortfalls
 from farm.library.gltf_asset import asset_to_glb, glb_size
 from farm.library.spec import parse_library_spec
@@ -102,6 +102,17 @@ def test_triangle_coverage_cuts_a_card_to_its_alpha():
 def sapling(renderer):
     spec = parse_library_spec({"species": {"sc_young_sapling": 1}, "texture_size": 64, "impostor_tile": 32})
     return build_asset("sc_young_sapling", tree_seed(3, 0), spec, renderer, StageTimer())
+
+
+def test_cameras_framed_on_hull_points_equal_those_framed_on_every_vertex(sapling):
+    lod0 = sapling.lod0
+    every = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices])
+    hull = framing_points(lod0)
+    assert len(hull) < len(every)
+    for azimuth, px in ((11.25, 512), (200.0, 64)):
+        a, b = switch_camera(every, azimuth, px), switch_camera(hull, azimuth, px)
+        assert np.array_equal(a.K, b.K) and np.array_equal(a.world_to_camera, b.world_to_camera)
+        assert (a.near, a.far) == (b.near, b.far)
 
 
 def test_glb_size_without_instancing_is_the_length_of_that_file(sapling):
