@@ -8,6 +8,10 @@ centre to the opaque share of its alpha tile, in unculled depth-only passes; the
 Measured on 2026-11-24, one core (taskset -c 0, OMP_NUM_THREADS=1), impostor + quality seconds before -> after
 that rule: maple 1.25+3.21 -> 0.13+0.49, pine 18.9+28.7 -> 0.13+1.26, cherry 11.0+16.7 -> 0.24+1.53,
 balsam_fir 6.42+9.26 -> 0.09+0.56, douglas_fir 5.72+6.36 -> 0.09+0.51.
+Min IoU LOD1/LOD2/LOD3/impostor, before -> after PCA-fitted cluster cards, widened tubes and no impostor dilation
+(2026-11-24, these five presets): maple .903/.863/.805/.879 -> .912/.880/.831/.891, pine .882/.802/.703/.807 ->
+.910/.895/.872/.813, cherry .928/.930/.893/.788 -> .933/.939/.895/.768, balsam_fir .745/.665/.581/.355 ->
+.751/.693/.576/.395, douglas_fir .731/.574/.512/.467 -> .738/.625/.568/.556.
 """
 from __future__ import annotations
 
