@@ -44,21 +44,26 @@ class _BinaryBuffer:
         self.views: list[dict] = []
         self.accessors: list[dict] = []
 
-    def view(self, data: bytes, target: int | None = None) -> int:
-        entry = {"buffer": 0, "byteOffset": self.size, "byteLength": len(data)}
+    def _record_view(self, length: int, target: int | None) -> int:
+        entry = {"buffer": 0, "byteOffset": self.size, "byteLength": length}
         if target is not None:
             entry["target"] = target
-        padding = (-len(data)) % 4
-        self.blobs.append(data + b"\0" * padding)
-        self.size += len(data) + padding
+        self.size += length + (-length) % 4
         self.views.append(entry)
         return len(self.views) - 1
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        self.blobs.append(data + b"\0" * ((-len(data)) % 4))
+        return self._record_view(len(data), target)
+
+    def _payload(self, array: np.ndarray) -> bytes:
+        """What an accessor's view holds: the array's little-endian bytes (a size-only buffer counts them)."""
+        return np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<")).tobytes()
 
     def accessor(self, array: np.ndarray, kind: str, target: int, with_bounds: bool = False) -> int:
         component = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _UNSIGNED_SHORT,
                      np.dtype(np.uint32): _UNSIGNED_INT}[array.dtype]
-        entry = {"bufferView": self.view(np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<")).tobytes(),
-                                         target),
+        entry = {"bufferView": self.view(self._payload(array), target),
                  "componentType": component, "count": int(len(array)), "type": kind}
         if with_bounds:
             entry["min"] = [float(x) for x in array.min(axis=0)]

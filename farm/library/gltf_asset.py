@@ -12,7 +12,7 @@ import struct
 
 import numpy as np
 
-from species.gltf import _FLOAT, _UNSIGNED_INT, _UNSIGNED_SHORT, _BinaryBuffer, z_up_to_y_up
+from species.gltf import _BinaryBuffer, z_up_to_y_up
 from species.mesh import _CARD_FACES, _CARD_UVS
 from species.pbr_textures import SEASONS
 from species.skeleton import LEAF_CARD_CORNERS
@@ -44,24 +44,10 @@ class _SizeOnlyBuffer(_BinaryBuffer):
     """The views and accessors a _BinaryBuffer would hold, counting bytes without copying any."""
 
     def view(self, data: bytes | int, target: int | None = None) -> int:
-        length = data if isinstance(data, int) else len(data)
-        entry = {"buffer": 0, "byteOffset": self.size, "byteLength": length}
-        if target is not None:
-            entry["target"] = target
-        self.size += length + (-length) % 4
-        self.views.append(entry)
-        return len(self.views) - 1
+        return self._record_view(data if isinstance(data, int) else len(data), target)
 
-    def accessor(self, array: np.ndarray, kind: str, target: int, with_bounds: bool = False) -> int:
-        component = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _UNSIGNED_SHORT,
-                     np.dtype(np.uint32): _UNSIGNED_INT}[array.dtype]
-        entry = {"bufferView": self.view(int(array.nbytes), target), "componentType": component,
-                 "count": int(len(array)), "type": kind}
-        if with_bounds:
-            entry["min"] = [float(x) for x in array.min(axis=0)]
-            entry["max"] = [float(x) for x in array.max(axis=0)]
-        self.accessors.append(entry)
-        return len(self.accessors) - 1
+    def _payload(self, array: np.ndarray) -> int:
+        return int(array.nbytes)
 
     def tobytes(self) -> bytes:
         raise TypeError("a size-only buffer holds no bytes")
