@@ -44,8 +44,20 @@ class RenderSpec:
     outputs: tuple[str, ...] = ()
 
 
+class ShardedCounts:
+    """Tree and shard counts of any job the pipeline plans (a `species_counts` mapping and a `shard_size`)."""
+
+    @property
+    def n_trees(self) -> int:
+        return sum(self.species_counts.values())
+
+    @property
+    def n_shards(self) -> int:
+        return -(-self.n_trees // self.shard_size)
+
+
 @dataclass(frozen=True)
-class JobSpec:
+class JobSpec(ShardedCounts):
     """One generation job.
 
     name          : job name; tree ids are f"{name}-{index:08d}".
@@ -86,14 +98,6 @@ class JobSpec:
         for i in np.argsort(-(quota - counts), kind="stable")[: self.trees - counts.sum()]:
             counts[i] += 1
         return {n: int(c) for n, c in zip(names, counts)}
-
-    @property
-    def n_trees(self) -> int:
-        return sum(self.species_counts.values())
-
-    @property
-    def n_shards(self) -> int:
-        return -(-self.n_trees // self.shard_size)
 
     def to_dict(self) -> dict:
         out = asdict(self)

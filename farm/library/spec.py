@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from farm.jobs import (JobSpecError, RenderSpec, _check_int, _check_keys, _known_species, load_spec,
+from farm.jobs import (JobSpecError, RenderSpec, ShardedCounts, _check_int, _check_keys, _known_species, load_spec,
                        species_of_trees)
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
@@ -30,7 +30,7 @@ class LibrarySpecError(JobSpecError):
 
 
 @dataclass(frozen=True)
-class LibrarySpec:
+class LibrarySpec(ShardedCounts):
     """One asset-library job.
 
     name          : job name (the dataset tables' tree ids are f"{name}-{index:08d}").
@@ -64,14 +64,6 @@ class LibrarySpec:
     @property
     def species_counts(self) -> dict[str, int]:
         return {name: int(count) for name, count in self.species.items()}
-
-    @property
-    def n_trees(self) -> int:
-        return sum(self.species_counts.values())
-
-    @property
-    def n_shards(self) -> int:
-        return -(-self.n_trees // self.shard_size)
 
     def to_dict(self) -> dict:
         out = asdict(self)
