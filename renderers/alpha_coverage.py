@@ -44,9 +44,7 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
 
     vertices : (V, 3) float, metres, world; faces : (F, 3) int; uvs : (V, 2) float, OBJ convention (v = 0 at the
     bottom row of `alpha`); alpha : (h, w) bool, True where the texture is opaque (nearest texel, no filtering).
-    Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated affinely in screen space: the
-    triangles these views meet (impostor planes seen from afar) are small against their distance, so
-    perspective correction would move a texel by far less than one.
+    Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated perspective-correctly, as GL does.
     """
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
@@ -58,6 +56,8 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     if np.any(depth[faces] <= 0):
         raise CoverageError(f"camera {camera.name!r} sees triangles behind it; coverage needs the mesh in front")
     tri = pixels[faces]  # (F, 3, 2)
+    # Perspective-correct weights 1 / depth; an orthographic view maps planes affinely.
+    inverse_depth = np.ones(faces.shape) if camera.is_orthographic else 1.0 / depth[faces]  # (F, 3)
     lo = np.ceil(tri.min(axis=1) - 1e-9).astype(np.int64)
     hi = np.floor(tri.max(axis=1) + 1e-9).astype(np.int64)
     lo = np.maximum(lo, 0)
@@ -93,8 +93,11 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
         face, b1, b2 = face[inside], b1[inside], b2[inside]
         flat = (py[inside] * camera.width + px[inside]).astype(np.int64)
         if uvs is not None:
-            uv = (face_uv[face, 0] + b1[:, None] * (face_uv[face, 1] - face_uv[face, 0])
-                  + b2[:, None] * (face_uv[face, 2] - face_uv[face, 0]))
+            # Screen barycentrics weighted by 1 / depth (a plane seen at a slant from a near camera drifts by
+            # several texels under affine interpolation).
+            w = np.stack([1.0 - b1 - b2, b1, b2], axis=1) * inverse_depth[face]
+            w /= w.sum(axis=1, keepdims=True)
+            uv = np.einsum("pk,pkc->pc", w, face_uv[face])
             h, w = texels.shape
             tcol = np.clip(np.floor(uv[:, 0] * w), 0, w - 1).astype(np.int64)
             trow = np.clip(np.floor((1.0 - uv[:, 1]) * h), 0, h - 1).astype(np.int64)

@@ -38,7 +38,8 @@ IMPOSTOR_PLANES = 8
 QUALITY_AZIMUTHS = tuple(float(a) for a in np.arange(8) * 45.0 + 11.25)
 # Atlas tiles per row (planes fill rows of this many tiles).
 _ATLAS_COLUMNS = 4
-# The planes' square spans the tree's horizontal radius and half height about the box centre, plus this margin.
+# The planes' square spans the tree's horizontal radius about the trunk and half height about the box centre, plus
+# this margin.
 _PLANE_MARGIN = 1.02
 # Alpha of the impostor is grown by this many texels. None: at the impostor's switch size a texel is about a
 # screen pixel, and growing sparse crowns (conifer branch tips, isolated clusters) by a texel each way inflates
@@ -60,7 +61,7 @@ class ImpostorAtlas:
     albedo  : (R T, C T, 4) uint8 sRGB + alpha (alpha 255 where the tree covers the texel), one tile per plane
               in rows of C = min(P, 4) tiles.
     normal  : (R T, C T, 3) uint8 tangent-space normals (+x along u, +y image up, +z toward the viewer).
-    centre  : (3,) float64 metres, where the planes cross (the tree's box centre).
+    centre  : (3,) float64 metres, where the planes cross (on the trunk's mean axis, at the box's mid height).
     half    : metres, half side of every plane's square.
     azimuths: (P,) float64 degrees, each plane faces the camera of that azimuth.
     tile    : T, pixels per tile side.
@@ -212,6 +213,11 @@ def _plane_frame(tree: TreeMesh) -> tuple[np.ndarray, float, float]:
         raise ImpostorError(f"tree {tree.name!r} has no vertices to make an impostor from")
     lo, hi = points.min(axis=0), points.max(axis=0)
     centre = 0.5 * (lo + hi)
+    order = tree.bark.attributes.get("order")
+    if order is not None and (np.asarray(order) == 0).any():
+        # The planes cross on the trunk, which every plane draws: crossing anywhere else would draw the trunk
+        # at a different place on each plane, a smear as wide as the offset between views.
+        centre[:2] = tree.bark.vertices[np.asarray(order) == 0, :2].astype(np.float64).mean(axis=0)
     rel = points - centre
     radius_xy = float(np.sqrt((rel[:, :2] ** 2).sum(axis=1)).max())
     half = max(radius_xy, 0.5 * float(hi[2] - lo[2])) * _PLANE_MARGIN

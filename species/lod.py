@@ -12,16 +12,26 @@ import numpy as np
 
 from .errors import TreefarmError
 from .mesh import DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
+from .polyline_simplify import simplification_keys
 from .skeleton import LEAF_CARD_CORNERS, Skeleton
 from .tree_mesh import TreeMesh
 
-__all__ = ["LodLevel", "LodBudgetError", "build_lod", "simplify_skeleton", "cluster_leaves",
-           "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "CARDS_PER_CLUSTER"]
+__all__ = ["LodLevel", "LodBudgetError", "build_lod", "simplify_skeleton", "cluster_leaves", "metres_per_pixel",
+           "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
+           "CARDS_PER_CLUSTER"]
 
 # Tube sides by branch order at each level (index = level - 1): the trunk keeps the most.
 LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
-# Keep every n-th node along a branch (first node, junctions and tips always kept), by level; raised further
-# when the bark alone is over budget.
+# Default switch sizes (pixels of tree size on screen) the levels are simplified for.
+LOD_SWITCH_PX = (512, 256, 128)
+# Screen tolerances (pixels at the switch size) tried for the bark, finest first.
+TOLERANCE_LADDER_PX = tuple(0.1 * 1.25 ** np.arange(60))
+# Branches shorter than this many tolerances are dropped (their leaves move to the parent branch).
+DROP_LENGTH_TOLERANCES = 2.0
+# Branches at least this wide on screen (pixels) keep their axis within THICK_TOLERANCE_PX pixels.
+THICK_BRANCH_PX = 2.0
+THICK_TOLERANCE_PX = 1.0
+# Fallback only (budgets too small for the tolerance ladder): keep every n-th node along a branch by level.
 LOD_NODE_STEPS = (2, 3, 4)
 _MAX_NODE_STEP = 32
 # A cluster is drawn as one card (2 triangles).
@@ -90,15 +100,14 @@ def _branch_parent(skeleton: Skeleton) -> np.ndarray:
     return np.where(junction >= 0, skeleton.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
 
 
-def _dropped_branches(skeleton: Skeleton, share: float, max_order: int | None = None,
+def _dropped_branches(skeleton: Skeleton, min_length: float, max_order: int | None = None,
                       clones: bool = False) -> np.ndarray:
-    """(B,) bool: branches shorter than `share` of the longest non-trunk branch (with `clones`, the trunk's
-    split clones too: every branch but branch 0), branches above `max_order`, and everything on them."""
+    """(B,) bool: branches shorter than `min_length` metres (trunk excepted; with `clones`, the trunk's split
+    clones too: every branch but branch 0), branches above `max_order`, and everything on them."""
     lengths = _branch_lengths(skeleton)
     order = skeleton.order[skeleton.branch_starts]
     candidate = (order > 0) | (clones & (np.arange(len(order)) > 0))
-    longest = lengths[candidate].max() if candidate.any() else 0.0
-    drop = candidate & (lengths < share * longest)
+    drop = candidate & (lengths < min_length)
     if max_order is not None:
         drop |= order > max_order
     parent = _branch_parent(skeleton)
@@ -109,22 +118,62 @@ def _dropped_branches(skeleton: Skeleton, share: float, max_order: int | None = 
         drop = inherited
 
 
+def _longest_candidate(skeleton: Skeleton, clones: bool) -> float:
+    """Metres, the longest branch that pruning may drop (non-trunk; with `clones` every branch but branch 0)."""
+    lengths = _branch_lengths(skeleton)
+    order = skeleton.order[skeleton.branch_starts]
+    candidate = (order > 0) | (clones & (np.arange(len(order)) > 0))
+    return float(lengths[candidate].max()) if candidate.any() else 0.0
+
+
 def _keep_mask(skeleton: Skeleton, share: float, node_step: int, max_order: int | None = None,
                clones: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) bool nodes kept and (B,) bool branches dropped, for a pruning share and node step (and the
-    fallbacks of `_dropped_branches`)."""
-    bid = skeleton.branch_id
-    drop = _dropped_branches(skeleton, share, max_order, clones)
-    alive = ~drop[bid]
+    """(N,) bool nodes kept and (B,) bool branches dropped, for a pruning share (of the longest droppable
+    branch) and node step (and the fallbacks of `_dropped_branches`)."""
+    drop = _dropped_branches(skeleton, share * _longest_candidate(skeleton, clones), max_order, clones)
     starts = skeleton.branch_starts
-    along = skeleton.depth - skeleton.depth[starts][bid]
-    keep = alive & ((along % node_step == 0) | (skeleton.continuation < 0))  # every n-th node and the tip
-    keep[starts[~drop]] = True
-    junctions = skeleton.parent[starts[~drop]]
-    keep[junctions[junctions >= 0]] = True  # where a kept branch attaches
-    keep &= alive
+    along = skeleton.depth - skeleton.depth[starts][skeleton.branch_id]
+    every_nth = (along % node_step == 0) | (skeleton.continuation < 0)  # every n-th node and the tip
+    return _with_structure(skeleton, every_nth, drop), drop
+
+
+def _with_structure(skeleton: Skeleton, chosen: np.ndarray, drop: np.ndarray) -> np.ndarray:
+    """(N,) bool: the `chosen` nodes of branches not dropped, plus what keeps the branching intact: the root,
+    each kept branch's first node and the node it grows from."""
+    keep = chosen & ~drop[skeleton.branch_id]
+    starts = skeleton.branch_starts[~drop]
+    keep[starts] = True
+    junctions = skeleton.parent[starts]
+    keep[junctions[junctions >= 0]] = True
     keep[0] = True
-    return keep, drop
+    return keep
+
+
+def _node_keys(skeleton: Skeleton) -> np.ndarray:
+    """(N,) float64 metres, each node's Douglas-Peucker key along its own branch (see `simplification_keys`);
+    a branch's path starts at its junction on the parent, so the junction bounds the first chord."""
+    paths = skeleton.branch_paths
+    nodes = np.concatenate(paths).astype(np.int64)
+    offsets = np.concatenate([[0], np.cumsum([len(p) for p in paths])])
+    keys = simplification_keys(skeleton.positions[nodes], skeleton.radius[nodes], offsets)
+    own = skeleton.branch_id[nodes] == np.repeat(np.arange(len(paths)), np.diff(offsets))
+    node_keys = np.full(len(skeleton), np.inf)
+    node_keys[nodes[own]] = keys[own]
+    return node_keys
+
+
+def _tolerance_mask(skeleton: Skeleton, node_keys: np.ndarray, tolerance: float,
+                    metres_per_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) bool nodes kept and (B,) bool branches dropped at a tolerance in metres: branches shorter than
+    DROP_LENGTH_TOLERANCES tolerances go (with all on them), the others keep the nodes Douglas-Peucker needs
+    to stay within the tolerance of their axis and radius. Branches at least THICK_BRANCH_PX wide on screen
+    stay within THICK_TOLERANCE_PX whatever the tolerance: a thin branch moved off its line costs its own
+    width in silhouette however far it moves, a thick one costs the whole offset along its length."""
+    drop = _dropped_branches(skeleton, DROP_LENGTH_TOLERANCES * tolerance)
+    diameter = 2.0 * skeleton.radius[skeleton.branch_starts].astype(np.float64)
+    thick = diameter >= THICK_BRANCH_PX * metres_per_px
+    limit = np.where(thick, min(tolerance, THICK_TOLERANCE_PX * metres_per_px), tolerance)
+    return _with_structure(skeleton, node_keys > limit[skeleton.branch_id], drop), drop
 
 
 def simplify_skeleton(skeleton: Skeleton, share: float, node_step: int) -> tuple[Skeleton, np.ndarray, np.ndarray]:
@@ -296,17 +345,55 @@ def _widened(skeleton: Skeleton, sides_by_order) -> Skeleton:
                     skeleton.order)
 
 
-def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> LodLevel:
-    """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles).
+def _fit_bark_by_tolerance(skeleton: Skeleton, sides, bark_target: int, metres_per_px: float):
+    """The (simplified skeleton, original_node, leaf_anchor) of the smallest screen tolerance on
+    TOLERANCE_LADDER_PX (pixels of `metres_per_px` metres) whose bark estimate fits `bark_target`, by
+    bisection (coarser tolerances never keep more); None when even the coarsest does not fit."""
+    keys = _node_keys(skeleton)
 
-    The bark keeps its LOD0 share of the budget: the coarsest pruning share of the ladder that fits is the
-    smallest that does, and the node step grows when even the trunk alone does not fit. The leaves get the
-    rest of the budget as crossed cluster cards. Raises LodBudgetError when nothing fits.
+    def fits(step: int):
+        keep, drop = _tolerance_mask(skeleton, keys, TOLERANCE_LADDER_PX[step] * metres_per_px, metres_per_px)
+        return keep if _bark_triangle_estimate(skeleton, keep, drop, sides) <= bark_target else None
+
+    lo, hi = 0, len(TOLERANCE_LADDER_PX) - 1
+    best = fits(hi)
+    if best is None:
+        return None
+    if (first := fits(lo)) is not None:
+        return _skeleton_from_mask(skeleton, first)
+    while hi - lo > 1:  # fits(hi) holds, fits(lo) does not
+        mid = (lo + hi) // 2
+        keep = fits(mid)
+        if keep is None:
+            lo = mid
+        else:
+            hi, best = mid, keep
+    return _skeleton_from_mask(skeleton, best)
+
+
+def metres_per_pixel(skeleton: Skeleton, switch_px: int) -> float:
+    """Metres a screen pixel spans when the tree's larger extent (height or width) is `switch_px` pixels."""
+    lo, hi = np.asarray(skeleton.bounds, np.float64)
+    return max(float(np.max(hi - lo)), 1e-6) / switch_px
+
+
+def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None) -> LodLevel:
+    """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles), for viewing at `switch_px`
+    pixels of tree size (default LOD_SWITCH_PX[level - 1]).
+
+    The bark keeps its LOD0 share of the budget: each branch keeps the nodes Douglas-Peucker needs to stay
+    within a screen tolerance of its axis and radius, branches a few tolerances long are dropped, and the
+    tolerance is the smallest of the ladder that fits. The leaves get the rest of the budget as cluster
+    cards. Raises LodBudgetError when nothing fits.
     """
     if not 1 <= level <= len(LOD_SIDES):
         raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
     if not 0.0 < budget <= 1.0:
         raise LodBudgetError(f"budget {budget!r} for LOD{level} is invalid: allowed a fraction in (0, 1]")
+    switch_px = LOD_SWITCH_PX[level - 1] if switch_px is None else switch_px
+    if isinstance(switch_px, bool) or not isinstance(switch_px, (int, np.integer)) or not 8 <= switch_px <= 4096:
+        raise LodBudgetError(f"switch size {switch_px!r} px for LOD{level} is invalid: allowed an integer in "
+                             f"[8, 4096]")
     total0 = lod0.n_faces
     target = int(np.floor(_BUDGET_MARGIN * budget * total0))
     bark_share = lod0.bark.n_faces / max(total0, 1)
@@ -316,7 +403,7 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float) -> 
     bark_target = max(int(target * bark_share), 0)
     if skeleton.n_leaves:
         bark_target = min(bark_target, target - min_leaf_tris)
-    chosen = _fit_bark(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1], _MAX_NODE_STEP, ((None, False),))
+    chosen = _fit_bark_by_tolerance(skeleton, sides, bark_target, metres_per_pixel(skeleton, int(switch_px)))
     if chosen is None:
         # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
         # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones

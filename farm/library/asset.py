@@ -87,8 +87,14 @@ def leaf_instances(skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Leaf card instances of a skeleton: translation (M, 3), rotation matrices (M, 3, 3) and scale (M, 3),
     float64, Z up, with transform = T R S exactly when the card axes are orthogonal (nearest rotation otherwise)."""
     linear = skeleton.leaves[:, :3, :3].astype(np.float64)
-    u, _, vt = np.linalg.svd(linear)
-    rotation = u @ vt
+    # Cards are made as rotation x scale, so their columns are orthogonal and normalising them is the polar
+    # factor; only cards whose columns are not (to float32 precision) go through the SVD.
+    rotation = linear / np.maximum(np.linalg.norm(linear, axis=1, keepdims=True), 1e-30)
+    skew = np.abs(np.einsum("mki,mkj->mij", rotation, rotation) - np.eye(3)).max(axis=(1, 2))
+    oblique = skew > 1e-5
+    if oblique.any():
+        u, _, vt = np.linalg.svd(linear[oblique])
+        rotation[oblique] = u @ vt
     flip = np.linalg.det(rotation) < 0
     rotation[flip] = rotation[flip] @ np.diag([1.0, -1.0, 1.0])  # the card is flat in y: flip its normal axis
     scale = np.einsum("mji,mji->mi", rotation, linear)  # diag(R^T M)
@@ -185,7 +191,8 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         skeleton = species.grow(params, species.rng_for(params))
         lod0 = species.build_mesh(skeleton, {**params, "name": ident})
     with timer.stage("lods"):
-        lods = [build_lod(skeleton, lod0, level, budget) for level, budget in enumerate(spec.lod_budgets, 1)]
+        lods = [build_lod(skeleton, lod0, level, budget, int(px))
+                for level, (budget, px) in enumerate(zip(spec.lod_budgets, spec.switch_px), 1)]
     with timer.stage("wind"):
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
         for lod, px in zip(lods, spec.switch_px):

@@ -67,3 +67,36 @@ def test_collision_capsules_cover_the_trunk_base_and_top():
     assert capsules.shape[1] == 7 and np.all(capsules[:, 6] > 0)
     trunk = skeleton.branch_paths[0]
     assert np.allclose(capsules[0, :3], skeleton.positions[trunk[0]])
+
+
+@pytest.mark.parametrize("name", ["palm", "weeping_willow"])
+def test_thick_branches_stay_within_a_pixel_of_their_lod0_axis_at_the_switch_size(name):
+    from species.lod import THICK_TOLERANCE_PX, metres_per_pixel
+
+    skeleton, lod0 = _tree(name, 0)
+    for level, budget, px in ((1, 0.40, 512), (3, 0.04, 128)):
+        lod = build_lod(skeleton, lod0, level, budget, px)
+        tolerance = THICK_TOLERANCE_PX * metres_per_pixel(skeleton, px)
+        trunk = skeleton.branch_paths[0]
+        kept = np.flatnonzero(np.isin(trunk, lod.original_node))
+        assert kept[0] == 0 and kept[-1] == len(trunk) - 1
+        for lo, hi in zip(kept[:-1], kept[1:]):
+            a, b = skeleton.positions[trunk[lo]].astype(float), skeleton.positions[trunk[hi]].astype(float)
+            inner = skeleton.positions[trunk[lo + 1:hi]].astype(float)
+            t = np.clip((inner - a) @ (b - a) / max((b - a) @ (b - a), 1e-12), 0, 1)
+            assert np.all(np.linalg.norm(inner - (a + t[:, None] * (b - a)), axis=1) <= tolerance + 1e-6)
+
+
+def test_within_a_roomy_budget_a_smaller_switch_size_keeps_less_bark():
+    skeleton, lod0 = _tree("sassafras", 0)
+    triangles = [build_lod(skeleton, lod0, 1, 1.0, px).mesh.bark.n_faces for px in (1024, 512, 128, 32)]
+    assert triangles == sorted(triangles, reverse=True) and triangles[-1] < triangles[0]
+
+
+@pytest.mark.parametrize("switch_px", [0, 5000, 12.5, True])
+def test_a_switch_size_out_of_range_is_rejected_with_its_value(switch_px):
+    from species.lod import LodBudgetError
+
+    skeleton, lod0 = _tree("maple", 0)
+    with pytest.raises(LodBudgetError, match="switch size"):
+        build_lod(skeleton, lod0, 1, 0.4, switch_px)

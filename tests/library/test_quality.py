@@ -13,7 +13,7 @@ from farm.library.gltf_asset import asset_to_glb, glb_size
 from farm.library.spec import parse_library_spec
 from farm.tree_chain import StageTimer, tree_seed
 from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
-from renderers.camera import orthographic_camera
+from renderers.camera import orthographic_camera, perspective_camera
 from renderers.impostor import switch_camera
 from species.mesh import leaf_part
 from species.pbr_textures import leaf_atlas
@@ -96,6 +96,32 @@ def test_triangle_coverage_cuts_a_card_to_its_alpha():
     cut = triangle_coverage(camera, vertices, faces, uvs, left_half)
     assert cut.sum() == pytest.approx(opaque.sum() / 2, rel=0.1)
     assert not (cut & ~opaque).any()
+
+
+def test_triangle_coverage_interpolates_uvs_perspective_correctly_on_a_slanted_plane():
+    # A 2 m square seen at 70 deg from a camera 3 m away: the left half (u < 0.5, by texture) must cover the
+    # pixels whose rays meet the plane at x < 0, which affine interpolation misses by several pixels.
+    vertices = np.array([[-1.0, 0.0, -1.0], [1.0, 0.0, -1.0], [1.0, 0.0, 1.0], [-1.0, 0.0, 1.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    uvs = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    left_half = np.zeros((64, 64), bool)
+    left_half[:, :32] = True
+    camera = perspective_camera(vertices, 70.0, 0.0, 96, fov_deg=70.0, distance_scale=0.6)
+    cut = triangle_coverage(camera, vertices, faces, uvs, left_half)
+    rows, cols = np.nonzero(triangle_coverage(camera, vertices, faces))
+    near = camera.unproject(np.stack([cols, rows], axis=1).astype(float), np.full(len(rows), 1.0))
+    far = camera.unproject(np.stack([cols, rows], axis=1).astype(float), np.full(len(rows), 2.0))
+    hit_x = near[:, 0] - near[:, 1] * (far[:, 0] - near[:, 0]) / (far[:, 1] - near[:, 1])  # ray meets y = 0
+    expected = hit_x < 0.0
+    clear = np.abs(hit_x) > 2 * 2.0 / 64  # two texels off the cut line
+    assert expected[clear].any() and (~expected[clear]).any()
+    assert np.array_equal(cut[rows, cols][clear], expected[clear])
+
+
+def test_impostor_planes_cross_on_the_trunk(sapling):
+    bark = sapling.lod0.bark
+    trunk = bark.vertices[bark.attributes["order"] == 0, :2].astype(np.float64)
+    np.testing.assert_allclose(sapling.impostor.centre[:2], trunk.mean(axis=0), atol=1e-9)
 
 
 @pytest.fixture(scope="module")
