@@ -288,29 +288,27 @@ def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
     by bisection on the cell size, numbered in sorted cell order) and the cell size in metres."""
     lo = points.min(axis=0)
     span = float(np.max(points.max(axis=0) - lo)) + 1e-9
-    sample = points if len(points) <= 20000 else points[:: len(points) // 20000 + 1]
+    # Counting cells is a hash of the keys (no sort): every point up to this many, a regular sample beyond.
+    sample = points if len(points) <= 200_000 else points[:: len(points) // 200_000 + 1]
 
-    def cell_count(size: float, pts: np.ndarray) -> int:
+    def cell_keys(size: float, pts: np.ndarray) -> np.ndarray:
         keys = np.floor((pts - lo) / size).astype(np.int64)
-        return len(np.unique(keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]))
+        return keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]
 
     small, large = span / 4096, span * 1.01
     for _ in range(24):
         size = np.sqrt(small * large)
-        if cell_count(size, sample) >= target:
+        if len(np.unique(cell_keys(size, sample))) >= target:
             small = size
         else:
             large = size
         if large / small < 1.02:
             break
     size = large  # the finest grid with at most `target` cells (on the sample; checked on all points)
-    while True:
-        keys = np.floor((points - lo) / size).astype(np.int64)
-        flat = keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]
-        cells, labels = np.unique(flat, return_inverse=True)
-        if len(cells) <= target:
-            return labels.astype(np.int64), size
+    while len(np.unique(cell_keys(size, points))) > target:
         size *= 1.05
+    _, labels = np.unique(cell_keys(size, points), return_inverse=True)
+    return labels.astype(np.int64), size
 
 
 def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_step: int, variants):
