@@ -129,7 +129,12 @@ class CoverageRenderer(DepthRenderer):
     def coverage(self, tree: TreeMesh, camera: Camera) -> np.ndarray:
         """(H, W) bool, pixels whose centre a triangle of `tree` covers (leaf cards as opaque quads)."""
         self.load(tree)
-        return self._pass(camera, set(self.part_names)) > 0
+        gl = self._renderer._renderer
+        gl.read_coverage = True  # read back the mask only: no colour blit, no depth linearisation
+        try:
+            return self._draw(camera, set(self.part_names))
+        finally:
+            gl.read_coverage = False
 
     def load_groups(self, groups: dict[str, tuple[np.ndarray, np.ndarray, bool]]) -> None:
         """Replace the scene's meshes by named face groups: name -> (vertices (V, 3) float metres, faces (F, 3)
@@ -163,6 +168,20 @@ def _unculled_renderer_class():
     from .maps import _single_sample_renderer_class
 
     class UnculledDepthRenderer(_single_sample_renderer_class()):
+        read_coverage = False
+
+        def _read_main_framebuffer(self, scene, flags):
+            if not self.read_coverage:
+                return super()._read_main_framebuffer(scene, flags)
+            width, height = self._main_fb_dims
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
+            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
+            GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_DEPTH_BUFFER_BIT, GL.GL_NEAREST)
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb)
+            window = np.frombuffer(GL.glReadPixels(0, 0, width, height, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT),
+                                   np.float32).reshape(height, width)
+            return window[::-1] < 1.0  # cleared to 1.0: anything drawn is nearer
+
         def _bind_and_draw_primitive(self, primitive, pose, program, flags):
             if not flags & RenderFlags.DEPTH_ONLY or primitive.indices is None or primitive.poses is not None:
                 return super()._bind_and_draw_primitive(primitive, pose, program, flags)

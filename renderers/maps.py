@@ -213,13 +213,17 @@ class DepthRenderer:
         if (self._renderer.viewport_width, self._renderer.viewport_height) != (camera.width, camera.height):
             self._renderer.viewport_width, self._renderer.viewport_height = camera.width, camera.height
 
-    def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
-        """(H, W) float32 metres of the nearest (farthest if reverse_depth) surface of the visible parts."""
+    def _draw(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
+        """Draw the visible parts depth-only through `camera`; what pyrender's read-back returns."""
         for name, node in self._mesh_nodes.items():
             node.mesh.is_visible = name in visible
         self._set_camera(camera, reverse_depth)
         flags = self._pyrender.RenderFlags.DEPTH_ONLY | self._pyrender.RenderFlags.SKIP_CULL_FACES
-        linear = self._renderer.render(self._scene, flags=flags)
+        return self._renderer.render(self._scene, flags=flags)
+
+    def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
+        """(H, W) float32 metres of the nearest (farthest if reverse_depth) surface of the visible parts."""
+        linear = self._draw(camera, visible, reverse_depth)
         if reverse_depth:
             linear = linear[:, ::-1]
         # pyrender linearised the window depth with the dummy planes near 1, far 2: undo, then use ours.
