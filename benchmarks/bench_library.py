@@ -18,7 +18,7 @@ LOD1/LOD2/LOD3: maple .912/.880/.831 -> .915/.885/.824, pine .910/.895/.872 -> .
 .933/.939/.895 -> .950/.903/.907, palm .895/.839/.804 -> .909/.899/.843, sc_young_sapling .562/.458/.355 ->
 .558/.460/.385, lsystem_monopodial .929/.876/.809 -> .888/.867/.798. Impostor planes crossing on the trunk and
 perspective-correct UVs in its raster (the old affine one drew slanted planes several pixels off): cherry .768 ->
-.803, maple .894 -> .885, pine .81 -> .74, douglas_fir .545 -> .543, balsam_fir .414 -> .351 (seed tree_seed(0, 0);
+.803, maple .894 -> .885, douglas_fir .545 -> .543, balsam_fir .414 -> .351 (seed tree_seed(0, 0);
 the old figures were partly the affine raster's error, not the impostor's quality).
 Seeds are tree_seed(0, position in the list): compare figures only between runs of the same list.
 """
