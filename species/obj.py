@@ -8,6 +8,7 @@ import re
 
 import numpy as np
 
+from .ascii_numbers import AsciiNumberError, fixed6_rows, int_rows
 from .errors import TreefarmError
 from .gltf import z_up_to_y_up
 from .textures import bark_png, leaf_png
@@ -20,28 +21,22 @@ _NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")
 
 
 class ObjError(TreefarmError):
-    """A tree that cannot be written as OBJ (a name that is not a plain file-name stem)."""
+    """A tree that cannot be written as OBJ (a name that is not a plain file-name stem, a non-finite or huge value)."""
 
 
-def _rows(line: str, values: np.ndarray) -> str:
-    """`line` (a %-template for one row, e.g. "v %.6f %.6f %.6f\\n") filled with every row, in one format call."""
-    if len(values) == 0:
-        return ""
-    return (line * len(values)) % tuple(values.ravel().tolist())
-
-
-def _part_text(name: str, part: MeshPart, first_index: int) -> str:
-    positions = z_up_to_y_up(part.vertices).astype(np.float64)
-    normals = z_up_to_y_up(part.normals).astype(np.float64)
+def _part_text(name: str, part: MeshPart, first_index: int) -> bytes:
     corners = (part.faces.astype(np.int64) + first_index).repeat(3, axis=1)  # v/vt/vn share one index
-    return "".join([
-        f"o {name}\n",
-        _rows("v %.6f %.6f %.6f\n", positions),
-        _rows("vt %.6f %.6f\n", part.uvs.astype(np.float64)),
-        _rows("vn %.6f %.6f %.6f\n", normals),
-        f"usemtl {name}\ns 1\n",
-        _rows("f %d/%d/%d %d/%d/%d %d/%d/%d\n", corners),
-    ])
+    try:
+        return b"".join([
+            f"o {name}\n".encode("ascii"),
+            fixed6_rows("v", z_up_to_y_up(part.vertices)),
+            fixed6_rows("vt", part.uvs),
+            fixed6_rows("vn", z_up_to_y_up(part.normals)),
+            f"usemtl {name}\ns 1\n".encode("ascii"),
+            int_rows("f", corners, " // // //"),
+        ])
+    except AsciiNumberError as error:
+        raise ObjError(f"{name} cannot be written as OBJ: {error}") from error
 
 
 def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
@@ -60,7 +55,8 @@ def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
                        f"(not first)")
     name = tree.name
     bark_file, leaf_file = f"{name}_bark.png", f"{name}_leaf.png"
-    obj = [f"# treefarm tree {name}: metres, Y up (converted from the farm's Z up)\n", f"mtllib {name}.mtl\n"]
+    header = f"# treefarm tree {name}: metres, Y up (converted from the farm's Z up)\nmtllib {name}.mtl\n"
+    obj = [header.encode("ascii")]
     first_index = 1  # OBJ indices are 1-based and global over the file
     for part_name, part in (("bark", tree.bark), ("leaves", tree.leaves)):
         if part.n_faces == 0:
@@ -75,7 +71,7 @@ def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
         f"map_Kd {leaf_file}\nmap_d {leaf_file}\n"
     )
     return {
-        f"{name}.obj": "".join(obj).encode("ascii"),
+        f"{name}.obj": b"".join(obj),
         f"{name}.mtl": mtl.encode("ascii"),
         bark_file: bark_png(tree.bark_color),
         leaf_file: leaf_png(tree.leaf_color),
