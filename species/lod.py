@@ -100,16 +100,21 @@ def _branch_parent(skeleton: Skeleton) -> np.ndarray:
     return np.where(junction >= 0, skeleton.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
 
 
+def _droppable(skeleton: Skeleton, clones: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(B,) float64 metres of each branch and (B,) bool, the branches pruning may drop: non-trunk ones (with
+    `clones`, the trunk's split clones too: every branch but branch 0)."""
+    order = skeleton.order[skeleton.branch_starts]
+    return _branch_lengths(skeleton), (order > 0) | (clones & (np.arange(len(order)) > 0))
+
+
 def _dropped_branches(skeleton: Skeleton, min_length: float, max_order: int | None = None,
                       clones: bool = False) -> np.ndarray:
-    """(B,) bool: branches shorter than `min_length` metres (trunk excepted; with `clones`, the trunk's split
-    clones too: every branch but branch 0), branches above `max_order`, and everything on them."""
-    lengths = _branch_lengths(skeleton)
-    order = skeleton.order[skeleton.branch_starts]
-    candidate = (order > 0) | (clones & (np.arange(len(order)) > 0))
+    """(B,) bool: droppable branches (see `_droppable`) shorter than `min_length` metres, branches above
+    `max_order`, and everything on them."""
+    lengths, candidate = _droppable(skeleton, clones)
     drop = candidate & (lengths < min_length)
     if max_order is not None:
-        drop |= order > max_order
+        drop |= skeleton.order[skeleton.branch_starts] > max_order
     parent = _branch_parent(skeleton)
     while True:
         inherited = drop | ((parent >= 0) & drop[np.maximum(parent, 0)])
@@ -119,10 +124,8 @@ def _dropped_branches(skeleton: Skeleton, min_length: float, max_order: int | No
 
 
 def _longest_candidate(skeleton: Skeleton, clones: bool) -> float:
-    """Metres, the longest branch that pruning may drop (non-trunk; with `clones` every branch but branch 0)."""
-    lengths = _branch_lengths(skeleton)
-    order = skeleton.order[skeleton.branch_starts]
-    candidate = (order > 0) | (clones & (np.arange(len(order)) > 0))
+    """Metres, the longest branch that pruning may drop (see `_droppable`)."""
+    lengths, candidate = _droppable(skeleton, clones)
     return float(lengths[candidate].max()) if candidate.any() else 0.0
 
 
@@ -305,9 +308,11 @@ def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
         if large / small < 1.02:
             break
     size = large  # the finest grid with at most `target` cells (on the sample; checked on all points)
-    while len(np.unique(cell_keys(size, points))) > target:
+    keys = cell_keys(size, points)
+    while len(np.unique(keys)) > target:
         size *= 1.05
-    _, labels = np.unique(cell_keys(size, points), return_inverse=True)
+        keys = cell_keys(size, points)
+    _, labels = np.unique(keys, return_inverse=True)
     return labels.astype(np.int64), size
 
 
