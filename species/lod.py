@@ -7,16 +7,18 @@ skeleton whose `leaves` are the cluster cards, its TreeMesh, and which original 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
 from .errors import TreefarmError
 from .mesh import DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
+from .leaf_clusters import LeafCards
 from .polyline_simplify import simplification_keys
-from .skeleton import LEAF_CARD_CORNERS, Skeleton
+from .skeleton import Skeleton
 from .tree_mesh import TreeMesh
 
-__all__ = ["LodLevel", "LodBudgetError", "build_lod", "simplify_skeleton", "cluster_leaves", "metres_per_pixel",
+__all__ = ["LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
            "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
            "CARDS_PER_CLUSTER"]
 
@@ -26,9 +28,10 @@ LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
 LOD_SWITCH_PX = (512, 256, 128)
 # Screen tolerances (pixels at the switch size) tried for the bark, finest first.
 TOLERANCE_LADDER_PX = tuple(0.1 * 1.25 ** np.arange(60))
-# Branches shorter than this many tolerances are dropped (their leaves move to the parent branch).
-DROP_LENGTH_TOLERANCES = 2.0
-# Branches at least this wide on screen (pixels) keep their axis within THICK_TOLERANCE_PX pixels.
+# The tolerances weighed against dropping branches: the ladder up to this many pixels.
+_MAX_WEIGHED_TOLERANCE_PX = 16.0
+# Branches at least this wide on screen (pixels) keep their axis within THICK_TOLERANCE_PX pixels, their sides by
+# order and their tip cones; thinner ones are bare 3-sided tubes (their cone and extra sides show nothing).
 THICK_BRANCH_PX = 2.0
 THICK_TOLERANCE_PX = 1.0
 # Fallback only (budgets too small for the tolerance ladder): keep every n-th node along a branch by level.
@@ -40,12 +43,6 @@ CARDS_PER_CLUSTER = 1
 _PRUNE_LADDER = (0.0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.85, 1.01)
 # The budget is filled to this fraction at most: merging of close rings can only lower counts, never raise.
 _BUDGET_MARGIN = 0.97
-# Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
-_SPREAD_SPAN = 2.0 * np.sqrt(3.0)
-# A cluster card covers this many times its leaves' estimated covered area (within their spread): from afar the
-# gaps between a cluster's leaves close, so its outline is more than its leaf area (measured: 1.5 raises the
-# LOD1/LOD2 min IoU of maple .899 -> .911 / .866 -> .880 and pine .885 -> .896 / .856 -> .882; 2.5 overshoots).
-_CLUSTER_AREA_GAIN = 1.5
 
 class LodBudgetError(TreefarmError):
     """A level of detail cannot meet its triangle budget (the budget is too small for this tree)."""
@@ -165,20 +162,6 @@ def _node_keys(skeleton: Skeleton) -> np.ndarray:
     return node_keys
 
 
-def _tolerance_mask(skeleton: Skeleton, node_keys: np.ndarray, tolerance: float,
-                    metres_per_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """(N,) bool nodes kept and (B,) bool branches dropped at a tolerance in metres: branches shorter than
-    DROP_LENGTH_TOLERANCES tolerances go (with all on them), the others keep the nodes Douglas-Peucker needs
-    to stay within the tolerance of their axis and radius. Branches at least THICK_BRANCH_PX wide on screen
-    stay within THICK_TOLERANCE_PX whatever the tolerance: a thin branch moved off its line costs its own
-    width in silhouette however far it moves, a thick one costs the whole offset along its length."""
-    drop = _dropped_branches(skeleton, DROP_LENGTH_TOLERANCES * tolerance)
-    diameter = 2.0 * skeleton.radius[skeleton.branch_starts].astype(np.float64)
-    thick = diameter >= THICK_BRANCH_PX * metres_per_px
-    limit = np.where(thick, min(tolerance, THICK_TOLERANCE_PX * metres_per_px), tolerance)
-    return _with_structure(skeleton, node_keys > limit[skeleton.branch_id], drop), drop
-
-
 def simplify_skeleton(skeleton: Skeleton, share: float, node_step: int) -> tuple[Skeleton, np.ndarray, np.ndarray]:
     """Drop branches shorter than `share` of the longest branch and keep every `node_step`-th node.
 
@@ -203,117 +186,25 @@ def _skeleton_from_mask(skeleton: Skeleton, keep: np.ndarray) -> tuple[Skeleton,
 
 
 def _bark_triangle_estimate(skeleton: Skeleton, keep: np.ndarray, drop: np.ndarray, sides_by_order) -> int:
-    """Upper bound of `bark_part` triangles of the kept nodes: 2 S per ring gap, S per tip cone, S for the
-    root disc (branch ids of the original skeleton; kept branches keep their identity)."""
-    counts = np.bincount(skeleton.branch_id[keep], minlength=skeleton.n_branches) + 1  # + junction point
-    counts[0] -= 1  # the trunk has no junction
+    """Upper bound of `bark_part` triangles of the kept nodes with sides by order and every tip coned: 2 S per
+    ring gap, S per tip cone, S for the root disc (branch ids of the original skeleton; kept branches keep
+    their identity)."""
     order = skeleton.order[skeleton.branch_starts]
     table = np.asarray(sides_by_order, np.int64)
     sides = table[np.minimum(order, len(table) - 1)]
-    meshed = (counts >= 2) & ~drop
-    return int((sides * (2 * (counts - 1) + 1))[meshed].sum() + sides[0])
+    costs = _branch_triangles(skeleton, keep, sides, np.ones(len(sides), bool))
+    return int(costs[~drop].sum())
 
 
-def cluster_leaves(leaves: np.ndarray, anchor: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
-    """Merge leaves into at most `n_clusters` larger cards on a voxel grid (one card per occupied cell).
-
-    leaves : (M, 4, 4) float, each leaf's transform of the unit card; anchor : (M,) int, node of each leaf.
-    Returns (transforms (C, 4, 4) float32, card_node (C,) int32). A cluster's card takes the orientation and
-    node of its leaf nearest the cluster centre, is centred on the cluster, and is scaled so its area is the
-    area the members cover together: sum of areas x (1 - exp(-d)) / d, with d their projected area (half
-    their area, random orientation) over the cell's face. A cluster of one leaf is that leaf.
-    """
-    leaves = np.asarray(leaves, np.float64)
-    m = len(leaves)
-    if m == 0 or n_clusters <= 0:
-        return np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32)
-    homo = np.concatenate([LEAF_CARD_CORNERS, np.ones((4, 1), np.float32)], axis=1).astype(np.float64)
-    corners = np.einsum("mij,kj->mki", leaves, homo)[..., :3]
-    centres = corners.mean(axis=1)
-    labels, cell = _grid_labels(centres, min(n_clusters, m))
-    n = int(labels.max()) + 1
-    count = np.bincount(labels, minlength=n)
-    mid = np.stack([np.bincount(labels, weights=centres[:, k], minlength=n) for k in range(3)], axis=1)
-    mid /= count[:, None]
-    # Representative: the member nearest its cluster centre (lowest index on ties).
-    distance = np.linalg.norm(centres - mid[labels], axis=1)
-    order = np.lexsort((np.arange(m), distance, labels))
-    first = np.ones(m, bool)
-    first[1:] = labels[order][1:] != labels[order][:-1]
-    representative = order[first]
-    areas = np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1)
-    total = np.bincount(labels, weights=areas, minlength=n)
-    d = 0.5 * total / (cell * cell)
-    covered = np.where(count > 1, total * -np.expm1(-d) / np.maximum(d, 1e-12), total)
-    cards = leaves[representative].copy()
-    merged = count[labels] > 1
-    if merged.any():
-        fitted = _fitted_cards(corners[merged].reshape(-1, 3), np.repeat(labels[merged], 4), n, covered)
-        many = count > 1
-        cards[many] = fitted[many]
-    card_node = np.asarray(anchor)[representative]
-    return cards.astype(np.float32), card_node.astype(np.int32)
-
-
-def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:
-    """(n, 4, 4) float64 card transforms fitted to each cluster's points (P, 3) metres (labels (P,) int in
-    [0, n)): centred on the points' mean, length along their principal axis, width along the second, normal
-    along the least spread; length and width span the points as a uniform spread would (2 sqrt(3) std)."""
-    count = np.maximum(np.bincount(labels, minlength=n), 1).astype(np.float64)
-    mean = np.stack([np.bincount(labels, weights=points[:, k], minlength=n) for k in range(3)], axis=1)
-    mean /= count[:, None]
-    rel = points - mean[labels]
-    outer = (rel[:, :, None] * rel[:, None, :]).reshape(-1, 9)
-    cov = np.stack([np.bincount(labels, weights=outer[:, k], minlength=n) for k in range(9)], axis=1)
-    cov = cov.reshape(n, 3, 3) / count[:, None, None]
-    variance, axes = np.linalg.eigh(cov)  # ascending: axes[:, :, 2] the principal axis
-    span = _SPREAD_SPAN * np.sqrt(np.maximum(variance, 0.0))
-    length, width = np.maximum(span[:, 2], 1e-4), np.maximum(span[:, 1], 1e-4)
-    # The card's area is the area the leaves cover (`area`, x _CLUSTER_AREA_GAIN), in the spread's proportions,
-    # never beyond the spread.
-    shrink = np.minimum(np.sqrt(_CLUSTER_AREA_GAIN * area / (length * width)), 1.0)
-    length, width = length * shrink, width * shrink
-    along, across, normal = axes[:, :, 2], axes[:, :, 1], axes[:, :, 0]
-    # Right-handed (width, normal, length) as the unit card's (x, y, z).
-    flip = np.einsum("ci,ci->c", np.cross(across, normal), along) < 0
-    normal = np.where(flip[:, None], -normal, normal)
-    cards = np.zeros((n, 4, 4))
-    cards[:, :3, 0] = across * width[:, None]
-    cards[:, :3, 1] = normal * width[:, None]
-    cards[:, :3, 2] = along * length[:, None]
-    cards[:, :3, 3] = mean - 0.5 * cards[:, :3, 2]
-    cards[:, 3, 3] = 1.0
-    return cards
-
-
-def _grid_labels(points: np.ndarray, target: int) -> np.ndarray:
-    """(M,) int64 cluster label per point (occupied cells of the finest cubic grid with at most `target` cells,
-    by bisection on the cell size, numbered in sorted cell order) and the cell size in metres."""
-    lo = points.min(axis=0)
-    span = float(np.max(points.max(axis=0) - lo)) + 1e-9
-    # Counting cells is a hash of the keys (no sort): every point up to this many, a regular sample beyond.
-    sample = points if len(points) <= 200_000 else points[:: len(points) // 200_000 + 1]
-
-    def cell_keys(size: float, pts: np.ndarray) -> np.ndarray:
-        keys = np.floor((pts - lo) / size).astype(np.int64)
-        return keys[:, 0] * 4_000_037 ** 2 + keys[:, 1] * 4_000_037 + keys[:, 2]
-
-    small, large = span / 4096, span * 1.01
-    for _ in range(24):
-        size = np.sqrt(small * large)
-        if len(np.unique(cell_keys(size, sample))) >= target:
-            small = size
-        else:
-            large = size
-        if large / small < 1.02:
-            break
-    size = large  # the finest grid with at most `target` cells (on the sample; checked on all points)
-    keys = cell_keys(size, points)
-    while len(np.unique(keys)) > target:
-        size *= 1.05
-        keys = cell_keys(size, points)
-    _, labels = np.unique(keys, return_inverse=True)
-    return labels.astype(np.int64), size
+def _branch_triangles(skeleton: Skeleton, keep: np.ndarray, sides: np.ndarray, coned: np.ndarray) -> np.ndarray:
+    """(B,) int64 upper bound of each branch's `bark_part` triangles from its kept nodes (its junction node
+    counts as its first ring): 2 S per ring gap, S for a tip cone, S for the root disc; 0 for a branch with
+    fewer than two rings."""
+    counts = np.bincount(skeleton.branch_id[keep], minlength=skeleton.n_branches) + 1  # + junction point
+    counts[0] -= 1  # the trunk has no junction
+    costs = sides * (2 * (counts - 1) + coned)
+    costs[0] += sides[0]
+    return np.where(counts >= 2, costs, 0)
 
 
 def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_step: int, variants):
@@ -332,46 +223,94 @@ def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_
         step = min(2 * step, max_step)
 
 
-def _widened(skeleton: Skeleton, sides_by_order) -> Skeleton:
-    """The skeleton with each node's radius raised so an S-sided tube shows, on average over view directions,
-    the width LOD0's tube of that order shows: a convex outline's mean width is its perimeter / pi, so an
-    S-gon of circumradius R shows 2 R S sin(pi / S) / pi (LOD0 sides: DEFAULT_RADIAL_SEGMENTS)."""
+def _widened(skeleton: Skeleton, branch_sides: np.ndarray) -> Skeleton:
+    """The skeleton with each node's radius raised so an S-sided tube (branch_sides (B,) int per branch) shows, on
+    average over view directions, the width LOD0's tube of that order shows: a convex outline's mean width is
+    its perimeter / pi, so an S-gon of circumradius R shows 2 R S sin(pi / S) / pi (LOD0 sides:
+    DEFAULT_RADIAL_SEGMENTS)."""
     def mean_width(sides):
         return sides * np.sin(np.pi / sides)
 
     order = np.asarray(skeleton.order, np.int64)
-    table = np.asarray(sides_by_order, np.float64)
     lod0_table = np.asarray(DEFAULT_RADIAL_SEGMENTS, np.float64)
-    widen = (mean_width(lod0_table[np.minimum(order, len(lod0_table) - 1)])
-             / mean_width(table[np.minimum(order, len(table) - 1)]))
+    sides = np.asarray(branch_sides, np.float64)[skeleton.branch_id]
+    widen = mean_width(lod0_table[np.minimum(order, len(lod0_table) - 1)]) / mean_width(sides)
     return Skeleton(skeleton.positions, skeleton.parent, (skeleton.radius * np.maximum(widen, 1.0)).astype(np.float32),
                     skeleton.order)
 
 
-def _fit_bark_by_tolerance(skeleton: Skeleton, sides, bark_target: int, metres_per_px: float):
-    """The (simplified skeleton, original_node, leaf_anchor) of the smallest screen tolerance on
-    TOLERANCE_LADDER_PX (pixels of `metres_per_px` metres) whose bark estimate fits `bark_target`, by
-    bisection (coarser tolerances never keep more); None when even the coarsest does not fit."""
-    keys = _node_keys(skeleton)
+def _branch_sides(skeleton: Skeleton, sides_by_order, metres_per_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """(B,) int64 sides and (B,) bool tip cones per branch: by order for branches at least THICK_BRANCH_PX wide
+    on screen where they start, 3 sides and no cone for thinner ones."""
+    starts = skeleton.branch_starts
+    table = np.asarray(sides_by_order, np.int64)
+    thick = 2.0 * skeleton.radius[starts].astype(np.float64) >= THICK_BRANCH_PX * metres_per_px
+    sides = np.where(thick, table[np.minimum(skeleton.order[starts], len(table) - 1)], 3)
+    return sides.astype(np.int64), thick
 
-    def fits(step: int):
-        keep, drop = _tolerance_mask(skeleton, keys, TOLERANCE_LADDER_PX[step] * metres_per_px, metres_per_px)
-        return keep if _bark_triangle_estimate(skeleton, keep, drop, sides) <= bark_target else None
 
-    lo, hi = 0, len(TOLERANCE_LADDER_PX) - 1
-    best = fits(hi)
+def _heap_ordered(value: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(B,) float64: each branch's value capped by every ancestor's (parent (B,) int, -1 at the root), so keeping
+    the largest values first never keeps a branch without the one it grows from."""
+    value = np.asarray(value, np.float64).copy()
+    ancestor = np.asarray(parent, np.int64).copy()
+    while (live := ancestor >= 0).any():  # pointer jumping: after k passes, the minimum over 2^k ancestors
+        value[live] = np.minimum(value[live], value[ancestor[live]])
+        ancestor[live] = ancestor[ancestor[live]]
+    return value
+
+
+def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order, bark_target: int,
+                           metres_per_px: float):
+    """The (simplified skeleton, original_node, leaf_anchor) that draws the bark within `bark_target` triangles
+    with the least estimated silhouette error at `metres_per_px`, or None when not even the trunk fits.
+
+    For each tolerance of the ladder (up to _MAX_WEIGHED_TOLERANCE_PX), every branch keeps the nodes
+    Douglas-Peucker needs to stay within it (THICK_TOLERANCE_PX for thick branches), and the branches are kept
+    in order of the area they draw on screen (length x width, at least one pixel wide; never a branch without
+    its parent) until the budget is spent. The error of a choice is the area of the dropped branches plus,
+    per kept branch, its length x the largest offset its dropped nodes had (at most its width: a thin line
+    moved off costs its own width); the tolerance with the least error wins (the finest on ties). keys: (N,)
+    float64 metres, `_node_keys(skeleton)`.
+    """
+    starts = skeleton.branch_starts
+    sides, coned = _branch_sides(skeleton, sides_by_order, metres_per_px)
+    width_px = np.maximum(2.0 * skeleton.radius[starts].astype(np.float64) / metres_per_px, 1.0)
+    length_px = _branch_lengths(skeleton) / metres_per_px
+    area = length_px * width_px
+    parent = _branch_parent(skeleton)
+    area[0] = np.inf  # the trunk always stays
+    rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -_heap_ordered(area, parent)))
+    area[0] = 0.0
+    junction = skeleton.parent[starts]
+    limit_px = np.where(width_px >= THICK_BRANCH_PX, THICK_TOLERANCE_PX, np.inf)
+    best = None
+    for tolerance_px in TOLERANCE_LADDER_PX:
+        if tolerance_px > _MAX_WEIGHED_TOLERANCE_PX:
+            break
+        kept_node = keys > np.minimum(limit_px, tolerance_px)[skeleton.branch_id] * metres_per_px
+        kept_node[starts] = True
+        kept_node[0] = True
+        costs = _branch_triangles(skeleton, kept_node, sides, coned)
+        # A kept child needs its junction node in the parent: charged to the child (an upper bound when two
+        # children share one).
+        parent_sides = sides[np.maximum(parent, 0)]
+        costs += np.where((junction >= 0) & ~kept_node[np.maximum(junction, 0)], 2 * parent_sides, 0)
+        n_kept = int(np.searchsorted(np.cumsum(costs[rank]), bark_target, side="right"))
+        if n_kept == 0:
+            continue
+        kept_branch = np.zeros(len(starts), bool)
+        kept_branch[rank[:n_kept]] = True
+        dropped_node_px = np.where(kept_node, 0.0, keys / metres_per_px)
+        offset_px = np.zeros(len(starts))
+        np.maximum.at(offset_px, skeleton.branch_id, dropped_node_px)
+        error = area[~kept_branch].sum() + (length_px * np.minimum(offset_px, width_px))[kept_branch].sum()
+        if best is None or error < best[0]:
+            best = (error, kept_node, kept_branch)
     if best is None:
         return None
-    if (first := fits(lo)) is not None:
-        return _skeleton_from_mask(skeleton, first)
-    while hi - lo > 1:  # fits(hi) holds, fits(lo) does not
-        mid = (lo + hi) // 2
-        keep = fits(mid)
-        if keep is None:
-            lo = mid
-        else:
-            hi, best = mid, keep
-    return _skeleton_from_mask(skeleton, best)
+    _, kept_node, kept_branch = best
+    return _skeleton_from_mask(skeleton, _with_structure(skeleton, kept_node, ~kept_branch))
 
 
 def metres_per_pixel(skeleton: Skeleton, switch_px: int) -> float:
@@ -380,15 +319,42 @@ def metres_per_pixel(skeleton: Skeleton, switch_px: int) -> float:
     return max(float(np.max(hi - lo)), 1e-6) / switch_px
 
 
-def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None) -> LodLevel:
+class TreeLods:
+    """Levels of detail of one tree: what every level and bark share needs (Douglas-Peucker keys of the nodes,
+    the leaf cards prepared for clustering) is computed once, on first use."""
+
+    def __init__(self, skeleton: Skeleton, lod0: TreeMesh):
+        self.skeleton, self.lod0 = skeleton, lod0
+
+    @cached_property
+    def node_keys(self) -> np.ndarray:
+        return _node_keys(self.skeleton)
+
+    @cached_property
+    def leaf_cards(self) -> LeafCards:
+        return LeafCards(self.skeleton.leaves)
+
+    def build(self, level: int, budget: float, switch_px: int | None = None,
+              bark_share: float | None = None) -> LodLevel:
+        """`build_lod` of this tree."""
+        return _build(self, level, budget, switch_px, bark_share)
+
+
+def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None,
+              bark_share: float | None = None) -> LodLevel:
     """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles), for viewing at `switch_px`
     pixels of tree size (default LOD_SWITCH_PX[level - 1]).
 
-    The bark keeps its LOD0 share of the budget: each branch keeps the nodes Douglas-Peucker needs to stay
-    within a screen tolerance of its axis and radius, branches a few tolerances long are dropped, and the
-    tolerance is the smallest of the ladder that fits. The leaves get the rest of the budget as cluster
-    cards. Raises LodBudgetError when nothing fits.
+    The bark gets `bark_share` of the budget (default: its share of LOD0's triangles) and draws it with the
+    least estimated silhouette error (see `_fit_bark_by_tolerance`): Douglas-Peucker nodes within a screen
+    tolerance, branches kept by the area they draw. The leaves get the rest of the budget as cluster cards.
+    Raises LodBudgetError when nothing fits.
     """
+    return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share)
+
+
+def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bark_share: float | None) -> LodLevel:
+    skeleton, lod0 = lods.skeleton, lods.lod0
     if not 1 <= level <= len(LOD_SIDES):
         raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
     if not 0.0 < budget <= 1.0:
@@ -399,14 +365,18 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, swi
                              f"[8, 4096]")
     total0 = lod0.n_faces
     target = int(np.floor(_BUDGET_MARGIN * budget * total0))
-    bark_share = lod0.bark.n_faces / max(total0, 1)
+    if bark_share is None:
+        bark_share = lod0.bark.n_faces / max(total0, 1)
+    elif not 0.0 <= bark_share <= 1.0:
+        raise LodBudgetError(f"bark share {bark_share!r} for LOD{level} is invalid: allowed a fraction in [0, 1]")
     sides = LOD_SIDES[level - 1]
     leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
     min_leaf_tris = leaf_tris_per_cluster if skeleton.n_leaves else 0
     bark_target = max(int(target * bark_share), 0)
     if skeleton.n_leaves:
         bark_target = min(bark_target, target - min_leaf_tris)
-    chosen = _fit_bark_by_tolerance(skeleton, sides, bark_target, metres_per_pixel(skeleton, int(switch_px)))
+    metres_per_px = metres_per_pixel(skeleton, int(switch_px))
+    chosen = _fit_bark_by_tolerance(skeleton, lods.node_keys, sides, bark_target, metres_per_px)
     if chosen is None:
         # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
         # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones
@@ -419,14 +389,15 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, swi
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
                              f"room for the trunk alone; raise the LOD{level} budget")
     simplified, original, leaf_anchor = chosen
-    simplified = _widened(simplified, sides)
-    bark = bark_part(simplified, sides, 3, thick_more=False)
+    branch_sides, coned = _branch_sides(simplified, sides, metres_per_px)
+    simplified = _widened(simplified, branch_sides)
+    bark = bark_part(simplified, min_segments=3, branch_sides=branch_sides, tip_cones=coned)
     leaf_budget = target - bark.n_faces
     n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
     if skeleton.n_leaves and n_clusters < 1:
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
                              f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
-    cards, card_node = cluster_leaves(skeleton.leaves, leaf_anchor, int(n_clusters))
+    cards, card_node = lods.leaf_cards.cluster(leaf_anchor, int(n_clusters))
     lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
                             leaves=cards, leaf_node=card_node)
     mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,

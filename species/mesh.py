@@ -143,16 +143,20 @@ def _branch_polylines(skeleton: Skeleton):
 
 
 def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments: int = 3,
-              thick_more: bool = True) -> MeshPart:
+              thick_more: bool = True, branch_sides: np.ndarray | None = None,
+              tip_cones: np.ndarray | None = None) -> MeshPart:
     """Bark: a tube per branch along rotation-minimizing frames, a cone at each tip, a disc under the root.
 
     The trunk's first ring is horizontal, so the bark never dips below the ground plane.
+    branch_sides : (B,) int per branch of `skeleton`, sides that override `by_order` (levels of detail);
+    tip_cones : (B,) bool, which branches end in a cone (default all; an open end of a sub-pixel twig shows
+    nothing, so far levels leave it out).
 
     Vertex layout: branches grouped by side count (ascending), then in branch order; per branch its rings
-    (S + 1 vertices each, the seam duplicated so u runs 0..repeat), then its tip apex; the root branch's
-    base centre comes last in its group. u = tiles around (round(circumference / 0.25 m), at least 1),
-    v = arc length / tile height (a tile is twice as tall as wide, like the bark texture), both continuous
-    along a branch.
+    (S + 1 vertices each, the seam duplicated so u runs 0..repeat), then the tip apices of the group's coned
+    branches; the root branch's base centre comes last in its group. u = tiles around (round(circumference /
+    0.25 m), at least 1), v = arc length / tile height (a tile is twice as tall as wide, like the bark
+    texture), both continuous along a branch.
     """
     points, radius, offsets, branch = _branch_polylines(skeleton)
     if len(branch) == 0:
@@ -167,7 +171,11 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     point_branch = np.repeat(np.arange(len(branch)), sizes)  # index into `branch`, per point
     order = skeleton.order[own_node].astype(np.int64)
     base_radius = radius[starts]
-    sides = radial_segments(order, base_radius, by_order, min_segments, thick_more)
+    if branch_sides is None:
+        sides = radial_segments(order, base_radius, by_order, min_segments, thick_more)
+    else:
+        sides = np.maximum(np.asarray(branch_sides, np.int64)[branch], min_segments)
+    coned = np.ones(len(branch), bool) if tip_cones is None else np.asarray(tip_cones, bool)[branch]
     repeat = np.maximum(1.0, np.round(2 * np.pi * base_radius / _BARK_TILE_WIDTH))
     tile_height = _BARK_TILE_ASPECT * 2 * np.pi * base_radius / repeat
     seg = np.zeros(len(points))
@@ -182,7 +190,7 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     for side_count in np.unique(sides):
         chosen = np.flatnonzero(sides == side_count)
         part = _tube_group(int(side_count), chosen, offsets, points, radius, tangent, normal, binormal,
-                           v_coord, repeat, tile_height, is_root=(own_node == 0))
+                           v_coord, repeat, tile_height, is_root=(own_node == 0), coned=coned)
         part["faces"] += vertex_base
         vertex_base += len(part["vertices"])
         part["order"] = order[chosen][part["local_branch"]].astype(np.uint8)
@@ -194,8 +202,9 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
 
 
 def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent, normal, binormal,
-                v_coord, repeat, tile_height, is_root) -> dict[str, np.ndarray]:
-    """Rings, tip cones and (for the root branch) the base disc of the branches `chosen`, all S-sided."""
+                v_coord, repeat, tile_height, is_root, coned) -> dict[str, np.ndarray]:
+    """Rings, tip cones (where `coned`) and (for the root branch) the base disc of the branches `chosen`, all
+    S-sided."""
     sizes = np.diff(offsets)[chosen]
     # Point indices of the chosen branches, in order.
     point_ids = np.repeat(offsets[chosen] - np.cumsum(np.concatenate([[0], sizes[:-1]])), sizes) + np.arange(sizes.sum())
@@ -222,27 +231,29 @@ def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent
     c, d = lower + ring_size + 1, lower + ring_size
     quads = np.stack([np.stack([a, b, c], -1), np.stack([a, c, d], -1)], axis=2).reshape(-1, 3)
 
-    # Tip cones: one apex per branch past its last ring.
+    # Tip cones: one apex past the last ring of each coned branch.
     n_ring_vertices = n_rings * ring_size
-    tip_point = point_ids[last_ring]
+    cone = np.flatnonzero(coned[chosen])
+    tip_point = point_ids[last_ring[cone]]
     tip_height = _TIP_CAP_HEIGHT * radius[tip_point]
     apex = points[tip_point] + tangent[tip_point] * tip_height[:, None]
-    apex_index = n_ring_vertices + np.arange(len(chosen))
-    ring_start = last_ring[:, None] * ring_size + np.arange(sides)[None, :]
+    apex_index = n_ring_vertices + np.arange(len(cone))
+    ring_start = last_ring[cone][:, None] * ring_size + np.arange(sides)[None, :]
     tip_faces = np.stack([ring_start, ring_start + 1, np.broadcast_to(apex_index[:, None], ring_start.shape)],
                          axis=-1).reshape(-1, 3)
-    apex_uv = np.stack([0.5 * repeat[chosen], v_coord[tip_point] + tip_height / tile_height[chosen]], axis=1)
+    apex_uv = np.stack([0.5 * repeat[chosen][cone], v_coord[tip_point] + tip_height / tile_height[chosen][cone]],
+                       axis=1)
 
     vertices = [ring_vertices.reshape(-1, 3), apex]
     normals = [direction.reshape(-1, 3), tangent[tip_point]]
     uvs = [ring_uvs.reshape(-1, 2), apex_uv]
     faces = [quads, tip_faces]
-    owners = [np.repeat(local_branch, ring_size), np.arange(len(chosen))]
+    owners = [np.repeat(local_branch, ring_size), cone]
 
     roots = np.flatnonzero(is_root[chosen])
     if len(roots):  # the trunk's bottom: a disc facing down, closing the tube at the ground
         first_ring = (np.cumsum(sizes) - sizes)[roots]
-        centre_index = n_ring_vertices + len(chosen) + np.arange(len(roots))
+        centre_index = n_ring_vertices + len(cone) + np.arange(len(roots))
         rim = first_ring[:, None] * ring_size + np.arange(sides)[None, :]
         faces.append(np.stack([rim + 1, rim, np.broadcast_to(centre_index[:, None], rim.shape)],
                               axis=-1).reshape(-1, 3))

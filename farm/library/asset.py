@@ -178,10 +178,10 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import render_impostor
     from species.collision import collision_capsules
-    from species.lod import build_lod
     from species.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 
     from ..tree_chain import stage_rngs
+    from .lod_fit import fit_lods
 
     sample_rng, _ = stage_rngs(seed)
     ident = asset_id(species_name, seed)
@@ -190,22 +190,21 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
     with timer.stage("grow"):
         skeleton = species.grow(params, species.rng_for(params))
         lod0 = species.build_mesh(skeleton, {**params, "name": ident})
+    with timer.stage("textures"):  # cached per species, colour and size: most assets hit the cache
+        maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
+        atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
+                   for season in SEASONS if season != "bare"}
+        lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("lods"):
-        lods = [build_lod(skeleton, lod0, level, budget, int(px))
-                for level, (budget, px) in enumerate(zip(spec.lod_budgets, spec.switch_px), 1)]
+        lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
+        lods = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, card_fraction)
     with timer.stage("wind"):
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
         for lod, px in zip(lods, spec.switch_px):
             levels.append(LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
                                     *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px)))
         capsules = collision_capsules(skeleton)
-    with timer.stage("textures"):  # cached per species, colour and size: most assets hit the cache
-        maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
-        atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)
-                   for season in SEASONS if season != "bare"}
-        lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("impostor"):
-        lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
         atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)

@@ -100,3 +100,50 @@ def test_a_switch_size_out_of_range_is_rejected_with_its_value(switch_px):
     skeleton, lod0 = _tree("maple", 0)
     with pytest.raises(LodBudgetError, match="switch size"):
         build_lod(skeleton, lod0, 1, 0.4, switch_px)
+
+
+def test_branches_thinner_than_two_pixels_at_the_switch_are_bare_three_sided_tubes():
+    from species.lod import THICK_BRANCH_PX, metres_per_pixel
+
+    skeleton, lod0 = _tree("sassafras", 0)
+    lod = build_lod(skeleton, lod0, 2, 0.12, 256)
+    simplified, bark = lod.skeleton, lod.mesh.bark
+    branch = bark.attributes["branch"]
+    # Widening only raises radii: a branch drawn at most 2 px wide started thinner than that before it.
+    thin = 2 * simplified.radius[simplified.branch_starts] < THICK_BRANCH_PX * metres_per_pixel(skeleton, 256)
+    meshed = np.unique(branch)
+    thin_meshed = meshed[thin[meshed]]
+    assert len(thin_meshed) > 10
+    for b in thin_meshed[:40]:
+        assert (branch == b).sum() % 4 == 0  # rings of 3 sides + seam, no apex
+
+
+def test_the_bark_share_moves_triangles_between_bark_and_leaf_cards():
+    skeleton, lod0 = _tree("maple", 0)
+    lean, heavy = (build_lod(skeleton, lod0, 1, 0.40, 512, bark_share=share) for share in (0.1, 0.8))
+    assert lean.mesh.bark.n_faces < heavy.mesh.bark.n_faces
+    assert lean.mesh.leaves.n_faces > heavy.mesh.leaves.n_faces
+    for lod in (lean, heavy):
+        assert lod.n_triangles <= 0.40 * lod0.n_faces
+
+
+@pytest.mark.parametrize("share", [-0.1, 1.5])
+def test_a_bark_share_outside_zero_to_one_is_rejected_with_its_value(share):
+    from species.lod import LodBudgetError
+
+    skeleton, lod0 = _tree("maple", 0)
+    with pytest.raises(LodBudgetError, match=str(share)):
+        build_lod(skeleton, lod0, 1, 0.4, 512, bark_share=share)
+
+
+def test_a_kept_branch_always_keeps_the_branch_it_grows_from():
+    from species.lod import _heap_ordered
+
+    # 0 <- 1 <- 2 <- 3 and 0 <- 4: a small parent caps everything beyond it
+    parent = np.array([-1, 0, 1, 2, 0])
+    capped = _heap_ordered(np.array([9.0, 2.0, 5.0, 1.0, 7.0]), parent)
+    np.testing.assert_array_equal(capped, [9.0, 2.0, 2.0, 1.0, 7.0])
+    rng = np.random.default_rng(4)
+    parent = np.concatenate([[-1], rng.integers(0, np.arange(1, 300))])
+    capped = _heap_ordered(rng.uniform(size=300), parent)
+    assert np.all(capped[1:] <= capped[parent[1:]])

@@ -211,3 +211,29 @@ def test_same_skeleton_gives_identical_arrays(random_skeleton, random_mesh):
     for a, b in ((random_mesh.bark, again.bark), (random_mesh.leaves, again.leaves)):
         for name in ("vertices", "faces", "normals", "uvs"):
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+
+
+def test_branches_without_tip_cones_lose_exactly_their_cone_faces_and_apex(random_skeleton):
+    from species.mesh import bark_part
+
+    n_branches = random_skeleton.n_branches
+    sides = np.full(n_branches, 3)
+    coned = bark_part(random_skeleton, branch_sides=sides)
+    no_cone = np.arange(n_branches) % 2 == 1
+    bare = bark_part(random_skeleton, branch_sides=sides, tip_cones=~no_cone)
+    meshed = np.unique(coned.attributes["branch"])
+    dropped = np.isin(meshed, np.flatnonzero(no_cone)).sum()
+    assert coned.n_faces - bare.n_faces == 3 * dropped
+    assert coned.n_vertices - bare.n_vertices == dropped
+
+
+def test_branch_sides_override_the_sides_by_order(random_skeleton):
+    from species.mesh import bark_part
+
+    sides = np.where(np.arange(random_skeleton.n_branches) % 3 == 0, 5, 3)
+    bark = bark_part(random_skeleton, branch_sides=sides)
+    branch = bark.attributes["branch"]
+    # every ring has S + 1 vertices (seam duplicated): a branch's vertex count minus its apex is a multiple
+    for b in np.unique(branch)[:50]:
+        ring_vertices = (branch == b).sum() - 1 - (b == 0)  # apex, and the root's base centre
+        assert ring_vertices % (sides[b] + 1) == 0

@@ -1,0 +1,73 @@
+"""Levels of detail fitted to the tree they simplify: each level's triangle budget is split between bark and leaf
+cards in the proportion whose silhouette comes closest to LOD0's, seen from azimuths the quality figures never use.
+
+In: skeleton, LOD0 TreeMesh and its coverage tree, the spec's budgets and switch sizes, the process's
+CoverageRenderer, the cluster cards' opaque share. Out: one `species.lod.LodLevel` per budget.
+"""
+from __future__ import annotations
+
+__all__ = ["fit_lods", "BARK_SHARE_SCALES", "CALIBRATION_AZIMUTHS"]
+
+# Candidate bark shares of a level's budget, as multiples of LOD0's bark share. A simplified branch draws more
+# silhouette per triangle than a merged leaf card on a sparse crown and less on a dense one, and leaf cards gain
+# on coarser levels, so no single proportion suits every tree and level (measured over the 45 presets with
+# 0.25-1.0: LOD1 mostly takes 0.75, LOD2 and LOD3 mostly 0.25-0.5, needle trees 1.0).
+BARK_SHARE_SCALES = (0.125, 0.25, 0.5, 0.75, 1.0)
+# Where the search starts on that ladder for LOD1; each coarser level starts where the one before ended.
+_FIRST_SCALE = 0.75
+# Azimuths (degrees) the split is judged from: a quarter turn apart, and 22.5 deg off both the quality
+# azimuths (renderers.impostor.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test.
+CALIBRATION_AZIMUTHS = (33.75, 123.75)
+
+
+def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_fraction: float) -> list:
+    """One LodLevel per (budget, switch size), its bark share chosen on BARK_SHARE_SCALES x LOD0's share by
+    the highest least IoU against LOD0 over CALIBRATION_AZIMUTHS at the level's switch size: a climb from the
+    previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better, so a level costs
+    about three builds, not one per scale. Budgets LOD0's own proportion cannot meet raise LodBudgetError as
+    `build_lod` does; other shares that cannot be met are skipped."""
+    from renderers.alpha_coverage import coverage_tree
+    from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
+    from species.lod import LodBudgetError, TreeLods
+
+    from .asset import framing_points
+
+    lods = TreeLods(skeleton, lod0)
+    lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
+    points = framing_points(lod0)
+    start = BARK_SHARE_SCALES.index(_FIRST_SCALE)
+    levels = []
+    for level, (budget, px) in enumerate(zip(budgets, switch_px), 1):
+        px = int(px)
+        cameras = [switch_camera(points, azimuth, px) for azimuth in CALIBRATION_AZIMUTHS]
+        references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
+        tried: dict[int, tuple[float, object]] = {}
+
+        def score(index: int) -> float:
+            if index not in tried:
+                scale = BARK_SHARE_SCALES[index]
+                try:
+                    lod = lods.build(level, budget, px, bark_share=None if scale == 1.0 else scale * lod0_share)
+                except LodBudgetError:
+                    if scale == 1.0:
+                        raise  # LOD0's own proportion is the reference: its failure is the budget's
+                    tried[index] = (-1.0, None)
+                    return -1.0
+                cover = coverage_tree(lod.mesh, card_fraction)
+                tried[index] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
+                                    for reference, camera in zip(references, cameras)), lod)
+            return tried[index][0]
+
+        best = start
+        while True:
+            neighbours = [i for i in (best - 1, best + 1) if 0 <= i < len(BARK_SHARE_SCALES)]
+            better = [i for i in neighbours if score(i) > score(best)]
+            if not better:
+                break
+            best = max(better, key=score)
+        if tried[best][1] is None:  # nothing but LOD0's proportion could be built
+            score(BARK_SHARE_SCALES.index(1.0))
+            best = BARK_SHARE_SCALES.index(1.0)
+        levels.append(tried[best][1])
+        start = best
+    return levels
