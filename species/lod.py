@@ -249,14 +249,20 @@ def _branch_sides(skeleton: Skeleton, sides_by_order, metres_per_px: float) -> t
     return sides.astype(np.int64), thick
 
 
-def _heap_ordered(value: np.ndarray, parent: np.ndarray) -> np.ndarray:
-    """(B,) float64: each branch's value capped by every ancestor's (parent (B,) int, -1 at the root), so keeping
-    the largest values first never keeps a branch without the one it grows from."""
+def _subtree_maximum(value: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(B,) float64: the largest value in each branch's subtree (itself and every branch growing from it, parent
+    (B,) int, -1 at the root), so ranking by it puts a branch before everything on it: keeping the largest
+    first never keeps a branch without the one it grows from, nor drops a stub that carries a long limb."""
     value = np.asarray(value, np.float64).copy()
-    ancestor = np.asarray(parent, np.int64).copy()
-    while (live := ancestor >= 0).any():  # pointer jumping: after k passes, the minimum over 2^k ancestors
-        value[live] = np.minimum(value[live], value[ancestor[live]])
-        ancestor[live] = ancestor[ancestor[live]]
+    parent = np.asarray(parent, np.int64)
+    depth = np.zeros(len(parent), np.int64)
+    ancestor = parent.copy()
+    while (live := ancestor >= 0).any():
+        depth[live] += 1
+        ancestor[live] = parent[ancestor[live]]
+    for level in range(int(depth.max(initial=0)), 0, -1):  # deepest first: one pass per branching depth
+        at = np.flatnonzero(depth == level)
+        np.maximum.at(value, parent[at], value[at])
     return value
 
 
@@ -267,11 +273,11 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
 
     For each tolerance of the ladder (up to _MAX_WEIGHED_TOLERANCE_PX), every branch keeps the nodes
     Douglas-Peucker needs to stay within it (THICK_TOLERANCE_PX for thick branches), and the branches are kept
-    in order of the area they draw on screen (length x width, at least one pixel wide; never a branch without
-    its parent) until the budget is spent. The error of a choice is the area of the dropped branches plus,
-    per kept branch, its length x the largest offset its dropped nodes had (at most its width: a thin line
-    moved off costs its own width); the tolerance with the least error wins (the finest on ties). keys: (N,)
-    float64 metres, `_node_keys(skeleton)`.
+    in order of the largest area drawn on screen in their subtree (length x width, at least one pixel wide),
+    until the budget is spent. The error of a choice is the area of the dropped branches plus, per kept
+    branch, its length x the largest offset its dropped nodes had (at most its width: a thin line moved off
+    costs its own width); the tolerance with the least error wins (the finest on ties). keys: (N,) float64
+    metres, `_node_keys(skeleton)`.
     """
     starts = skeleton.branch_starts
     sides, coned = _branch_sides(skeleton, sides_by_order, metres_per_px)
@@ -280,7 +286,7 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
     area = length_px * width_px
     parent = _branch_parent(skeleton)
     area[0] = np.inf  # the trunk always stays
-    rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -_heap_ordered(area, parent)))
+    rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -_subtree_maximum(area, parent)))
     area[0] = 0.0
     junction = skeleton.parent[starts]
     limit_px = np.where(width_px >= THICK_BRANCH_PX, THICK_TOLERANCE_PX, np.inf)
