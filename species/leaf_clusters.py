@@ -9,14 +9,15 @@ import numpy as np
 
 from .skeleton import LEAF_CARD_CORNERS
 
-__all__ = ["LeafCards", "cluster_leaves"]
+__all__ = ["LeafCards", "cluster_leaves", "CLUSTER_AREA_GAIN"]
 
 # Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
 _SPREAD_SPAN = 2.0 * np.sqrt(3.0)
-# A cluster card covers this many times its leaves' estimated covered area (within their spread): from afar the
-# gaps between a cluster's leaves close, so its outline is more than its leaf area (measured: 1.5 raises the
-# LOD1/LOD2 min IoU of maple .899 -> .911 / .866 -> .880 and pine .885 -> .896 / .856 -> .882; 2.5 overshoots).
-_CLUSTER_AREA_GAIN = 1.5
+# By default a cluster card covers this many times its leaves' estimated covered area (within their spread): from
+# afar the gaps between a cluster's leaves close, so its outline is more than its leaf area (measured: 1.5 raises
+# the LOD1/LOD2 min IoU of maple .899 -> .911 / .866 -> .880 and pine .885 -> .896 / .856 -> .882; as one value
+# for 12 presets it still beats 1.0, 1.25 and 2.0 once each level's bark share is fitted).
+CLUSTER_AREA_GAIN = 1.5
 # Grid cell sizes tried: the finest (span / 4096) times this factor to an integer power.
 _CELL_STEP = 1.02
 _FINEST_CELL = 1.0 / 4096
@@ -74,14 +75,15 @@ class LeafCards:
         _, labels = np.unique(self._cell_keys(step), return_inverse=True)
         return labels.astype(np.int64), self._cell_size(step)
 
-    def cluster(self, anchor: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
+    def cluster(self, anchor: np.ndarray, n_clusters: int,
+                area_gain: float = CLUSTER_AREA_GAIN) -> tuple[np.ndarray, np.ndarray]:
         """Merge the leaves into at most `n_clusters` larger cards on a voxel grid (one card per occupied cell).
 
         anchor : (M,) int, node of each leaf. Returns (transforms (C, 4, 4) float32, card_node (C,) int32). A
         cluster's card takes the orientation and node of its leaf nearest the cluster centre, is centred on the
         cluster, and is scaled so its area is the area the members cover together: sum of areas x
         (1 - exp(-d)) / d, with d their projected area (half their area, random orientation) over the cell's
-        face. A cluster of one leaf is that leaf.
+        face, x `area_gain` (never beyond the members' spread). A cluster of one leaf is that leaf.
         """
         m = len(self)
         if m == 0 or n_clusters <= 0:
@@ -104,7 +106,8 @@ class LeafCards:
         cards = self.leaves[representative].copy()
         merged = count[labels] > 1
         if merged.any():
-            fitted = _fitted_cards(self.corners[merged].reshape(-1, 3), np.repeat(labels[merged], 4), n, covered)
+            fitted = _fitted_cards(self.corners[merged].reshape(-1, 3), np.repeat(labels[merged], 4), n,
+                                   area_gain * covered)
             many = count > 1
             cards[many] = fitted[many]
         card_node = np.asarray(anchor)[representative]
@@ -130,9 +133,8 @@ def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarr
     variance, axes = np.linalg.eigh(cov)  # ascending: axes[:, :, 2] the principal axis
     span = _SPREAD_SPAN * np.sqrt(np.maximum(variance, 0.0))
     length, width = np.maximum(span[:, 2], 1e-4), np.maximum(span[:, 1], 1e-4)
-    # The card's area is the area the leaves cover (`area`, x _CLUSTER_AREA_GAIN), in the spread's proportions,
-    # never beyond the spread.
-    shrink = np.minimum(np.sqrt(_CLUSTER_AREA_GAIN * area / (length * width)), 1.0)
+    # The card's area is `area`, in the spread's proportions, never beyond the spread.
+    shrink = np.minimum(np.sqrt(area / (length * width)), 1.0)
     length, width = length * shrink, width * shrink
     along, across, normal = axes[:, :, 2], axes[:, :, 1], axes[:, :, 0]
     # Right-handed (width, normal, length) as the unit card's (x, y, z).

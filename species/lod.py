@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import TreefarmError
 from .mesh import DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
-from .leaf_clusters import LeafCards
+from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
 from .polyline_simplify import simplification_keys
 from .skeleton import Skeleton
 from .tree_mesh import TreeMesh
@@ -340,26 +340,28 @@ class TreeLods:
     def leaf_cards(self) -> LeafCards:
         return LeafCards(self.skeleton.leaves)
 
-    def build(self, level: int, budget: float, switch_px: int | None = None,
-              bark_share: float | None = None) -> LodLevel:
+    def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
+              card_area_gain: float = CLUSTER_AREA_GAIN) -> LodLevel:
         """`build_lod` of this tree."""
-        return _build(self, level, budget, switch_px, bark_share)
+        return _build(self, level, budget, switch_px, bark_share, card_area_gain)
 
 
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None,
-              bark_share: float | None = None) -> LodLevel:
+              bark_share: float | None = None, card_area_gain: float = CLUSTER_AREA_GAIN) -> LodLevel:
     """Level `level` (1..3) of detail within `budget` (fraction of LOD0 triangles), for viewing at `switch_px`
     pixels of tree size (default LOD_SWITCH_PX[level - 1]).
 
     The bark gets `bark_share` of the budget (default: its share of LOD0's triangles) and draws it with the
     least estimated silhouette error (see `_fit_bark_by_tolerance`): Douglas-Peucker nodes within a screen
-    tolerance, branches kept by the area they draw. The leaves get the rest of the budget as cluster cards.
-    Raises LodBudgetError when nothing fits.
+    tolerance, branches kept by the area they draw. The leaves get the rest of the budget as cluster cards,
+    each `card_area_gain` times the area its leaves cover (see `species.leaf_clusters`). Raises LodBudgetError
+    when nothing fits.
     """
-    return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share)
+    return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share, card_area_gain)
 
 
-def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bark_share: float | None) -> LodLevel:
+def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bark_share: float | None,
+           card_area_gain: float) -> LodLevel:
     skeleton, lod0 = lods.skeleton, lods.lod0
     if not 1 <= level <= len(LOD_SIDES):
         raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
@@ -375,6 +377,8 @@ def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bar
         bark_share = lod0.bark.n_faces / max(total0, 1)
     elif not 0.0 <= bark_share <= 1.0:
         raise LodBudgetError(f"bark share {bark_share!r} for LOD{level} is invalid: allowed a fraction in [0, 1]")
+    if not card_area_gain > 0:
+        raise LodBudgetError(f"card area gain {card_area_gain!r} for LOD{level} is invalid: allowed a number > 0")
     sides = LOD_SIDES[level - 1]
     leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
     min_leaf_tris = leaf_tris_per_cluster if skeleton.n_leaves else 0
@@ -403,7 +407,7 @@ def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bar
     if skeleton.n_leaves and n_clusters < 1:
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
                              f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
-    cards, card_node = lods.leaf_cards.cluster(leaf_anchor, int(n_clusters))
+    cards, card_node = lods.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
     lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
                             leaves=cards, leaf_node=card_node)
     mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,

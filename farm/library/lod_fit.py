@@ -6,7 +6,7 @@ CoverageRenderer, the cluster cards' opaque share. Out: one `species.lod.LodLeve
 """
 from __future__ import annotations
 
-__all__ = ["fit_lods", "BARK_SHARE_SCALES", "CALIBRATION_AZIMUTHS"]
+__all__ = ["fit_lods", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share. A simplified branch draws more
 # silhouette per triangle than a merged leaf card on a sparse crown and less on a dense one, and leaf cards gain
@@ -15,6 +15,9 @@ __all__ = ["fit_lods", "BARK_SHARE_SCALES", "CALIBRATION_AZIMUTHS"]
 BARK_SHARE_SCALES = (0.125, 0.25, 0.5, 0.75, 1.0)
 # Where the search starts on that ladder for LOD1; each coarser level starts where the one before ended.
 _FIRST_SCALE = 0.75
+# Candidate area gains of the cluster cards (species.leaf_clusters.CLUSTER_AREA_GAIN is the default): how much of
+# the gap between a cluster's leaves its card fills depends on how many pixels the leaves span at the switch size.
+CARD_AREA_GAINS = (0.75, 1.0, 1.5, 2.25, 3.5)
 # Azimuths (degrees) the split is judged from: 22.5 deg off both the quality azimuths
 # (renderers.impostor.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test. One view
 # chose the same shares as two perpendicular ones on 10 presets (min IoU within 0.003) at 60 % of the cost.
@@ -22,13 +25,15 @@ CALIBRATION_AZIMUTHS = (33.75,)
 
 
 def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_fraction: float) -> list:
-    """One LodLevel per (budget, switch size), its bark share chosen on BARK_SHARE_SCALES x LOD0's share by
-    the highest least IoU against LOD0 over CALIBRATION_AZIMUTHS at the level's switch size: a climb from the
-    previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better, so a level costs
-    about three builds, not one per scale. Budgets LOD0's own proportion cannot meet raise LodBudgetError as
+    """One LodLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
+    CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
+    share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
+    at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same way. A level
+    costs about five builds, not one per pair. Budgets LOD0's own proportion cannot meet raise LodBudgetError as
     `build_lod` does; other shares that cannot be met are skipped."""
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
+    from species.leaf_clusters import CLUSTER_AREA_GAIN
     from species.lod import LodBudgetError, TreeLods
 
     from .asset import framing_points
@@ -36,39 +41,48 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_frac
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
     points = framing_points(lod0)
+    full_share = BARK_SHARE_SCALES.index(1.0)
+    default_gain = CARD_AREA_GAINS.index(CLUSTER_AREA_GAIN)
     start = BARK_SHARE_SCALES.index(_FIRST_SCALE)
     levels = []
     for level, (budget, px) in enumerate(zip(budgets, switch_px), 1):
         px = int(px)
         cameras = [switch_camera(points, azimuth, px) for azimuth in CALIBRATION_AZIMUTHS]
         references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
-        tried: dict[int, tuple[float, object]] = {}
+        tried: dict[tuple[int, int], tuple[float, object]] = {}
 
-        def score(index: int) -> float:
-            if index not in tried:
-                scale = BARK_SHARE_SCALES[index]
+        def score(share: int, gain: int) -> float:
+            if (share, gain) not in tried:
+                scale = BARK_SHARE_SCALES[share]
                 try:
-                    lod = lods.build(level, budget, px, bark_share=None if scale == 1.0 else scale * lod0_share)
+                    lod = lods.build(level, budget, px, bark_share=None if share == full_share else scale * lod0_share,
+                                     card_area_gain=CARD_AREA_GAINS[gain])
                 except LodBudgetError:
-                    if scale == 1.0:
+                    if share == full_share:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
-                    tried[index] = (-1.0, None)
+                    tried[share, gain] = (-1.0, None)
                     return -1.0
                 cover = coverage_tree(lod.mesh, card_fraction)
-                tried[index] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
-                                    for reference, camera in zip(references, cameras)), lod)
-            return tried[index][0]
+                tried[share, gain] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
+                                          for reference, camera in zip(references, cameras)), lod)
+            return tried[share, gain][0]
 
-        best = start
-        while True:
-            neighbours = [i for i in (best - 1, best + 1) if 0 <= i < len(BARK_SHARE_SCALES)]
-            better = [i for i in neighbours if score(i) > score(best)]
-            if not better:
-                break
-            best = max(better, key=score)
-        if tried[best][1] is None:  # nothing but LOD0's proportion could be built
-            score(BARK_SHARE_SCALES.index(1.0))
-            best = BARK_SHARE_SCALES.index(1.0)
-        levels.append(tried[best][1])
-        start = best
+        share = _climb(lambda index: score(index, default_gain), start, len(BARK_SHARE_SCALES))
+        if tried[share, default_gain][1] is None:  # nothing but LOD0's proportion could be built
+            score(full_share, default_gain)
+            share = full_share
+        gain = _climb(lambda index: score(share, index), default_gain, len(CARD_AREA_GAINS))
+        levels.append(tried[share, gain][1])
+        start = share
     return levels
+
+
+def _climb(score, start: int, count: int) -> int:
+    """The index in [0, count) reached from `start` by moving to the better-scoring neighbour while one scores
+    higher (strictly: ties stay)."""
+    best = start
+    while True:
+        better = [i for i in (best - 1, best + 1) if 0 <= i < count and score(i) > score(best)]
+        if not better:
+            return best
+        best = max(better, key=score)

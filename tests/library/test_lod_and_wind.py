@@ -148,3 +148,24 @@ def test_branches_rank_by_the_largest_value_in_their_subtree():
     value = rng.uniform(size=300)
     ranked = _subtree_maximum(value, parent)
     assert np.all(ranked >= value) and np.all(ranked[1:] <= ranked[parent[1:]])
+
+
+def test_a_larger_card_area_gain_gives_larger_cluster_cards_within_the_same_budget():
+    skeleton, lod0 = _tree("maple", 0)
+    small, large = (build_lod(skeleton, lod0, 3, 0.04, 128, card_area_gain=gain) for gain in (1.0, 3.0))
+    assert small.n_triangles == large.n_triangles <= 0.04 * lod0.n_faces
+
+    def areas(lod):
+        corners = lod.skeleton.leaf_corners().astype(np.float64)
+        return np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 3] - corners[:, 0]), axis=1)
+
+    assert areas(large).sum() > areas(small).sum()
+    assert np.all(areas(large) >= areas(small) * (1 - 1e-6))
+
+
+def test_a_card_area_gain_that_is_not_positive_is_rejected_with_its_value():
+    from species.lod import LodBudgetError
+
+    skeleton, lod0 = _tree("maple", 0)
+    with pytest.raises(LodBudgetError, match="card area gain 0"):
+        build_lod(skeleton, lod0, 1, 0.4, 512, card_area_gain=0.0)
