@@ -305,9 +305,9 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
     """Render a tree's impostor atlas: for each plane an orthographic view along its normal of the slice of the
     tree nearest that plane (the faces within 90 / planes degrees of azimuth of it, the trunk and the axis in
     every plane), giving albedo (bark or leaf colour by the rendered mask, sRGB), alpha (coverage, grown by
-    one texel) and tangent-space normals (from the rendered depth). Slicing puts every part of the crown on
-    one plane only, so a view between planes sees the crown once, not the union of every plane's whole view
-    (which fills in a sparse crown). The slices are uploaded once, two depth-only passes (bark, leaves) per
+    _ALPHA_DILATE_TEXELS texels) and tangent-space normals (from the rendered depth). Slicing puts every part of
+    the crown on one plane only, so a view between planes sees the crown once, not the union of every plane's
+    whole view (which fills in a sparse crown). The slices are uploaded once, two depth-only passes (bark, leaves) per
     plane. `renderer` is the process's CoverageRenderer."""
     if not 8 <= tile <= 2048:
         raise ImpostorError(f"impostor tile {tile} px is invalid: allowed 8..2048")

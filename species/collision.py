@@ -44,7 +44,7 @@ def collision_capsules(skeleton: Skeleton) -> np.ndarray:
 
 
 def capsule_mesh(capsules: np.ndarray, sides: int = 6) -> MeshPart:
-    """A low-poly mesh of the capsules (each a closed `sides`-sided prism with pointed caps), normals outward."""
+    """A low-poly mesh of the capsules (each a closed `sides`-sided capsule with rounded caps), normals outward."""
     import trimesh
 
     meshes = []

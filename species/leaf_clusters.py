@@ -80,10 +80,11 @@ class LeafCards:
         """Merge the leaves into at most `n_clusters` larger cards on a voxel grid (one card per occupied cell).
 
         anchor : (M,) int, node of each leaf. Returns (transforms (C, 4, 4) float32, card_node (C,) int32). A
-        cluster's card takes the orientation and node of its leaf nearest the cluster centre, is centred on the
-        cluster, and is scaled so its area is the area the members cover together: sum of areas x
-        (1 - exp(-d)) / d, with d their projected area (half their area, random orientation) over the cell's
-        face, x `area_gain` (never beyond the members' spread). A cluster of one leaf is that leaf.
+        cluster's card hangs from the node of its leaf nearest the cluster centre; it is centred on the
+        members, lies along their two widest spreads (`_fitted_cards`), and its area is the area the members
+        cover together: sum of areas x (1 - exp(-d)) / d, with d their projected area (half their area, random
+        orientation) over the cell's face, x `area_gain` (never beyond the members' spread). A cluster of one
+        leaf is that leaf.
         """
         m = len(self)
         if m == 0 or n_clusters <= 0:

@@ -1,5 +1,5 @@
 """Levels of detail built from the skeleton, as a tree artist would: fewer sides, fewer rings, short twigs
-dropped (their leaves handed to the parent branch), leaves merged into larger crossed cluster cards.
+dropped (their leaves handed to the parent branch), leaves merged into larger cluster cards.
 
 In: a Skeleton, its LOD0 TreeMesh and a triangle budget (fraction of LOD0). Out: a `LodLevel` (simplified
 skeleton whose `leaves` are the cluster cards, its TreeMesh, and which original node each kept node was).

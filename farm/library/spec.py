@@ -41,7 +41,7 @@ class LibrarySpec(ShardedCounts):
                     take over; strictly decreasing, one more than lod_budgets.
     formats       : files written per asset (glb, usd, obj, fbx, collision) and per species (blend).
     texture_size  : bark texture height in pixels (leaf atlas tiles are half of it).
-    impostor_tile : pixels per impostor atlas tile (4 tiles).
+    impostor_tile : pixels per impostor atlas tile (one tile per plane: 8 tiles in 4 columns).
     shard_size    : assets per shard; resources: Ray resources per worker actor.
     """
 
