@@ -105,9 +105,8 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
             put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
     if "obj" in spec.formats:
         with timer.stage("obj"):
-            for name, data in asset.lod0.to_obj().items():
-                put("obj" if name.endswith(".obj") else f"obj_{name.rsplit('.', 1)[-1]}_{len(kinds)}",
-                    f"obj/{name}", data)
+            for name, data in asset.lod0.to_obj().items():  # side files keyed by their own name: stable keys
+                put("obj" if name.endswith(".obj") else f"obj_{name}", f"obj/{name}", data)
     if "collision" in spec.formats:
         from species.collision import capsule_mesh
 

@@ -50,6 +50,14 @@ def test_every_asset_is_catalogued_with_its_files(library):
     assert farm_main(["library", "validate", str(library)]) == 0
 
 
+def test_every_written_file_has_its_size_recorded_under_a_key_naming_it(library):
+    for record_path in (library / "assets").glob("*/asset.json"):
+        record = json.loads(record_path.read_text())
+        obj_side_files = {path.rsplit("/", 1)[-1] for path in record["all_files"]
+                          if "/obj/" in path and not path.endswith(".obj")}
+        assert obj_side_files and {f"obj_{name}" for name in obj_side_files} <= set(record["sizes"])
+
+
 def test_every_glb_passes_the_khronos_validator_and_loads_in_trimesh(library, tmp_path):
     import trimesh
 
