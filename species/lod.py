@@ -207,7 +207,7 @@ def _branch_triangles(skeleton: Skeleton, keep: np.ndarray, sides: np.ndarray, c
     return np.where(counts >= 2, costs, 0)
 
 
-def _fit_bark(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_step: int, variants):
+def _fit_bark_by_steps(skeleton: Skeleton, sides, bark_target: int, first_step: int, max_step: int, variants):
     """The first (simplified skeleton, original_node, leaf_anchor) whose bark estimate fits `bark_target`,
     trying node steps from `first_step` doubling up to `max_step`, each with the prune ladder under each
     (max_order, clones) variant; None when nothing fits."""
@@ -331,6 +331,7 @@ class TreeLods:
 
     def __init__(self, skeleton: Skeleton, lod0: TreeMesh):
         self.skeleton, self.lod0 = skeleton, lod0
+        self.barks: dict[tuple, tuple] = {}  # (level, target, switch px, bark share) -> fitted bark
 
     @cached_property
     def node_keys(self) -> np.ndarray:
@@ -379,29 +380,11 @@ def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bar
         raise LodBudgetError(f"bark share {bark_share!r} for LOD{level} is invalid: allowed a fraction in [0, 1]")
     if not card_area_gain > 0:
         raise LodBudgetError(f"card area gain {card_area_gain!r} for LOD{level} is invalid: allowed a number > 0")
-    sides = LOD_SIDES[level - 1]
+    key = (level, target, int(switch_px), float(bark_share))
+    if key not in lods.barks:  # the bark does not depend on the cards' gain: fitted once per share
+        lods.barks[key] = _fit_bark(lods, level, budget, target, int(switch_px), bark_share)
+    simplified, original, leaf_anchor, bark = lods.barks[key]
     leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
-    min_leaf_tris = leaf_tris_per_cluster if skeleton.n_leaves else 0
-    bark_target = max(int(target * bark_share), 0)
-    if skeleton.n_leaves:
-        bark_target = min(bark_target, target - min_leaf_tris)
-    metres_per_px = metres_per_pixel(skeleton, int(switch_px))
-    chosen = _fit_bark_by_tolerance(skeleton, lods.node_keys, sides, bark_target, metres_per_px)
-    if chosen is None:
-        # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
-        # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones
-        # pruned like branches; the leaves go into the few cluster cards left.
-        sides = (3,) * len(sides)
-        bark_target = target - min_leaf_tris
-        chosen = _fit_bark(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1],
-                           max(_MAX_NODE_STEP, int(skeleton.depth.max()) + 1), ((1, False), (1, True)))
-    if chosen is None:
-        raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
-                             f"room for the trunk alone; raise the LOD{level} budget")
-    simplified, original, leaf_anchor = chosen
-    branch_sides, coned = _branch_sides(simplified, sides, metres_per_px)
-    simplified = _widened(simplified, branch_sides)
-    bark = bark_part(simplified, min_segments=3, branch_sides=branch_sides, tip_cones=coned)
     leaf_budget = target - bark.n_faces
     n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
     if skeleton.n_leaves and n_clusters < 1:
@@ -413,3 +396,32 @@ def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bar
     mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,
                     leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
     return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
+
+
+def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px: int, bark_share: float):
+    """(simplified skeleton widened, original_node, leaf_anchor, bark MeshPart) of a level whose bark may take
+    `bark_share` of `target` triangles, leaving at least one card for the leaves; LodBudgetError if nothing fits."""
+    skeleton, total0 = lods.skeleton, lods.lod0.n_faces
+    sides = LOD_SIDES[level - 1]
+    min_leaf_tris = 2 * CARDS_PER_CLUSTER if skeleton.n_leaves else 0
+    bark_target = max(int(target * bark_share), 0)
+    if skeleton.n_leaves:
+        bark_target = min(bark_target, target - min_leaf_tris)
+    metres_per_px = metres_per_pixel(skeleton, switch_px)
+    chosen = _fit_bark_by_tolerance(skeleton, lods.node_keys, sides, bark_target, metres_per_px)
+    if chosen is None:
+        # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
+        # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones
+        # pruned like branches; the leaves go into the few cluster cards left.
+        sides = (3,) * len(sides)
+        bark_target = target - min_leaf_tris
+        chosen = _fit_bark_by_steps(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1],
+                                    max(_MAX_NODE_STEP, int(skeleton.depth.max()) + 1), ((1, False), (1, True)))
+    if chosen is None:
+        raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
+                             f"room for the trunk alone; raise the LOD{level} budget")
+    simplified, original, leaf_anchor = chosen
+    branch_sides, coned = _branch_sides(simplified, sides, metres_per_px)
+    simplified = _widened(simplified, branch_sides)
+    bark = bark_part(simplified, min_segments=3, branch_sides=branch_sides, tip_cones=coned)
+    return simplified, original, leaf_anchor, bark
