@@ -88,23 +88,22 @@ def combine_parts(parts: PartDepths) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def normals_from_depth(camera: Camera, depth: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8 surface normals from a depth map, in camera axes (x right, y down, z forward) mapped from
     [-1, 1] to [0, 255], facing the camera; background (depth 0) is 0."""
-    h, w = depth.shape
-    v, u = np.mgrid[0:h, 0:w].astype(np.float32)
     fx, fy = camera.K[0, 0], camera.K[1, 1]
     cx, cy = camera.K[0, 2], camera.K[1, 2]
     z = depth.astype(np.float32)
+    u = ((np.arange(z.shape[1], dtype=np.float32) - cx) / fx)[None, :]
+    v = ((np.arange(z.shape[0], dtype=np.float32) - cy) / fy)[:, None]
     if camera.is_orthographic:
-        x, y = (u - cx) / fx, (v - cy) / fy
+        x, y = np.broadcast_to(u, z.shape), np.broadcast_to(v, z.shape)
     else:
-        x, y = (u - cx) / fx * z, (v - cy) / fy * z
-    points = np.stack([x, y, z], axis=-1)
-    du = np.gradient(points, axis=1)
-    dv = np.gradient(points, axis=0)
-    n = np.cross(du, dv)
+        x, y = u * z, v * z
+    # Per-component gradients and cross product: no (H, W, 3) stacks until the normal itself.
+    xu, yu, zu = (np.gradient(c, axis=1) for c in (x, y, z))
+    xv, yv, zv = (np.gradient(c, axis=0) for c in (x, y, z))
+    n = np.stack([yu * zv - zu * yv, zu * xv - xu * zv, xu * yv - yu * xv], axis=-1)
     n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    view = points if not camera.is_orthographic else np.array([0.0, 0.0, 1.0], np.float32)
-    facing = (n * view).sum(axis=-1, keepdims=True) > 0
-    n = np.where(facing, -n, n)
+    towards = n[..., 2] if camera.is_orthographic else n[..., 0] * x + n[..., 1] * y + n[..., 2] * z
+    n[towards > 0] *= -1
     out = np.clip((n + 1.0) * 127.5, 0, 255).astype(np.uint8)
     out[z <= 0] = 0
     return out
