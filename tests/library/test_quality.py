@@ -216,12 +216,12 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
         return [i for i in (index - 1, index + 1) if 0 <= i < count]
 
     lods = TreeLods(skeleton, lod0)
-    by_share = [lods.build(2, 0.12, 256, bark_share=scale * share0) for scale in BARK_SHARE_SCALES]
+    by_share = [lods.build(2, 0.12, 256, bark_share=min(scale * share0, 1.0)) for scale in BARK_SHARE_SCALES]
     share_scores = [score(lod) for lod in by_share]
     share = [lod.mesh.bark.n_faces for lod in by_share].index(chosen.mesh.bark.n_faces)
     assert all(share_scores[share] >= share_scores[i] for i in neighbours(share, len(BARK_SHARE_SCALES)))
-    by_gain = [lods.build(2, 0.12, 256, bark_share=BARK_SHARE_SCALES[share] * share0, card_area_gain=gain)
-               for gain in CARD_AREA_GAINS]
+    chosen_share = min(BARK_SHARE_SCALES[share] * share0, 1.0)
+    by_gain = [lods.build(2, 0.12, 256, bark_share=chosen_share, card_area_gain=gain) for gain in CARD_AREA_GAINS]
     gain = [np.array_equal(lod.skeleton.leaves, chosen.skeleton.leaves) for lod in by_gain].index(True)
     gain_scores = [score(lod) for lod in by_gain]
     assert gain_scores[gain] >= gain_scores[CARD_AREA_GAINS.index(CLUSTER_AREA_GAIN)]
