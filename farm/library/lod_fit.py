@@ -33,8 +33,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_frac
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
     from LOD2 on, at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same
-    way. A level costs three to six builds, not one per pair. Budgets LOD0's own proportion cannot meet raise LodBudgetError as
-    `build_lod` does; other shares that cannot be met are skipped."""
+    way. A level costs three to six builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
+    LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
     from species.leaf_clusters import CLUSTER_AREA_GAIN

@@ -1,5 +1,6 @@
 """Quality of the LOD chain as the library measures it: alpha-tested coverage (cards shrunk to their texture's
-opaque share, unculled depth-only GL passes, software raster for the impostor), the sliced impostor, exact GLB size without instancing, validate's IoU report, and the IoU target per preset."""
+opaque share, unculled depth-only GL passes, software raster for the impostor), the sliced impostor, exact GLB
+size without instancing, validate's IoU report, the fitted bark/leaf split, and the IoU target per preset."""
 from __future__ import annotations
 
 import json
