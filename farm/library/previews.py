@@ -34,12 +34,12 @@ def shaded_view(renderer, tree, azimuth_deg: float, size: int, points: np.ndarra
     renderer.load(tree)
     depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
     normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
-    light = np.clip(-(normals @ _LIGHT), 0.0, 1.0) * (1 - _AMBIENT) + _AMBIENT
-    albedo = np.zeros(mask.shape + (3,))
-    albedo[mask == 1] = tree.bark_color
-    albedo[mask == 2] = tree.leaf_color
-    colour = np.round(linear_to_srgb(albedo * light[..., None]) * 255).astype(np.uint8)
-    colour[mask == 0] = 255
+    covered = mask > 0  # shade only the tree's pixels: the sRGB curve is the costly step
+    light = np.clip(-(normals[covered] @ _LIGHT), 0.0, 1.0) * (1 - _AMBIENT) + _AMBIENT
+    albedo = np.where((mask[covered] == 1)[:, None], np.asarray(tree.bark_color, np.float64),
+                      np.asarray(tree.leaf_color, np.float64))
+    colour = np.full(mask.shape + (3,), 255, np.uint8)
+    colour[covered] = np.round(linear_to_srgb(albedo * light[:, None]) * 255).astype(np.uint8)
     return colour
 
 
