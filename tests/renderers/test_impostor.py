@@ -1,0 +1,57 @@
+"""The impostor's slicing of a tree among its planes: every face on the axis or on one plane, shared with the
+neighbouring plane only near the sectors' edges."""
+from __future__ import annotations
+
+import numpy as np
+
+from renderers.impostor import _SECTOR_OVERLAP, _sector_groups
+from species.tree_mesh import MeshPart, TreeMesh
+
+
+def _ring_of_triangles(count: int, radius: float) -> MeshPart:
+    """`count` small triangles evenly spread in azimuth at `radius` metres from the z axis, 1 m up."""
+    angle = (np.arange(count) + 0.5) * 2 * np.pi / count
+    centre = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.ones(count)], axis=1)
+    offsets = np.array([[0.0, 0.0, 0.0], [0.001, 0.0, 0.0], [0.0, 0.0, 0.001]])
+    vertices = (centre[:, None, :] + offsets[None]).reshape(-1, 3).astype(np.float32)
+    faces = np.arange(3 * count, dtype=np.int32).reshape(-1, 3)
+    normals = np.tile([0.0, 0.0, 1.0], (len(vertices), 1)).astype(np.float32)
+    return MeshPart(vertices, faces, normals, np.zeros((len(vertices), 2), np.float32),
+                    attributes={"node": np.zeros(len(vertices), np.int32)})
+
+
+def _memberships(groups: dict, planes: int, part: MeshPart) -> np.ndarray:
+    """(F, planes + 1) bool: which plane groups (and, last, the axis group) hold each face, found by centroid."""
+    centroids = part.vertices[part.faces].mean(axis=1)
+    member = np.zeros((part.n_faces, planes + 1), bool)
+    for column, name in [(p, f"leaves_{p}") for p in range(planes)] + [(planes, "leaves_axis")]:
+        if name not in groups:
+            continue
+        vertices, faces, _ = groups[name]
+        found = vertices[faces].mean(axis=1)
+        distance = np.linalg.norm(centroids[:, None, :] - found[None, :, :], axis=2)
+        member[:, column] = (distance < 1e-5).any(axis=1)
+    return member
+
+
+def test_faces_off_the_axis_lie_on_one_plane_or_two_neighbouring_ones():
+    planes, count = 8, 720
+    ring = _ring_of_triangles(count, 1.0)
+    tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="ring")
+    groups = _sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1)
+    member = _memberships(groups, planes, ring)
+    on_planes = member[:, :planes]
+    assert not member[:, planes].any()
+    assert set(on_planes.sum(axis=1)) == {1, 2}
+    pairs = np.array([np.flatnonzero(row) for row in on_planes if row.sum() == 2])
+    assert (((pairs[:, 1] - pairs[:, 0]) % planes == 1) | ((pairs[:, 0] - pairs[:, 1]) % planes == 1)).all()
+    # Evenly spread azimuths: the shared margins take 2 x _SECTOR_OVERLAP of every sector.
+    assert abs((on_planes.sum(axis=1) == 2).mean() - 2 * _SECTOR_OVERLAP) < 0.02
+
+
+def test_faces_near_the_axis_go_on_the_axis_group_alone():
+    planes = 8
+    ring = _ring_of_triangles(64, 0.05)
+    tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="core")
+    member = _memberships(_sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, ring)
+    assert member[:, planes].all() and not member[:, :planes].any()
