@@ -81,14 +81,15 @@ def _parquet_bytes(rows: list[dict]) -> bytes:
 
 
 def write_catalog(location: Location, spec) -> dict:
-    """Write catalog.parquet, catalog.json, previews/<species>.png, index.html (and blender/<species>.blend when
-    asked and available); returns {"assets": n, "blender": status}."""
+    """Write catalog.parquet, catalog.json, previews/<species>.png, the wind example (wind_viewer), index.html
+    (and blender/<species>.blend when asked and available); returns {"assets": n, "blender": status}."""
     import cv2
 
     from renderers.contact_sheet import contact_sheet
 
     from .job import BLENDER_PENDING, blender_available
     from .previews import gallery_html
+    from .wind_viewer import write_wind_viewer
 
     rows = catalog_rows(location, spec)
     location.write_atomic("catalog.parquet", _parquet_bytes(rows))
@@ -107,6 +108,7 @@ def write_catalog(location: Location, spec) -> dict:
         sheet = contact_sheet([(name, cells)], cell=192)
         ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
         location.write_atomic(f"previews/{name}.png", png.tobytes())
+    write_wind_viewer(location)
     location.write_atomic("index.html", gallery_html(rows).encode())
     blender = "not asked"
     if "blend" in spec.formats:

@@ -59,11 +59,16 @@ def turntable(renderer, tree) -> np.ndarray:
 
 def gallery_html(rows: list[dict]) -> str:
     """A self-contained gallery page: one card per asset (thumbnail, turntable, facts, file links), relative
-    paths only, so it opens from disk. rows: catalog rows (dicts)."""
+    paths only, so it opens from disk (but for the wind example's link). rows: catalog rows (dicts)."""
+    from .wind_viewer import wind_link
+
     cards = []
     for row in rows:
         files = " ".join(f'<a href="{html.escape(path)}">{html.escape(kind)}</a>'
                          for kind, path in sorted(row["files"].items()))
+        if "glb" in row["files"]:  # the page needs the folder served over HTTP (ES modules)
+            link = html.escape(wind_link(row["files"]["glb"]))
+            files += f' <a href="{link}" title="serve the folder over HTTP">wind</a>'
         lods = " / ".join(f"{n}: {t} tris, IoU {i:.2f}" for n, t, i in
                           zip(row["level_names"], row["triangles"], row["iou_min"]))
         cards.append(
