@@ -9,7 +9,7 @@ import numpy as np
 
 from .skeleton import LEAF_CARD_CORNERS
 
-__all__ = ["LeafCards", "cluster_leaves", "CLUSTER_AREA_GAIN"]
+__all__ = ["LeafCards", "CLUSTER_AREA_GAIN"]
 
 # Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
 _SPREAD_SPAN = 2.0 * np.sqrt(3.0)
@@ -113,11 +113,6 @@ class LeafCards:
             cards[many] = fitted[many]
         card_node = np.asarray(anchor)[representative]
         return cards.astype(np.float32), card_node.astype(np.int32)
-
-
-def cluster_leaves(leaves: np.ndarray, anchor: np.ndarray, n_clusters: int) -> tuple[np.ndarray, np.ndarray]:
-    """`LeafCards(leaves).cluster(anchor, n_clusters)`: leaves (M, 4, 4) float transforms of the unit card."""
-    return LeafCards(leaves).cluster(anchor, n_clusters)
 
 
 def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:

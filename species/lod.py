@@ -289,6 +289,10 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
     rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -_subtree_maximum(area, parent)))
     area[0] = 0.0
     junction = skeleton.parent[starts]
+    # A kept child needs its junction node in the parent: where a tolerance drops that node, it is charged to
+    # the child (an upper bound when two children share one).
+    junction_cost = np.where(junction >= 0, 2 * sides[np.maximum(parent, 0)], 0)
+    junction = np.maximum(junction, 0)
     limit_px = np.where(width_px >= THICK_BRANCH_PX, THICK_TOLERANCE_PX, np.inf)
     best = None
     for tolerance_px in TOLERANCE_LADDER_PX:
@@ -297,11 +301,7 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
         kept_node = keys > np.minimum(limit_px, tolerance_px)[skeleton.branch_id] * metres_per_px
         kept_node[starts] = True
         kept_node[0] = True
-        costs = _branch_triangles(skeleton, kept_node, sides, coned)
-        # A kept child needs its junction node in the parent: charged to the child (an upper bound when two
-        # children share one).
-        parent_sides = sides[np.maximum(parent, 0)]
-        costs += np.where((junction >= 0) & ~kept_node[np.maximum(junction, 0)], 2 * parent_sides, 0)
+        costs = _branch_triangles(skeleton, kept_node, sides, coned) + np.where(kept_node[junction], 0, junction_cost)
         n_kept = int(np.searchsorted(np.cumsum(costs[rank]), bark_target, side="right"))
         if n_kept == 0:
             continue
@@ -344,7 +344,39 @@ class TreeLods:
     def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
               card_area_gain: float = CLUSTER_AREA_GAIN) -> LodLevel:
         """`build_lod` of this tree."""
-        return _build(self, level, budget, switch_px, bark_share, card_area_gain)
+        skeleton, lod0 = self.skeleton, self.lod0
+        if not 1 <= level <= len(LOD_SIDES):
+            raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
+        if not 0.0 < budget <= 1.0:
+            raise LodBudgetError(f"budget {budget!r} for LOD{level} is invalid: allowed a fraction in (0, 1]")
+        switch_px = LOD_SWITCH_PX[level - 1] if switch_px is None else switch_px
+        if isinstance(switch_px, bool) or not isinstance(switch_px, (int, np.integer)) or not 8 <= switch_px <= 4096:
+            raise LodBudgetError(f"switch size {switch_px!r} px for LOD{level} is invalid: allowed an integer in "
+                                 f"[8, 4096]")
+        total0 = lod0.n_faces
+        target = int(np.floor(_BUDGET_MARGIN * budget * total0))
+        if bark_share is None:
+            bark_share = lod0.bark.n_faces / max(total0, 1)
+        elif not 0.0 <= bark_share <= 1.0:
+            raise LodBudgetError(f"bark share {bark_share!r} for LOD{level} is invalid: allowed a fraction in [0, 1]")
+        if not card_area_gain > 0:
+            raise LodBudgetError(f"card area gain {card_area_gain!r} for LOD{level} is invalid: allowed a number > 0")
+        key = (level, target, int(switch_px), float(bark_share))
+        if key not in self.barks:  # the bark does not depend on the cards' gain: fitted once per share
+            self.barks[key] = _fit_bark(self, level, budget, target, int(switch_px), bark_share)
+        simplified, original, leaf_anchor, bark = self.barks[key]
+        leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
+        leaf_budget = target - bark.n_faces
+        n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
+        if skeleton.n_leaves and n_clusters < 1:
+            raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
+                                 f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
+        cards, card_node = self.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
+        lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
+                                leaves=cards, leaf_node=card_node)
+        mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,
+                        leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
+        return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
 
 
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None,
@@ -359,43 +391,6 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, swi
     when nothing fits.
     """
     return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share, card_area_gain)
-
-
-def _build(lods: TreeLods, level: int, budget: float, switch_px: int | None, bark_share: float | None,
-           card_area_gain: float) -> LodLevel:
-    skeleton, lod0 = lods.skeleton, lods.lod0
-    if not 1 <= level <= len(LOD_SIDES):
-        raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
-    if not 0.0 < budget <= 1.0:
-        raise LodBudgetError(f"budget {budget!r} for LOD{level} is invalid: allowed a fraction in (0, 1]")
-    switch_px = LOD_SWITCH_PX[level - 1] if switch_px is None else switch_px
-    if isinstance(switch_px, bool) or not isinstance(switch_px, (int, np.integer)) or not 8 <= switch_px <= 4096:
-        raise LodBudgetError(f"switch size {switch_px!r} px for LOD{level} is invalid: allowed an integer in "
-                             f"[8, 4096]")
-    total0 = lod0.n_faces
-    target = int(np.floor(_BUDGET_MARGIN * budget * total0))
-    if bark_share is None:
-        bark_share = lod0.bark.n_faces / max(total0, 1)
-    elif not 0.0 <= bark_share <= 1.0:
-        raise LodBudgetError(f"bark share {bark_share!r} for LOD{level} is invalid: allowed a fraction in [0, 1]")
-    if not card_area_gain > 0:
-        raise LodBudgetError(f"card area gain {card_area_gain!r} for LOD{level} is invalid: allowed a number > 0")
-    key = (level, target, int(switch_px), float(bark_share))
-    if key not in lods.barks:  # the bark does not depend on the cards' gain: fitted once per share
-        lods.barks[key] = _fit_bark(lods, level, budget, target, int(switch_px), bark_share)
-    simplified, original, leaf_anchor, bark = lods.barks[key]
-    leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
-    leaf_budget = target - bark.n_faces
-    n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
-    if skeleton.n_leaves and n_clusters < 1:
-        raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
-                             f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
-    cards, card_node = lods.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
-    lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
-                            leaves=cards, leaf_node=card_node)
-    mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,
-                    leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
-    return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
 
 
 def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px: int, bark_share: float):
