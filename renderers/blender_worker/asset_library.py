@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
+from blend_bytes import make_deterministic
 from fbx import check_glb, import_checked_glb, merge_instances, subtree
 from scene import JobError, mesh_objects, mesh_stats, require, reset_scene
 
@@ -193,9 +194,15 @@ def run(job: dict, out_dir: str) -> dict:
     bpy.data.batch_remove([obj for obj in bpy.data.objects if obj not in kept])
     bpy.data.batch_remove([c for c in bpy.data.collections if c not in made])
     bpy.data.orphans_purge(do_recursive=True)
+    # Edit-mode selection is no part of an asset, and Blender writes `.select_edge` of joined meshes with stale
+    # bytes past its end, which would make the file differ from run to run.
+    for mesh in bpy.data.meshes:
+        for name in [a.name for a in mesh.attributes if a.name.startswith(".select_")]:
+            mesh.attributes.remove(mesh.attributes[name])
     os.makedirs(os.path.dirname(os.path.abspath(blend)) or ".", exist_ok=True)
     start = time.perf_counter()
     bpy.ops.wm.save_as_mainfile(filepath=blend, compress=False, relative_remap=False)
+    make_deterministic(blend)  # the same assets give the same bytes (Blender leaves a few run-dependent ones)
     return {"blend": blend, "bytes": os.path.getsize(blend), "assets": rows,
             "save_seconds": time.perf_counter() - start, "blender_version": bpy.app.version_string}
 

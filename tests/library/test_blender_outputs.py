@@ -127,12 +127,11 @@ def tree_fbx_read_back(fbx_batch):
 
 
 @pytest.fixture(scope="module")
-def library(tree, lods_glb, instanced_glb, tmp_path_factory):
-    """A .blend with four assets (a 512 px preview given; previews drawn; LOD nodes) and its inspection."""
+def library_assets(tree, lods_glb, instanced_glb, tmp_path_factory):
+    """Four assets for a .blend: a 512 px preview given; previews drawn; LOD nodes."""
     from PIL import Image
 
-    folder = tmp_path_factory.mktemp("library")
-    preview = folder.parent / "preview.png"
+    preview = tmp_path_factory.mktemp("preview") / "preview.png"
     Image.fromarray(np.broadcast_to(np.array(PREVIEW_RGB, np.uint8), (512, 512, 3)).copy()).save(preview)
     assets = [
         {"id": "sapling_0001", "glb_path": tree[1], "preview_png": preview, "tags": ["sapling", "broadleaf"],
@@ -141,7 +140,13 @@ def library(tree, lods_glb, instanced_glb, tmp_path_factory):
         {"id": "boxes_lod0", "glb_path": lods_glb, "node": "LOD0", "tags": ["test"], "catalog_path": "Tests/Boxes"},
         {"id": "X", "glb_path": instanced_glb, "node": "X_LOD0", "tags": ["test"], "catalog_path": "Tests/Boxes"},
     ]
-    written = write_asset_library(assets, folder / "saplings.blend")
+    return assets
+
+
+@pytest.fixture(scope="module")
+def library(library_assets, tmp_path_factory):
+    """The .blend of `library_assets` and its inspection."""
+    written = write_asset_library(library_assets, tmp_path_factory.mktemp("library") / "saplings.blend")
     read = inspect_blend(written["blend"])
     return written, {row["name"]: row for row in read["assets"]}, read
 
@@ -342,6 +347,14 @@ def test_blend_is_saved_uncompressed(library):
     assert open(written["blend"], "rb").read(7) == b"BLENDER"  # a compressed file starts with zstd's magic
 
 
+def test_blend_written_again_is_byte_identical(library_assets, library, tmp_path):
+    """Blender leaves random node ids, a clock-seeded colour seed and stale bytes after strings in a saved file;
+    the worker rewrites them (renderers/blender_worker/blend_bytes.py), so the same assets give the same file."""
+    written, assets, _ = library
+    again = write_asset_library(library_assets, tmp_path / "saplings.blend")
+    assert open(again["blend"], "rb").read() == open(written["blend"], "rb").read()
+
+
 # ------------------------------------------------------------------------------------------- catalogs and errors
 def test_catalog_file_merges_libraries_and_keeps_uuids(tmp_path):
     first = write_catalog_file(tmp_path, ["Trees/Fir"])
@@ -388,3 +401,28 @@ def test_library_of_a_file_that_is_not_a_glb_fails_with_the_log_tail(tmp_path):
 def test_inspect_of_a_missing_blend_names_the_path(tmp_path):
     with pytest.raises(BlenderError, match="nothing.blend.*does not exist"):
         inspect_blend(tmp_path / "nothing.blend")
+
+
+def test_deterministic_rewrite_changes_nothing_the_second_time(library, tmp_path):
+    from renderers.blender_worker.blend_bytes import make_deterministic
+
+    written, _, _ = library
+    copy = tmp_path / "copy.blend"
+    copy.write_bytes(open(written["blend"], "rb").read())
+    assert make_deterministic(copy) == 0  # the worker already rewrote it
+    assert copy.read_bytes() == open(written["blend"], "rb").read()
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"BLENDER-v300REND", "not an uncompressed Blender 5 file"),
+    (b"\x28\xb5\x2f\xfd compressed", "not an uncompressed Blender 5 file"),
+    (b"BLENDER17-01v0500REND\0\0\0\0", "truncated"),
+])
+def test_deterministic_rewrite_refuses_other_files_and_leaves_them(tmp_path, content, message):
+    from renderers.blender_worker.blend_bytes import make_deterministic
+
+    path = tmp_path / "other.blend"
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=message):
+        make_deterministic(path)
+    assert path.read_bytes() == content
