@@ -57,7 +57,7 @@ def catalog_rows(location: Location, spec) -> list[dict]:
             "thumbnail": record["files"]["thumbnail"], "turntable": record["files"]["turntable"],
             "glb_bytes": record["sizes"].get("glb"), "glb_bytes_without_instancing":
                 record["sizes"].get("glb_without_instancing"),
-            "files": record["files"],
+            "files": record["files"], "blender": record.get("blender", "not asked"),
         })
     return rows
 
@@ -87,7 +87,7 @@ def write_catalog(location: Location, spec) -> dict:
 
     from renderers.contact_sheet import contact_sheet
 
-    from .job import BLENDER_PENDING, blender_available
+    from .job import BLENDER_FAILED, BLENDER_PENDING, blender_available
     from .previews import gallery_html
     from .wind_viewer import write_wind_viewer
 
@@ -126,15 +126,18 @@ def write_catalog(location: Location, spec) -> dict:
                 if assets:
                     write_asset_library(assets, location.path(f"blender/{name}.blend"))
             blender = "written"
+    failed = sum(row["blender"].startswith(BLENDER_FAILED) for row in rows)
+    if failed:
+        blender += f"; FBX export failed for {failed} asset(s) (`farm library validate` names them)"
     return {"assets": len(rows), "blender": blender}
 
 
 def validate_library(path: str) -> list[Problem]:
     """Problems of a library folder: not a library, missing catalog, missing or changed asset files, unreadable
-    GLBs. An empty list means every catalogued file is present with its recorded checksum."""
+    GLBs, failed FBX exports. An empty list means every catalogued file is present with its recorded checksum."""
     from species.gltf import GlbError, read_glb_chunks
 
-    from .job import LIBRARY_RECORD, LibraryError, read_library_spec
+    from .job import BLENDER_FAILED, LIBRARY_RECORD, LibraryError, read_library_spec
 
     location = Location.resolve(path)
     try:
@@ -150,6 +153,8 @@ def validate_library(path: str) -> list[Problem]:
             problems.append(Problem(location.path(record_path), "missing"))
             continue
         record = json.loads(location.read_bytes(record_path))
+        if record.get("blender", "").startswith(BLENDER_FAILED):
+            problems.append(Problem(location.path(record_path), f"Blender outputs {record['blender']}"))
         for relative, digest in record["sha256"].items():
             if not location.exists(relative):
                 problems.append(Problem(location.path(relative), "missing"))

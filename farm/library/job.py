@@ -21,11 +21,12 @@ from .asset import LibraryAsset, build_asset
 
 __all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
            "LibraryError", "LIBRARY_RECORD",
-           "blender_available", "BLENDER_PENDING"]
+           "blender_available", "BLENDER_PENDING", "BLENDER_FAILED"]
 
 LIBRARY_RECORD = "library.json"
 ASSETS = "assets"
 BLENDER_PENDING = "blender outputs pending (renderers.blender_assets is not available)"
+BLENDER_FAILED = "failed: "  # how an asset.json's "blender" starts when its FBX export failed
 
 
 class LibraryError(TreefarmError):
@@ -131,7 +132,11 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
 
 def finish_assets(pending: list[dict], location: Location, spec, timer: StageTimer) -> list[dict]:
     """Export the FBX files (one per LOD) of every pending asset in ONE Blender process, from each asset's
-    non-instanced GLB, then write each asset.json (atomically, last); returns the finished records."""
+    non-instanced GLB, then write each asset.json (atomically, last); returns the finished records.
+
+    When Blender fails, every asset of the batch still gets its asset.json (its other files are whole), with
+    `"blender": "failed: <Blender's message>"`; the catalog counts those assets and `farm library validate`
+    names them."""
     jobs, owners = [], []
     for index, item in enumerate(pending):
         record = item["record"]
@@ -144,10 +149,16 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
                          "node": f"{ident}_{name}", "name": f"{ident}_{name}"})
             owners.append((index, name))
     if jobs:
+        from renderers.blender import BlenderError
         from renderers.blender_assets import export_fbx_batch
 
-        with timer.stage("blender"):
-            rows = export_fbx_batch(jobs)
+        try:
+            with timer.stage("blender"):
+                rows = export_fbx_batch(jobs)
+        except BlenderError as exc:
+            rows, failure = [], f"{BLENDER_FAILED}{str(exc).splitlines()[0]}"
+            for index in {index for index, _ in owners}:
+                pending[index]["record"]["blender"] = failure
         for (index, name), job, row in zip(owners, jobs, rows):
             record = pending[index]["record"]
             relative = os.path.relpath(job["fbx"], location.root)

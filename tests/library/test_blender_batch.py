@@ -58,3 +58,30 @@ def test_every_asset_record_lists_its_fbx_files_with_their_sizes(shard_run):
         fbx = {k: v for k, v in record["sizes"].items() if k.startswith("fbx_")}
         assert sorted(fbx) == sorted(f"fbx_{name}" for name in ("LOD0", "LOD1", "LOD2", "LOD3", "IMPOSTOR"))
         assert record["blender"] == "written" and all(v >= 100 for v in fbx.values())
+
+
+def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypatch):
+    from farm.library.catalog import validate_library, write_catalog
+    from renderers.blender import BlenderError
+
+    def failing_batch(jobs, timeout=0.0):
+        raise BlenderError("Blender job 'fbx' failed (exit status 1); last lines of its log:\nSegmentation fault")
+
+    monkeypatch.setattr(job, "blender_available", lambda: True)
+    monkeypatch.setattr("renderers.blender_assets.export_fbx_batch", failing_batch)
+    spec = parse_library_spec(SPEC)
+    location = Location.resolve(str(tmp_path))
+    job._write_library_record(location, spec)  # what run_library writes before the shards
+    chain = job.LibraryChain(spec, str(tmp_path))
+    records = [run_shard(spec, plan, location, chain) for plan in plan_shards(spec)]
+    assert all(not record["failures"] for record in records)  # the trees were built; only Blender failed
+    assets = [json.loads(path.read_text()) for path in sorted(tmp_path.glob("assets/*/asset.json"))]
+    assert len(assets) == 3  # every asset of both shards, the shards' last ones included
+    for record in assets:
+        assert record["blender"] == "failed: Blender job 'fbx' failed (exit status 1); last lines of its log:"
+        assert not any(key.startswith("fbx_") for key in record["files"]) and "glb" in record["files"]
+    summary = write_catalog(location, spec)
+    assert summary["assets"] == 3 and "FBX export failed for 3 asset(s)" in summary["blender"]
+    problems = validate_library(str(tmp_path))
+    assert sorted(p.path for p in problems) == sorted(str(path) for path in tmp_path.glob("assets/*/asset.json"))
+    assert all("Blender outputs failed" in p.reason for p in problems)
