@@ -31,7 +31,9 @@ def prim_name(asset_id: str) -> str:
 
 
 def _material(stage, path: str, colour_file: str | None, normal_file: str | None, roughness_file: str | None,
-              opacity_from_texture: bool, roughness: float):
+              opacity_from_texture: bool, roughness: float, wrap: str):
+    """A UsdPreviewSurface material; `wrap` ("repeat" for tiling bark, "clamp" for atlases) as in the GLB's
+    samplers, so an atlas tile's edge never samples its neighbour."""
     from pxr import Sdf, UsdShade
 
     material = UsdShade.Material.Define(stage, path)
@@ -50,8 +52,8 @@ def _material(stage, path: str, colour_file: str | None, normal_file: str | None
         tex.CreateInput("file", Sdf.ValueTypeNames.Asset).Set(file)
         tex.CreateInput("st", Sdf.ValueTypeNames.Float2).ConnectToSource(st)
         tex.CreateInput("sourceColorSpace", Sdf.ValueTypeNames.Token).Set("sRGB" if colour else "raw")
-        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set("repeat")
-        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set("repeat")
+        tex.CreateInput("wrapS", Sdf.ValueTypeNames.Token).Set(wrap)
+        tex.CreateInput("wrapT", Sdf.ValueTypeNames.Token).Set(wrap)
         return tex
 
     if colour_file:
@@ -149,11 +151,12 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     looks = f"{root_path}/Looks"
     UsdGeom.Scope.Define(stage, looks)
     bark = _material(stage, f"{looks}/bark", TEXTURE_FILES["bark_base_color"], TEXTURE_FILES["bark_normal"],
-                     TEXTURE_FILES["bark_roughness_metallic"], False, 0.9)
-    leaves = {s: _material(stage, f"{looks}/leaves_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, True, 0.7)
+                     TEXTURE_FILES["bark_roughness_metallic"], False, 0.9, "repeat")
+    leaves = {s: _material(stage, f"{looks}/leaves_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, True, 0.7,
+                           "clamp")
               for s in SEASONS if s != "bare"}
     impostor = _material(stage, f"{looks}/impostor", TEXTURE_FILES["impostor_albedo"],
-                         TEXTURE_FILES["impostor_normal"], None, True, 0.8)
+                         TEXTURE_FILES["impostor_normal"], None, True, 0.8, "clamp")
     geom = f"{root_path}/Geom"
     UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")

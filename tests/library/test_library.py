@@ -84,6 +84,28 @@ def test_every_usd_opens_and_passes_usd_validation(library):
         assert not stage.GetPrimAtPath(stage.GetDefaultPrim().GetPath().AppendPath("Geom/leaves")).IsActive()
 
 
+def test_usd_textures_wrap_as_the_glb_samplers_do(library):
+    """Bark tiles (repeat); leaf atlases and the impostor atlas clamp, so a tile's edge never samples the next."""
+    from pxr import Usd, UsdShade
+
+    from species.gltf import read_glb_chunks
+
+    names = {10497: "repeat", 33071: "clamp"}
+    usd = sorted(library.glob("assets/*/*.usdc"))[0]
+    document, _ = read_glb_chunks(usd.with_suffix(".glb").read_bytes())
+    glb = {document["images"][t["source"]]["name"]: names[document["samplers"][t["sampler"]]["wrapS"]]
+           for t in document["textures"]}
+    stage = Usd.Stage.Open(str(usd))
+    seen = {}
+    for prim in stage.Traverse():
+        shader = UsdShade.Shader(prim)
+        if shader and shader.GetIdAttr().Get() == "UsdUVTexture":
+            stem = shader.GetInput("file").Get().path.rsplit("/", 1)[-1].removesuffix(".png")
+            seen[stem] = (shader.GetInput("wrapS").Get(), shader.GetInput("wrapT").Get())
+    assert seen and {stem: wrap[0] for stem, wrap in seen.items()} == {stem: glb[stem] for stem in seen}
+    assert all(s == t for s, t in seen.values()) and {"repeat", "clamp"} == {s for s, _ in seen.values()}
+
+
 def test_catalog_triangles_and_iou_follow_the_budgets(library):
     import pandas as pd
 
