@@ -25,9 +25,11 @@ _NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 class JobSpecError(TreefarmError):
     """A job specification has a missing, unknown or out-of-range field."""
 
+    subject = "job spec"  # what the message calls the specification
+
     def __init__(self, field_name: str, value: Any, allowed: str):
         self.field, self.value, self.allowed = field_name, value, allowed
-        super().__init__(f"job spec field {field_name!r} = {value!r} is invalid: allowed {allowed}")
+        super().__init__(f"{self.subject} field {field_name!r} = {value!r} is invalid: allowed {allowed}")
 
 
 @dataclass(frozen=True)

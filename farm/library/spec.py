@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,19 @@ _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px
 
 class LibrarySpecError(JobSpecError):
     """A library spec has a missing, unknown or impossible field."""
+
+    subject = "library spec"
+
+
+@contextmanager
+def _library_errors():
+    """The farm's spec checks raise JobSpecError; in a library spec they read as library spec errors."""
+    try:
+        yield
+    except LibrarySpecError:
+        raise
+    except JobSpecError as exc:
+        raise LibrarySpecError(exc.field, exc.value, exc.allowed) from None
 
 
 @dataclass(frozen=True)
@@ -98,6 +112,11 @@ def _check_fractions(name: str, value: Any) -> tuple[float, ...]:
 
 def parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     """Validate a library spec mapping; None or {} gives the default (every preset, 4 variants each)."""
+    with _library_errors():
+        return _parse_library_spec(raw, known_species)
+
+
+def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     raw = _check_keys("", raw or {}, _TOP_KEYS)
     known = list(known_species) if known_species is not None else _known_species()
     name = raw.get("name", "library")
@@ -144,7 +163,8 @@ def parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
 
 def load_library_spec(path: str | Path, **known) -> LibrarySpec:
     """Read and validate a YAML library spec file with the farm's spec loader (`farm.jobs.load_spec`)."""
-    return load_spec(path, parse=parse_library_spec, **known)
+    with _library_errors():
+        return load_spec(path, parse=parse_library_spec, **known)
 
 
 def default_library_spec(per_species: int = 4) -> LibrarySpec:

@@ -148,13 +148,15 @@ def test_add_builds_one_more_asset_into_the_catalog(library, tmp_path):
     ({"species": {"no_such_tree": 1}}, "no_such_tree"),
     ({"lod_budgets": [0.4, 0.5, 0.04]}, "lod_budgets"),
     ({"formats": ["glb", "stl"]}, "formats"),
+    ({"seed": -1}, "seed"),  # checked by the farm's own spec helpers, still named as a library spec field
+    ({"colour": "green"}, "colour"),
 ])
 def test_bad_spec_gives_one_line_error_and_writes_nothing(tmp_path, capsys, change, named):
     path = tmp_path / "bad.yaml"
     path.write_text(yaml.safe_dump({**SPEC, **change}))
     assert farm_main(["library", str(path), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("farm: error:") and named in err[0]
+    assert len(err) == 1 and err[0].startswith("farm: error: library spec field") and named in err[0]
     assert not (tmp_path / "out").exists()
 
 
