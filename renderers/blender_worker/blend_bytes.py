@@ -1,14 +1,17 @@
 """Make a saved .blend byte-identical between runs (the same scene gives the same file).
 
-Blender 5.0 already writes stable block addresses; what still differs between two saves of the same scene is:
-- bytes after the terminating NUL of fixed-size strings (char arrays of 16 bytes or more), and `_pad` fields:
-  left as the allocator found them;
-- `bNode.identifier`: drawn at random when a node is made (unique within its tree);
-- `Mesh.face_sets_color_seed`: drawn from the clock;
-- the order of the two vertices of a `ScrEdge` (the UI's screen edges), sorted by memory address.
-`make_deterministic` rewrites those in place: strings are zero-filled after their NUL, node identifiers become
-1, 2, 3, ... in file order (unique in every tree), the colour seed 0, and each screen edge lists its vertices in
-address order. Blender reads none of them as anything but these meanings, so the file opens as before.
+What differs between two saves of the same scene by Blender 5.0, and how it is rewritten:
+- block addresses (which pointers hold): they depend on what data was shared in memory when the file was saved.
+  IDs are renumbered 16, 32, ... in file order, each ID's data blocks 2**40 + 16, + 32, ... (Blender needs
+  data addresses unique only within their ID), and every pointer with them; a pointer that holds no block's
+  address (a run-time pointer, which Blender sets to NULL when it reads the file) becomes 0;
+- bytes after the terminating NUL of fixed-size strings (char arrays of 16 bytes or more), and `_pad` fields,
+  left as the allocator found them: zeroed;
+- `bNode.identifier`, drawn at random when a node is made (unique within its tree): 1, 2, 3, ... in file order;
+- `Mesh.face_sets_color_seed`, drawn from the clock: 0;
+- the order of the two vertices of a `ScrEdge` (the UI's screen edges), sorted by memory address: sorted by
+  their new addresses.
+Blender opens the result with the same meshes, materials, images, assets and previews.
 
 Only the file's own SDNA (its struct catalogue, block "DNA1") is read, so this follows the layout of whatever
 Blender wrote the file. It handles the blend-file header of Blender 5.0 ("BLENDER17-01v...": 8-byte pointers,
@@ -70,8 +73,8 @@ def _align4(position: int) -> int:
     return (position + 3) & ~3
 
 
-def _read_sdna(blob: bytes) -> tuple[list[str], list[tuple[str, list[tuple[str, str]]]], dict[str, int]]:
-    """(type names, structs as (type, [(field type, field name)]), type sizes) of a DNA1 block."""
+def _read_sdna(blob: bytes) -> tuple[list[tuple[str, list[tuple[str, str]]]], dict[str, int]]:
+    """(structs as (type, [(field type, field name)]), type sizes) of a DNA1 block."""
     if blob[:8] != b"SDNANAME":
         raise ValueError("the DNA1 block does not start with SDNANAME")
     (n_names,) = struct.unpack_from("<i", blob, 8)
@@ -91,7 +94,7 @@ def _read_sdna(blob: bytes) -> tuple[list[str], list[tuple[str, list[tuple[str, 
         position += 4 + 4 * n_fields
         structs.append((types[type_index], [(types[pairs[2 * i]], names[pairs[2 * i + 1]])
                                             for i in range(n_fields)]))
-    return types, structs, dict(zip(types, sizes))
+    return structs, dict(zip(types, sizes))
 
 
 _ARRAY = re.compile(r"\[(\d+)\]")
@@ -99,6 +102,31 @@ _ARRAY = re.compile(r"\[(\d+)\]")
 # 16-byte one. Strings are at least this long (names are 64 bytes, paths 1024).
 _SHORTEST_STRING = 16
 _BINARY_CHAR_ARRAYS = {("IDHash", "data")}
+
+
+@dataclass(frozen=True)
+class _Field:
+    type: str          # the field's type ("char", "float", "Object", ...), the pointee's for a pointer
+    name: str          # without "*", "(*...)()" and "[n]"
+    pointer: bool
+    function: bool     # a function pointer
+    dims: list[int]    # array dimensions ([] for a single value)
+    offset: int        # bytes from the start of the struct
+    element: int       # bytes per element
+    count: int         # elements (the product of dims)
+
+
+def _fields(fields: list[tuple[str, str]], sizes: dict[str, int]):
+    """The _Field of each (type, name) of a struct, in order."""
+    offset = 0
+    for field_type, field_name in fields:
+        dims = [int(d) for d in _ARRAY.findall(field_name)]
+        pointer = field_name.startswith("*") or field_name.startswith("(*")
+        element = 8 if pointer else sizes[field_type]
+        count = int(np.prod(dims)) if dims else 1
+        bare = field_name.lstrip("*(").split("[")[0].split(")")[0]
+        yield _Field(field_type, bare, pointer, field_name.startswith("(*"), dims, offset, element, count)
+        offset += element * count
 
 
 @dataclass
@@ -120,49 +148,34 @@ def _layouts(structs, sizes) -> dict[int, _Layout]:
     def layout(index: int) -> _Layout:
         if index in cache:
             return cache[index]
-        strings, pads, pointers, offset = [], [], [], 0
-        for field_type, field_name in structs[index][1]:
-            dims = [int(d) for d in _ARRAY.findall(field_name)]
-            pointer = field_name.startswith("*") or field_name.startswith("(*")
-            element = 8 if pointer else sizes[field_type]
-            count = int(np.prod(dims)) if dims else 1
-            total = element * count
-            bare = field_name.lstrip("*(").split("[")[0].split(")")[0]
-            if pointer:
-                pointers.extend((offset + 8 * k, field_type in ids and not field_name.startswith("(*"))
-                                for k in range(count))
-            elif bare.startswith("_pad"):
-                pads.append((offset, total))
-            elif (field_type == "char" and dims and dims[-1] >= _SHORTEST_STRING
-                  and (structs[index][0], bare) not in _BINARY_CHAR_ARRAYS):
-                row = dims[-1]
-                strings.extend((offset + k * row, row) for k in range(total // row))
-            elif field_type in by_type:
-                inner = layout(by_type[field_type])
-                for k in range(count):
-                    base = offset + k * element
+        strings, pads, pointers, size = [], [], [], 0
+        for f in _fields(structs[index][1], sizes):
+            size = f.offset + f.element * f.count
+            if f.pointer:
+                pointers.extend((f.offset + 8 * k, f.type in ids and not f.function) for k in range(f.count))
+            elif f.name.startswith("_pad"):
+                pads.append((f.offset, f.element * f.count))
+            elif (f.type == "char" and f.dims and f.dims[-1] >= _SHORTEST_STRING
+                  and (structs[index][0], f.name) not in _BINARY_CHAR_ARRAYS):
+                row = f.dims[-1]
+                strings.extend((f.offset + k * row, row) for k in range(f.count // row))
+            elif f.type in by_type:
+                inner = layout(by_type[f.type])
+                for k in range(f.count):
+                    base = f.offset + k * f.element
                     strings.extend((base + o, n) for o, n in inner.strings)
                     pads.extend((base + o, n) for o, n in inner.pads)
                     pointers.extend((base + o, is_id) for o, is_id in inner.pointers)
-            offset += total
-        cache[index] = _Layout(strings, pads, pointers, offset)
+        cache[index] = _Layout(strings, pads, pointers, size)
         return cache[index]
 
     return {index: layout(index) for index in range(len(structs))}
 
 
-def _field_offset(structs, sizes, struct_name: str, field: str) -> int | None:
-    for name, fields in structs:
-        if name != struct_name:
-            continue
-        offset = 0
-        for field_type, field_name in fields:
-            dims = [int(d) for d in _ARRAY.findall(field_name)]
-            element = 8 if field_name.startswith("*") or field_name.startswith("(*") else sizes[field_type]
-            if field_name.lstrip("*").split("[")[0] == field:
-                return offset
-            offset += element * (int(np.prod(dims)) if dims else 1)
-    return None
+def _field_offset(structs, sizes, struct_name: str, field_name: str) -> int | None:
+    """Byte offset of a field in a struct, None when the file's SDNA has no such field."""
+    fields = next((fields for name, fields in structs if name == struct_name), [])
+    return next((f.offset for f in _fields(fields, sizes) if f.name == field_name), None)
 
 
 def _clean_strings(view: np.ndarray, strings: list[tuple[int, int]]) -> None:
@@ -224,7 +237,7 @@ def make_deterministic(path: str | os.PathLike) -> int:
     dna = next((b for b in blocks if b.code == "DNA1"), None)
     if dna is None:
         raise ValueError(f"{path!r} has no DNA1 block")
-    _, structs, sizes = _read_sdna(bytes(data[dna.offset:dna.offset + dna.length]))
+    structs, sizes = _read_sdna(bytes(data[dna.offset:dna.offset + dna.length]))
     layouts = _layouts(structs, sizes)
     names = [name for name, _ in structs]
     node_id = _field_offset(structs, sizes, "bNode", "identifier")
