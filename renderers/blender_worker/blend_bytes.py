@@ -134,7 +134,8 @@ class _Layout:
     """Where, in one struct instance, the bytes to rewrite are."""
     strings: list[tuple[int, int]]  # (offset, length) of each fixed-size string
     pads: list[tuple[int, int]]     # (offset, length) of padding fields
-    pointers: list[tuple[int, bool]]  # (offset, points at an ID data-block) of each pointer
+    id_pointers: list[int]          # offsets of pointers to ID data-blocks
+    data_pointers: list[int]        # offsets of every other pointer
     size: int
 
 
@@ -148,11 +149,12 @@ def _layouts(structs, sizes) -> dict[int, _Layout]:
     def layout(index: int) -> _Layout:
         if index in cache:
             return cache[index]
-        strings, pads, pointers, size = [], [], [], 0
+        strings, pads, id_pointers, data_pointers, size = [], [], [], [], 0
         for f in _fields(structs[index][1], sizes):
             size = f.offset + f.element * f.count
             if f.pointer:
-                pointers.extend((f.offset + 8 * k, f.type in ids and not f.function) for k in range(f.count))
+                to_id = f.type in ids and not f.function
+                (id_pointers if to_id else data_pointers).extend(f.offset + 8 * k for k in range(f.count))
             elif f.name.startswith("_pad"):
                 pads.append((f.offset, f.element * f.count))
             elif (f.type == "char" and f.dims and f.dims[-1] >= _SHORTEST_STRING
@@ -165,8 +167,9 @@ def _layouts(structs, sizes) -> dict[int, _Layout]:
                     base = f.offset + k * f.element
                     strings.extend((base + o, n) for o, n in inner.strings)
                     pads.extend((base + o, n) for o, n in inner.pads)
-                    pointers.extend((base + o, is_id) for o, is_id in inner.pointers)
-        cache[index] = _Layout(strings, pads, pointers, size)
+                    id_pointers.extend(base + o for o in inner.id_pointers)
+                    data_pointers.extend(base + o for o in inner.data_pointers)
+        cache[index] = _Layout(strings, pads, id_pointers, data_pointers, size)
         return cache[index]
 
     return {index: layout(index) for index in range(len(structs))}
@@ -187,9 +190,10 @@ def _clean_strings(view: np.ndarray, strings: list[tuple[int, int]]) -> None:
 
 
 class _Addresses:
-    """Old block addresses -> new ones: (sorted old, new) arrays for a vectorised lookup."""
+    """Old block addresses -> new ones: the mapping, and (sorted old, new) arrays for a vectorised lookup."""
 
     def __init__(self, mapping: dict[int, int]):
+        self.mapping = mapping
         keys = sorted(mapping)
         self.old = np.array(keys or [0], np.uint64)
         self.new = np.array([mapping[k] for k in keys] or [0], np.uint64)
@@ -252,7 +256,7 @@ def make_deterministic(path: str | os.PathLike) -> int:
         if block.address:
             header = block.offset - _BHEAD.size
             own = ids if block.code not in _NOT_ID else local
-            struct.pack_into("<Q", data, header + 8, int(own.remap(np.array([block.address], np.uint64))[0]))
+            struct.pack_into("<Q", data, header + 8, own.mapping[block.address])
         if block.code in ("DNA1", "ENDB", "TEST", "REND") or block.length == 0:
             continue  # the catalogue itself, the end, the thumbnail and the render info hold no pointers
         if block.sdna == 0:  # raw data: arrays of pointers (to IDs, or to this ID's data) are remapped
@@ -271,13 +275,11 @@ def make_deterministic(path: str | os.PathLike) -> int:
         _clean_strings(view, layout.strings)
         for offset, length in layout.pads:
             view[:, offset:offset + length] = 0
-        for is_id in (True, False):
-            offsets = [offset for offset, points_at_id in layout.pointers if points_at_id == is_id]
+        # An ID pointer may hold an embedded ID (a material's node tree), which is data of its owner.
+        for offsets, first, second in ((layout.id_pointers, ids, local), (layout.data_pointers, local, ids)):
             if offsets:
                 columns = np.array(offsets)[:, None] + np.arange(8)
                 words = np.ascontiguousarray(view[:, columns]).view("<u8")[..., 0]
-                # An ID pointer may hold an embedded ID (a material's node tree), which is data of its owner.
-                first, second = (ids, local) if is_id else (local, ids)
                 mapped = np.where(first.known(words), first.remap(words), second.remap(words))
                 view[:, columns] = mapped.astype(np.uint64)[..., None].view(np.uint8)
         kind = names[block.sdna]
