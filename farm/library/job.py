@@ -20,7 +20,7 @@ from ..tree_chain import BuiltTree, StageTimer, to_json
 from .asset import LibraryAsset, build_asset
 
 __all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
-           "LibraryError", "LIBRARY_RECORD",
+           "retry_failed_fbx", "LibraryError", "LIBRARY_RECORD",
            "blender_available", "BLENDER_PENDING", "BLENDER_FAILED"]
 
 LIBRARY_RECORD = "library.json"
@@ -171,6 +171,30 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
     return [item["record"] for item in pending]
 
 
+def retry_failed_fbx(location: Location, spec, timer: StageTimer | None = None) -> int:
+    """Export again, in one Blender process, the FBX files of every asset whose export failed (asset.json says
+    `"blender": "failed: ..."`), as a resumed job should finish what a run left undone; returns how many assets
+    were retried. Their other files are whole and stay as they are; each asset.json is rewritten (atomically)
+    with the new outcome."""
+    from .catalog import _asset_ids
+
+    if "fbx" not in spec.formats or not _wants_blender(spec, location):
+        return 0
+    pending = []
+    for ident in _asset_ids(location, spec):
+        path = f"{ASSETS}/{ident}/asset.json"
+        if not location.exists(path):
+            continue
+        record = json.loads(location.read_bytes(path))
+        if str(record.get("blender", "")).startswith(BLENDER_FAILED) and "glb_flat" in record["files"] \
+                and location.exists(record["files"]["glb_flat"]):
+            pending.append({"record": record, "level_names": [level["name"] for level in record["levels"]],
+                            "folder": f"{ASSETS}/{ident}"})
+    if pending:
+        finish_assets(pending, location, spec, timer or StageTimer())
+    return len(pending)
+
+
 def _tags(asset: LibraryAsset) -> list[str]:
     height = asset.skeleton.height
     size = "small" if height < 4 else "medium" if height < 15 else "large"
@@ -232,6 +256,7 @@ def run_library(spec, out: str, workers: int | None = None, address: str | None 
     _write_library_record(location, spec)
     manifest = run_job(spec, out, workers=workers, address=address,
                        builder_factory=partial(LibraryChain, out=location.uri), progress=progress)
+    retry_failed_fbx(location, spec)  # a run whose Blender batch failed is finished by the next one
     catalog = write_catalog(location, spec)
     return {"manifest": manifest, "catalog": catalog}
 

@@ -85,3 +85,22 @@ def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypa
     problems = validate_library(str(tmp_path))
     assert sorted(p.path for p in problems) == sorted(str(path) for path in tmp_path.glob("assets/*/asset.json"))
     assert all("Blender outputs failed" in p.reason for p in problems)
+    # The next run (a resumed `farm library`) exports the failed assets again, in one batch, and leaves the rest.
+    batches = []
+
+    def record_batch(jobs, timeout=0.0):
+        batches.append(list(jobs))
+        return [{"bytes": 100 + i} for i in range(len(jobs))]
+
+    monkeypatch.setattr("renderers.blender_assets.export_fbx_batch", record_batch)
+    glb_before = {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")}
+    assert job.retry_failed_fbx(location, spec) == 3
+    assert [len(batch) for batch in batches] == [3 * 5]
+    for path in sorted(tmp_path.glob("assets/*/asset.json")):
+        record = json.loads(path.read_text())
+        assert record["blender"] == "written"
+        assert sorted(k for k in record["files"] if k.startswith("fbx_")) == \
+            sorted(f"fbx_{name}" for name in ("LOD0", "LOD1", "LOD2", "LOD3", "IMPOSTOR"))
+    assert {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")} == glb_before
+    assert validate_library(str(tmp_path)) == []
+    assert job.retry_failed_fbx(location, spec) == 0 and len(batches) == 1  # nothing left to retry
