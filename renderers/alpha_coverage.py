@@ -5,7 +5,7 @@ In: a `Camera`, triangles (vertices, faces) with optional UVs and an alpha mask,
 Out: (H, W) bool coverage, or plain opaque cards (MeshPart / TreeMesh) that depth-only GL passes draw.
 
 Measurement rule (the same for LOD0 leaves, LOD cluster cards and every level, so the comparison is fair): a
-card textured with alpha tile A is drawn as its own two triangles shrunk about the card's centre by sqrt(f) in
+card textured with alpha tile A (a single leaf, or a clump for cards that merge several leaves) is drawn as its own two triangles shrunk about the card's centre by sqrt(f) in
 both axes, f = the share of texels of A at or above the files' alpha cutoff (0.5), measured once per tile. The
 shrunk card covers the same area as the alpha-tested card; only where inside the card that area lies differs.
 """
@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from species.errors import TreefarmError
+from species.lod import card_clumps
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import Camera
@@ -115,25 +116,31 @@ def opaque_fraction(alpha: np.ndarray) -> float:
     return float(alpha.mean())
 
 
-def shrunk_cards(cards: MeshPart, fraction: float) -> MeshPart:
+def shrunk_cards(cards: MeshPart, fraction) -> MeshPart:
     """Cards (four corners each, as `leaf_part` makes them) shrunk about their centres by sqrt(fraction) in both
     axes, so each covers `fraction` of its area: the opaque area of an alpha-tested card as two triangles.
-    Faces, normals, UVs and attributes are kept; vertices (V, 3) float32 metres."""
-    if not 0.0 < fraction <= 1.0:
-        raise CoverageError(f"coverage fraction {fraction!r} is invalid: allowed (0, 1]")
+    fraction: one number for every card or (C,) one per card. Faces, normals, UVs and attributes are kept;
+    vertices (V, 3) float32 metres."""
     if cards.n_vertices % 4:
         raise CoverageError(f"{cards.n_vertices} card vertices are invalid: allowed four per card")
+    fractions = np.broadcast_to(np.asarray(fraction, np.float64), (cards.n_vertices // 4,))
+    bad = ~((fractions > 0.0) & (fractions <= 1.0))
+    if bad.any():
+        raise CoverageError(f"coverage fraction {fractions[bad][0]!r} is invalid: allowed (0, 1]")
     corners = np.asarray(cards.vertices, np.float64).reshape(-1, 4, 3)
     centre = corners.mean(axis=1, keepdims=True)
-    shrunk = centre + np.sqrt(fraction) * (corners - centre)
+    shrunk = centre + np.sqrt(fractions)[:, None, None] * (corners - centre)
     return MeshPart(shrunk.reshape(-1, 3).astype(np.float32), cards.faces, cards.normals, cards.uvs,
                     dict(cards.attributes))
 
 
-def coverage_tree(tree: TreeMesh, fraction: float) -> TreeMesh:
-    """The tree with its leaf cards shrunk to `fraction` of their area (see `shrunk_cards`), for opaque
-    depth-only coverage passes; the bark is kept as it is."""
+def coverage_tree(tree: TreeMesh, fraction: float, clump_fraction: float | None = None) -> TreeMesh:
+    """The tree with its leaf cards shrunk to the opaque share of the tile each is textured with (see
+    `shrunk_cards`), for opaque depth-only coverage passes: `fraction` (the single leaf) for every card, or
+    `clump_fraction` for the cards a LOD marks as merged clumps (`species.lod.card_clumps`) when given. The bark
+    is kept as it is."""
     if tree.leaves.n_faces == 0:
         return tree
-    return TreeMesh(bark=tree.bark, leaves=shrunk_cards(tree.leaves, fraction), bark_color=tree.bark_color,
+    fractions = fraction if clump_fraction is None else np.where(card_clumps(tree.leaves), clump_fraction, fraction)
+    return TreeMesh(bark=tree.bark, leaves=shrunk_cards(tree.leaves, fractions), bark_color=tree.bark_color,
                     leaf_color=tree.leaf_color, name=tree.name)

@@ -13,7 +13,7 @@ from .errors import TreefarmError
 from .textures import bark_png, leaf_png
 from .tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["tree_mesh_to_glb", "read_glb_json", "read_glb_chunks", "z_up_to_y_up", "GlbError"]
+__all__ = ["tree_mesh_to_glb", "read_glb_json", "read_glb_chunks", "read_accessor", "z_up_to_y_up", "GlbError"]
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
 _CHUNK_JSON = 0x4E4F534A  # "JSON"
@@ -161,6 +161,25 @@ def read_glb_chunks(data: bytes) -> tuple[dict, bytes]:
             raise GlbError(f"second GLB chunk has type {bin_type:#x}; expected BIN ({_CHUNK_BIN:#x})")
         binary = data[offset + 8:offset + 8 + bin_length]
     return document, binary
+
+
+_COMPONENT_TYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+                    5126: np.float32}
+_TYPE_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+def read_accessor(document: dict, binary: bytes, index: int) -> np.ndarray:
+    """The data of accessor `index` of a GLB's (document, binary chunk), as (count,) or (count, width) numpy
+    (tightly packed views, as this project writes them; a strided view raises GlbError)."""
+    accessor = document["accessors"][index]
+    view = document["bufferViews"][accessor["bufferView"]]
+    dtype = np.dtype(_COMPONENT_TYPES[accessor["componentType"]])
+    width = _TYPE_WIDTHS[accessor["type"]]
+    if view.get("byteStride", width * dtype.itemsize) != width * dtype.itemsize:
+        raise GlbError(f"accessor {index} reads a strided view (byteStride {view['byteStride']}); allowed packed")
+    data = np.frombuffer(binary, dtype, accessor["count"] * width,
+                         view.get("byteOffset", 0) + accessor.get("byteOffset", 0))
+    return data.reshape(accessor["count"], width) if width > 1 else data
 
 
 def read_glb_json(data: bytes) -> dict:

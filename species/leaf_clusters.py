@@ -1,7 +1,8 @@
 """Leaf cards merged into larger cluster cards on a voxel grid, for coarser levels of detail.
 
 In: leaf transforms (M, 4, 4) of the unit card, the node each leaf hangs from, a cluster count. Out: cluster card
-transforms (C, 4, 4) and their nodes. `LeafCards` keeps what every cluster count of one tree shares.
+transforms (C, 4, 4), their nodes and which of them merge several leaves (a card that stands for one leaf is that
+leaf, and is textured as one). `LeafCards` keeps what every cluster count of one tree shares.
 """
 from __future__ import annotations
 
@@ -76,10 +77,11 @@ class LeafCards:
         return labels.astype(np.int64), self._cell_size(step)
 
     def cluster(self, anchor: np.ndarray, n_clusters: int,
-                area_gain: float = CLUSTER_AREA_GAIN) -> tuple[np.ndarray, np.ndarray]:
+                area_gain: float = CLUSTER_AREA_GAIN) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Merge the leaves into at most `n_clusters` larger cards on a voxel grid (one card per occupied cell).
 
-        anchor : (M,) int, node of each leaf. Returns (transforms (C, 4, 4) float32, card_node (C,) int32). A
+        anchor : (M,) int, node of each leaf. Returns (transforms (C, 4, 4) float32, card_node (C,) int32,
+        merged (C,) bool: the card stands for more than one leaf, so it is drawn with a clump texture). A
         cluster's card hangs from the node of its leaf nearest the cluster centre; it is centred on the
         members, lies along their two widest spreads (`_fitted_cards`), and its area is the area the members
         cover together: sum of areas x (1 - exp(-d)) / d, with d their projected area (half their area, random
@@ -88,7 +90,7 @@ class LeafCards:
         """
         m = len(self)
         if m == 0 or n_clusters <= 0:
-            return np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32)
+            return np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32), np.zeros(0, bool)
         centres = self.centres
         labels, cell = self.grid_labels(min(n_clusters, m))
         n = int(labels.max()) + 1
@@ -112,7 +114,7 @@ class LeafCards:
             many = count > 1
             cards[many] = fitted[many]
         card_node = np.asarray(anchor)[representative]
-        return cards.astype(np.float32), card_node.astype(np.int32)
+        return cards.astype(np.float32), card_node.astype(np.int32), count > 1
 
 
 def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarray) -> np.ndarray:

@@ -16,11 +16,11 @@ from .mesh import DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
 from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
 from .polyline_simplify import simplification_keys
 from .skeleton import Skeleton
-from .tree_mesh import TreeMesh
+from .tree_mesh import MeshPart, TreeMesh
 
 __all__ = ["LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
            "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
-           "CARDS_PER_CLUSTER"]
+           "CARDS_PER_CLUSTER", "CLUMP_ATTRIBUTE", "card_clumps"]
 
 # Tube sides by branch order at each level (index = level - 1): the trunk keeps the most.
 LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
@@ -39,6 +39,9 @@ LOD_NODE_STEPS = (2, 3, 4)
 _MAX_NODE_STEP = 32
 # A cluster is drawn as one card (2 triangles).
 CARDS_PER_CLUSTER = 1
+# Per-vertex leaf attribute of LOD meshes: 1 where a card merges several leaves (textured as a clump), 0 where it
+# is one leaf (textured as that leaf); LOD0's cards have none (every card is one leaf).
+CLUMP_ATTRIBUTE = "clump"
 # Shares of the longest branch below which branches are dropped, tried in turn until the bark fits its budget.
 _PRUNE_LADDER = (0.0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.85, 1.01)
 # The budget is filled to this fraction at most: merging of close rings can only lower counts, never raise.
@@ -54,7 +57,8 @@ class LodLevel:
 
     level         : 1, 2, 3, ...
     skeleton      : the simplified skeleton; its leaves are the cluster cards (CARDS_PER_CLUSTER per cluster).
-    mesh          : its TreeMesh (bark with `order`/`branch`, cards with `node` attributes).
+    mesh          : its TreeMesh (bark with `order`/`branch`, cards with `node` and `clump` attributes; `clump` is
+                    1 on the vertices of cards that merge several leaves, 0 on cards that are one leaf).
     original_node : (N',) int32, the LOD0 node each kept node is.
     n_clusters    : leaf clusters (cards / CARDS_PER_CLUSTER).
     """
@@ -68,6 +72,15 @@ class LodLevel:
     @property
     def n_triangles(self) -> int:
         return self.mesh.n_faces
+
+
+def card_clumps(leaves: MeshPart) -> np.ndarray:
+    """(C,) bool per card of a leaf MeshPart (four vertices per card): True where the card merges several leaves
+    (CLUMP_ATTRIBUTE), all False for cards without that attribute (LOD0's)."""
+    flags = leaves.attributes.get(CLUMP_ATTRIBUTE)
+    if flags is None:
+        return np.zeros(leaves.n_vertices // 4, bool)
+    return np.asarray(flags[::4]) > 0
 
 
 def nearest_kept_ancestor(parent: np.ndarray, keep: np.ndarray) -> np.ndarray:
@@ -371,10 +384,13 @@ class TreeLods:
         if skeleton.n_leaves and n_clusters < 1:
             raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
                                  f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
-        cards, card_node = self.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
+        cards, card_node, merged = self.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
         lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
                                 leaves=cards, leaf_node=card_node)
-        mesh = TreeMesh(bark=bark, leaves=leaf_part(lod_skeleton), bark_color=lod0.bark_color,
+        leaves = leaf_part(lod_skeleton)
+        leaves = MeshPart(leaves.vertices, leaves.faces, leaves.normals, leaves.uvs,
+                          {**leaves.attributes, CLUMP_ATTRIBUTE: np.repeat(merged, 4).astype(np.uint8)})
+        mesh = TreeMesh(bark=bark, leaves=leaves, bark_color=lod0.bark_color,
                         leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
         return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
 

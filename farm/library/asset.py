@@ -148,8 +148,8 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
                   lod0_cover=None) -> None:
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
     both drawn through the same camera in one depth-only pass each, every leaf card shrunk to the opaque share
-    of the tile it uses (LOD0 cards: `lod0_fraction` of the single leaf; coarser levels: `card_fraction` of the
-    clump), the impostor cut by its atlas alpha. Each LOD0 reference (azimuth, size) is rendered once."""
+    of the tile it uses (`lod0_fraction` of the single leaf for LOD0's cards and for LOD cards that are one
+    leaf; `card_fraction` of the clump for cards that merge several), the impostor cut by its atlas alpha. Each LOD0 reference (azimuth, size) is rendered once."""
     from renderers.alpha_coverage import coverage_tree, triangle_coverage
     from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 
@@ -166,7 +166,7 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
             draw = lambda camera: triangle_coverage(camera, billboard.vertices, billboard.faces,  # noqa: E731
                                                     billboard.uvs, opaque)
         else:
-            cover = coverage_tree(level.mesh, card_fraction)
+            cover = coverage_tree(level.mesh, lod0_fraction, card_fraction)
             draw = lambda camera: renderer.coverage(cover, camera)  # noqa: E731
         keys = [(azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
         level.iou = [silhouette_iou(references[key], closed_silhouette(draw(cameras[key]))) for key in keys]
@@ -197,7 +197,8 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("lods"):
         lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
-        lods = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, card_fraction)
+        lods = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
+                        card_fraction)
     with timer.stage("wind"):
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
         for lod, px in zip(lods, spec.switch_px):

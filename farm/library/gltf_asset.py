@@ -1,5 +1,5 @@
 """The asset GLB: every level of detail and the impostor as named nodes (MSFT_lod on the root, screen coverages
-in its extras), leaves as one instanced card (EXT_mesh_gpu_instancing), seasons as KHR_materials_variants,
+in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for clumps), seasons as KHR_materials_variants,
 wind attributes `_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha.
 
 In: a LibraryAsset. Out: GLB bytes (Y up, metres); same asset, same bytes. `instanced=False` bakes the leaves
@@ -15,6 +15,7 @@ import numpy as np
 from species.gltf import _BinaryBuffer, z_up_to_y_up
 from species.mesh import _CARD_FACES, _CARD_UVS
 from species.pbr_textures import SEASONS
+from species.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 from .png_cache import encode_png
 
@@ -126,10 +127,11 @@ def _materials(writer: _Writer, asset: LibraryAsset) -> dict[str, int]:
     return out
 
 
-def _leaf_tile_uvs(uvs: np.ndarray, level: int) -> np.ndarray:
-    """Card UVs into the atlas: LOD0 leaves the left tile (one leaf), coarser cards the right (a clump)."""
+def _leaf_tile_uvs(uvs: np.ndarray, clump: np.ndarray) -> np.ndarray:
+    """Card UVs (V, 2) into the atlas: the left tile (one leaf) where `clump` (V,) bool is False, the right (a
+    clump of leaves) where it is True."""
     out = np.asarray(uvs, np.float64).copy()
-    out[:, 0] = 0.5 * out[:, 0] + (0.0 if level == 0 else 0.5)
+    out[:, 0] = 0.5 * out[:, 0] + 0.5 * np.asarray(clump, np.float64)
     return out
 
 
@@ -156,7 +158,7 @@ def _document(asset: LibraryAsset, instanced: bool, size_only: bool) -> tuple[by
     materials = _materials(writer, asset)
     variant_maps = [{"material": materials[season], "variants": [i]} for i, season in enumerate(SEASONS)]
     level_nodes = []
-    for index, level in enumerate(asset.levels):
+    for level in asset.levels:
         children = []
         mesh = level.mesh
         if level.name == "IMPOSTOR":
@@ -171,7 +173,7 @@ def _document(asset: LibraryAsset, instanced: bool, size_only: bool) -> tuple[by
             children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_bark",
                                          "mesh": writer.mesh(f"{level.name}_bark", prim)}))
             if level.skeleton.n_leaves:
-                children.append(_leaves_node(writer, asset, index, level, materials, variant_maps, instanced))
+                children += _leaves_nodes(writer, asset, level, materials, variant_maps, instanced)
         node = {"name": f"{asset.asset_id}_{level.name}", "children": children,
                 "extras": {"switch_px": level.switch_px, "triangles": level.n_triangles}}
         level_nodes.append(writer.node(node))
@@ -193,33 +195,43 @@ def _document(asset: LibraryAsset, instanced: bool, size_only: bool) -> tuple[by
     return json_bytes, writer
 
 
-def _leaves_node(writer: _Writer, asset, index: int, level, materials, variant_maps, instanced: bool) -> int:
-    name = f"{asset.asset_id}_{level.name}_leaves"
-    skeleton = level.skeleton
+def _leaves_nodes(writer: _Writer, asset, level, materials, variant_maps, instanced: bool) -> list[int]:
+    """The level's leaf card nodes. Flat: one `_leaves` mesh, each card's UVs in its own tile. Instanced: one
+    node per card kind present, each drawing one card mesh at every instance of its kind (`_leaves`: cards
+    that are one leaf, single-leaf tile; `_clumps`: cards that merge several, clump tile)."""
+    skeleton, part = level.skeleton, level.mesh.leaves
+    clumps = card_clumps(part)
     if not instanced:
-        part = level.mesh.leaves
         per_vertex = {"_WIND": (np.repeat(level.leaf_wind, 4, axis=0), "VEC4"),
                       "_WIND_PIVOT": (z_up_to_y_up(np.repeat(level.leaf_pivot, 4, axis=0)), "VEC3")}
-        prim = writer.primitive(part.vertices, part.normals, _leaf_tile_uvs(part.uvs, index), part.faces,
-                                materials["summer"], per_vertex, variant_maps)
-        return writer.node({"name": name, "mesh": writer.mesh(f"{level.name}_leaves", prim)})
-    # One card in its own frame (z along the leaf, normal +y); every leaf is an instance of it. Its vertices
-    # are not turned to Y up: the instance rotations carry the whole frame change.
+        prim = writer.primitive(part.vertices, part.normals, _leaf_tile_uvs(part.uvs, np.repeat(clumps, 4)),
+                                part.faces, materials["summer"], per_vertex, variant_maps)
+        return [writer.node({"name": f"{asset.asset_id}_{level.name}_leaves",
+                             "mesh": writer.mesh(f"{level.name}_leaves", prim)})]
+    # One card in its own frame (z along the leaf, normal +y); every card of a kind is an instance of it. Its
+    # vertices are not turned to Y up: the instance rotations carry the whole frame change.
     card_normals = np.tile([0.0, 1.0, 0.0], (4, 1))
-    card = writer.primitive(_card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
-                            _leaf_tile_uvs(_CARD_UVS, index), _CARD_FACES, materials["summer"],
-                            {"_WIND": (np.zeros((4, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((4, 3)), "VEC3")},
-                            variant_maps)
     translation, rotation, scale = leaf_instances(skeleton)
-    attributes = {
-        "TRANSLATION": writer.vec(translation @ _Z_TO_Y.T, "VEC3", None),
-        "ROTATION": writer.vec(_quaternions(_Z_TO_Y @ rotation), "VEC4", None),
-        "SCALE": writer.vec(scale, "VEC3", None),
-        "_WIND": writer.vec(level.leaf_wind, "VEC4", None),
-        "_WIND_PIVOT": writer.vec(z_up_to_y_up(level.leaf_pivot), "VEC3", None),
-    }
-    return writer.node({"name": name, "mesh": writer.mesh(f"{level.name}_leaf_card", card),
-                        "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}})
+    nodes = []
+    for clump, kind in ((False, "leaves"), (True, "clumps")):
+        chosen = clumps == clump
+        if not chosen.any():
+            continue
+        card = writer.primitive(_card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
+                                _leaf_tile_uvs(_CARD_UVS, np.full(4, clump)), _CARD_FACES, materials["summer"],
+                                {"_WIND": (np.zeros((4, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((4, 3)), "VEC3")},
+                                variant_maps)
+        attributes = {
+            "TRANSLATION": writer.vec(translation[chosen] @ _Z_TO_Y.T, "VEC3", None),
+            "ROTATION": writer.vec(_quaternions(_Z_TO_Y @ rotation[chosen]), "VEC4", None),
+            "SCALE": writer.vec(scale[chosen], "VEC3", None),
+            "_WIND": writer.vec(level.leaf_wind[chosen], "VEC4", None),
+            "_WIND_PIVOT": writer.vec(z_up_to_y_up(level.leaf_pivot[chosen]), "VEC3", None),
+        }
+        nodes.append(writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
+                                  "mesh": writer.mesh(f"{level.name}_{kind[:-1]}_card", card),
+                                  "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}}))
+    return nodes
 
 
 def _card_to_local(vectors: np.ndarray) -> np.ndarray:

@@ -2,7 +2,7 @@
 cards in the proportion whose silhouette comes closest to LOD0's, seen from azimuths the quality figures never use.
 
 In: skeleton, LOD0 TreeMesh and its coverage tree, the spec's budgets and switch sizes, the process's
-CoverageRenderer, the cluster cards' opaque share. Out: one `species.lod.LodLevel` per budget.
+CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. Out: one `species.lod.LodLevel` per budget.
 """
 from __future__ import annotations
 
@@ -28,7 +28,8 @@ _FIRST_GAIN_LEVEL = 2
 CALIBRATION_AZIMUTHS = (33.75,)
 
 
-def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_fraction: float) -> list:
+def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_fraction: float,
+             card_fraction: float) -> list:
     """One LodLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
@@ -66,7 +67,7 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, card_frac
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
                     tried[share, gain] = (-1.0, None)
                     return -1.0
-                cover = coverage_tree(lod.mesh, card_fraction)
+                cover = coverage_tree(lod.mesh, leaf_fraction, card_fraction)
                 tried[share, gain] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
                                           for reference, camera in zip(references, cameras)), lod)
             return tried[share, gain][0]

@@ -1,5 +1,5 @@
 """The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
-variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of one card, wind primvars.
+variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on coarser levels, a clump card), wind primvars.
 
 In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
 """
@@ -10,6 +10,7 @@ import tempfile
 
 import numpy as np
 
+from species.lod import card_clumps
 from species.pbr_textures import SEASONS
 from species.skeleton import LEAF_CARD_CORNERS
 
@@ -105,7 +106,7 @@ def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = N
     return mesh
 
 
-def _leaf_instancer(stage, path: str, level, level_index: int, card_material):
+def _leaf_instancer(stage, path: str, level, card_material):
     from pxr import Sdf, UsdGeom, UsdShade, Vt
     from scipy.spatial.transform import Rotation
 
@@ -114,13 +115,20 @@ def _leaf_instancer(stage, path: str, level, level_index: int, card_material):
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
     card = MeshPart(LEAF_CARD_CORNERS, _CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), _CARD_UVS)
-    prototype = _mesh(stage, f"{path}/prototypes/card", card, uv_tile=0 if level_index == 0 else 1)
-    UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
-    instancer.CreatePrototypesRel().SetTargets([prototype.GetPath()])
+    # One prototype per card kind present: `leaf` (single-leaf tile) for cards that are one leaf, `clump`
+    # (clump tile) for cards that merge several.
+    clumps = card_clumps(level.mesh.leaves)
+    kinds = [kind for kind in (False, True) if (clumps == kind).any()]
+    prototypes = []
+    for kind in kinds:
+        prototype = _mesh(stage, f"{path}/prototypes/{'clump' if kind else 'leaf'}", card, uv_tile=int(kind))
+        UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+        prototypes.append(prototype.GetPath())
+    instancer.CreatePrototypesRel().SetTargets(prototypes)
     translation, rotation, scale = leaf_instances(level.skeleton)
     quat = Rotation.from_matrix(rotation).as_quat()  # x, y, z, w
     quat[quat[:, 3] < 0] *= -1.0
-    instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.zeros(len(translation), np.int32)))
+    instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.searchsorted(kinds, clumps).astype(np.int32)))
     instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
     instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))
     instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scale.astype(np.float32)))
@@ -160,7 +168,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     geom = f"{root_path}/Geom"
     UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")
-    for index, level in enumerate(asset.levels):
+    for level in asset.levels:
         lod_set.AddVariant(level.name)
         lod_set.SetVariantSelection(level.name)
         with lod_set.GetVariantEditContext():
@@ -171,7 +179,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
                 if level.skeleton.n_leaves:
-                    _leaf_instancer(stage, f"{geom}/leaves", level, index, leaves["summer"])
+                    _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
             stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
     lod_set.SetVariantSelection("LOD0")
     season_set = root.GetVariantSets().AddVariantSet("season")

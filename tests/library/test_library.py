@@ -106,6 +106,45 @@ def test_usd_textures_wrap_as_the_glb_samplers_do(library):
     assert all(s == t for s, t in seen.values()) and {"repeat", "clamp"} == {s for s, _ in seen.values()}
 
 
+def test_single_leaves_use_the_leaf_tile_and_clumps_the_clump_tile_in_glb_and_usd(library):
+    """Cards that are one leaf are textured with the atlas's single-leaf tile (left half), cards that merge several
+    with its clump tile (right half): per level, one instanced GLB node and one USD prototype per kind, the same
+    number of cards of each kind in both files."""
+    from pxr import Usd, UsdGeom
+
+    from species.gltf import read_accessor, read_glb_chunks
+
+    kinds_seen = set()
+    for glb in sorted(library.glob("assets/*/*.glb")):
+        document, binary = read_glb_chunks(glb.read_bytes())
+        counts = {}
+        for node in document["nodes"]:
+            level, kind = node["name"].rsplit("_", 2)[-2:]
+            if kind not in ("leaves", "clumps"):
+                continue
+            primitive = document["meshes"][node["mesh"]]["primitives"][0]
+            u = read_accessor(document, binary, primitive["attributes"]["TEXCOORD_0"])[:, 0]
+            assert (u <= 0.5).all() if kind == "leaves" else (u >= 0.5).all(), (glb.name, node["name"])
+            instances = node["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]
+            counts[level, kind] = document["accessors"][instances["TRANSLATION"]]["count"]
+        assert ("LOD0", "clumps") not in counts and ("LOD0", "leaves") in counts
+        kinds_seen |= {kind for level, kind in counts if level != "LOD0"}
+        stage = Usd.Stage.Open(str(glb.with_suffix(".usdc")))
+        root = stage.GetDefaultPrim()
+        for level in sorted({level for level, _ in counts}):
+            root.GetVariantSets().GetVariantSet("lod").SetVariantSelection(level)
+            instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath(root.GetPath().AppendPath("Geom/leaves")))
+            indices = np.array(instancer.GetProtoIndicesAttr().Get())
+            usd_counts = {}
+            for i, path in enumerate(instancer.GetPrototypesRel().GetTargets()):
+                kind = {"leaf": "leaves", "clump": "clumps"}[path.name]
+                u = np.array(UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(path)).GetPrimvar("st").Get())[:, 0]
+                assert (u <= 0.5).all() if kind == "leaves" else (u >= 0.5).all(), (path, level)
+                usd_counts[level, kind] = int((indices == i).sum())
+            assert usd_counts == {key: n for key, n in counts.items() if key[0] == level}
+    assert kinds_seen == {"leaves", "clumps"}  # coarser levels hold both kinds somewhere in the library
+
+
 def test_catalog_triangles_and_iou_follow_the_budgets(library):
     import pandas as pd
 

@@ -169,3 +169,41 @@ def test_a_card_area_gain_that_is_not_positive_is_rejected_with_its_value():
     skeleton, lod0 = _tree("maple", 0)
     with pytest.raises(LodBudgetError, match="card area gain 0"):
         build_lod(skeleton, lod0, 1, 0.4, 512, card_area_gain=0.0)
+
+
+def test_a_card_that_is_one_leaf_is_that_leaf_and_only_merged_cards_are_clumps():
+    from species.leaf_clusters import LeafCards
+    from species.lod import CLUMP_ATTRIBUTE, card_clumps
+
+    skeleton, lod0 = _tree("maple", 0)
+    lod = build_lod(skeleton, lod0, 1, 0.4, 512)
+    clumps = card_clumps(lod.mesh.leaves)
+    assert len(clumps) == len(lod.skeleton.leaves) and clumps.any() and not clumps.all()
+    assert np.array_equal(lod.mesh.leaves.attributes[CLUMP_ATTRIBUTE], np.repeat(clumps, 4))
+    lod0_leaves = {m.astype(np.float32).tobytes() for m in skeleton.leaves}
+    is_a_leaf = np.array([m.astype(np.float32).tobytes() in lod0_leaves for m in lod.skeleton.leaves])
+    assert np.array_equal(is_a_leaf, ~clumps)
+    assert not card_clumps(lod0.leaves).any()  # LOD0's cards are all single leaves
+    cards = LeafCards(skeleton.leaves)
+    _, _, merged = cards.cluster(skeleton.leaf_node, 1)
+    assert merged.tolist() == [True]  # every leaf in one card
+
+
+def test_a_coverage_tree_cuts_single_leaves_and_clumps_to_their_own_tiles_share():
+    from renderers.alpha_coverage import coverage_tree
+    from species.lod import card_clumps
+
+    skeleton, lod0 = _tree("maple", 0)
+    lod = build_lod(skeleton, lod0, 2, 0.12, 256)
+    clumps = card_clumps(lod.mesh.leaves)
+    assert clumps.any() and not clumps.all()
+
+    def areas(part):
+        c = part.vertices.reshape(-1, 4, 3).astype(np.float64)
+        return np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 3] - c[:, 0]), axis=1)
+
+    full = areas(lod.mesh.leaves)
+    cut = areas(coverage_tree(lod.mesh, 0.25, 0.64).leaves)
+    np.testing.assert_allclose(cut[~clumps], 0.25 * full[~clumps], rtol=1e-4)
+    np.testing.assert_allclose(cut[clumps], 0.64 * full[clumps], rtol=1e-4)
+    np.testing.assert_allclose(areas(coverage_tree(lod.mesh, 0.25).leaves), 0.25 * full, rtol=1e-4)

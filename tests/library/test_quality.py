@@ -203,13 +203,13 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     lod0 = species.build_mesh(skeleton, params)
     lod0_fraction, card_fraction = leaf_fractions(leaf_atlas((0.2, 0.5, 0.1), 64))
     cover = coverage_tree(lod0, lod0_fraction)
-    chosen = fit_lods(skeleton, lod0, cover, (0.4, 0.12), (512, 256), renderer, card_fraction)[1]
+    chosen = fit_lods(skeleton, lod0, cover, (0.4, 0.12), (512, 256), renderer, lod0_fraction, card_fraction)[1]
     share0 = lod0.bark.n_faces / lod0.n_faces
     points = framing_points(lod0)
 
     def score(lod):
         return min(silhouette_iou(closed_silhouette(renderer.coverage(cover, switch_camera(points, az, 256))),
-                                  closed_silhouette(renderer.coverage(coverage_tree(lod.mesh, card_fraction),
+                                  closed_silhouette(renderer.coverage(coverage_tree(lod.mesh, lod0_fraction, card_fraction),
                                                                       switch_camera(points, az, 256))))
                    for az in CALIBRATION_AZIMUTHS)
 

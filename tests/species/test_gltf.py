@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from species.gltf import GlbError, read_glb_chunks, read_glb_json, tree_mesh_to_glb
+from species.gltf import GlbError, read_accessor, read_glb_chunks, read_glb_json, tree_mesh_to_glb
 from species.mesh import build_mesh
 from species.tree_mesh import MeshError, MeshPart, TreeMesh
 from tests.gltf_validator import assert_valid_glb
@@ -21,15 +21,6 @@ def fork_mesh():
 @pytest.fixture(scope="module")
 def fork_glb(fork_mesh):
     return fork_mesh.to_glb()
-
-
-def _accessor_array(document, binary, index):
-    accessor = document["accessors"][index]
-    view = document["bufferViews"][accessor["bufferView"]]
-    dtype = {5126: np.float32, 5123: np.uint16, 5125: np.uint32}[accessor["componentType"]]
-    width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3}[accessor["type"]]
-    data = np.frombuffer(binary, dtype, accessor["count"] * width, view["byteOffset"])
-    return data.reshape(accessor["count"], width) if width > 1 else data
 
 
 def test_fork_glb_passes_the_khronos_validator(fork_mesh, fork_glb, tmp_path):
@@ -83,7 +74,7 @@ def test_chunks_and_buffer_views_are_four_byte_aligned(fork_glb):
 def test_world_z_becomes_gltf_y(fork_mesh, fork_glb):
     document, binary = read_glb_chunks(fork_glb)
     position = document["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
-    gltf = _accessor_array(document, binary, position)
+    gltf = read_accessor(document, binary, position)
     world = fork_mesh.bark.vertices
     np.testing.assert_array_equal(gltf[:, 1], world[:, 2])   # height h at world z is glTF y
     np.testing.assert_array_equal(gltf[:, 2], -world[:, 1])
@@ -93,7 +84,7 @@ def test_world_z_becomes_gltf_y(fork_mesh, fork_glb):
 def test_texture_v_is_flipped_for_gltf(fork_mesh, fork_glb):
     document, binary = read_glb_chunks(fork_glb)
     texcoord = document["meshes"][1]["primitives"][0]["attributes"]["TEXCOORD_0"]
-    np.testing.assert_allclose(_accessor_array(document, binary, texcoord)[:, 1], 1 - fork_mesh.leaves.uvs[:, 1])
+    np.testing.assert_allclose(read_accessor(document, binary, texcoord)[:, 1], 1 - fork_mesh.leaves.uvs[:, 1])
 
 
 def test_trimesh_reads_back_the_same_counts_and_names(fork_mesh, fork_glb):
