@@ -3,8 +3,9 @@ library's least silhouette IoU beside two floors of the measure itself, LOD0 aga
 to the side and LOD0 against LOD0 turned by 1 deg.
 
 - Half a pixel: a LOD whose every vertex stayed within half a pixel of LOD0's (finer than any simplification
-  a screen tolerance allows) still moves thin outlines by that much (the least of a move across and a move up). Where LOD0 moved by half a pixel falls
-  below the target, the measure cannot tell a LOD accurate to half a pixel from a poor one.
+  a screen tolerance allows) still moves thin outlines by that much (the least of a move across and a move
+  up). Where LOD0 moved by half a pixel falls below the target, the measure cannot tell a LOD accurate to half
+  a pixel from a poor one.
 - 1 and 4 deg: a view-sampled impostor (crossed planes, a ring of billboards, an octahedral atlas) shows from
   between its views a tree turned by up to half their spacing. LOD0 turned 1 deg is what a billboard with a
   view every 2 deg (180 frames around the tree) shows at worst, before any texel is lost; 4 deg, one with a

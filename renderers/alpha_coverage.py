@@ -5,9 +5,10 @@ In: a `Camera`, triangles (vertices, faces) with optional UVs and an alpha mask,
 Out: (H, W) bool coverage, or plain opaque cards (MeshPart / TreeMesh) that depth-only GL passes draw.
 
 Measurement rule (the same for LOD0 leaves, LOD cluster cards and every level, so the comparison is fair): a
-card textured with alpha tile A (a single leaf, or a clump for cards that merge several leaves) is drawn as its own two triangles shrunk about the card's centre by sqrt(f) in
-both axes, f = the share of texels of A at or above the files' alpha cutoff (0.5), measured once per tile. The
-shrunk card covers the same area as the alpha-tested card; only where inside the card that area lies differs.
+card textured with alpha tile A (a single leaf, or a clump for cards that merge several leaves) is drawn as its
+own two triangles shrunk about the card's centre by sqrt(f) in both axes, f = the share of texels of A at or
+above the files' alpha cutoff (0.5), measured once per tile. The shrunk card covers the same area as the
+alpha-tested card; only where inside the card that area lies differs.
 """
 from __future__ import annotations
 

@@ -149,7 +149,8 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
     both drawn through the same camera in one depth-only pass each, every leaf card shrunk to the opaque share
     of the tile it uses (`lod0_fraction` of the single leaf for LOD0's cards and for LOD cards that are one
-    leaf; `card_fraction` of the clump for cards that merge several), the impostor cut by its atlas alpha. Each LOD0 reference (azimuth, size) is rendered once."""
+    leaf; `card_fraction` of the clump for cards that merge several), the impostor cut by its atlas alpha.
+    Each LOD0 reference (azimuth, size) is rendered once."""
     from renderers.alpha_coverage import coverage_tree, triangle_coverage
     from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 

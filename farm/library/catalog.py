@@ -14,8 +14,8 @@ from ..manifest import Problem
 from ..storage import Location, sha256_hex
 from ..tree_chain import to_json, tree_seed
 
-__all__ = ["catalog_rows", "write_catalog", "validate_library", "quality_shortfalls", "CATALOG_COLUMNS",
-           "IOU_TARGET"]
+__all__ = ["catalog_rows", "library_asset_ids", "write_catalog", "validate_library", "quality_shortfalls",
+           "CATALOG_COLUMNS", "IOU_TARGET"]
 
 # Silhouette IoU against LOD0 every level should reach at its switch size (issue 11's target).
 IOU_TARGET = 0.9
@@ -25,7 +25,9 @@ CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_
                    "tags", "thumbnail", "turntable", "glb_bytes", "glb_bytes_without_instancing")
 
 
-def _asset_ids(location: Location, spec) -> list[str]:
+def library_asset_ids(location: Location, spec) -> list[str]:
+    """Sorted ids of every asset a library holds or should hold: its spec's trees and those `farm library add`
+    added (whether or not their asset.json was written)."""
     from .asset import asset_id
     from .spec import species_of_trees
 
@@ -40,7 +42,7 @@ def _asset_ids(location: Location, spec) -> list[str]:
 def catalog_rows(location: Location, spec) -> list[dict]:
     """One row per asset present (asset.json written), sorted by id."""
     rows = []
-    for ident in _asset_ids(location, spec):
+    for ident in library_asset_ids(location, spec):
         path = f"assets/{ident}/asset.json"
         if not location.exists(path):
             continue  # a failed tree: the manifest's failures name it

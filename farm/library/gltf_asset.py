@@ -1,6 +1,7 @@
 """The asset GLB: every level of detail and the impostor as named nodes (MSFT_lod on the root, screen coverages
-in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for clumps), seasons as KHR_materials_variants,
-wind attributes `_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha.
+in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for
+clumps), seasons as KHR_materials_variants, wind attributes `_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas
+with alpha.
 
 In: a LibraryAsset. Out: GLB bytes (Y up, metres); same asset, same bytes. `instanced=False` bakes the leaves
 into plain triangles (to measure what instancing saves).

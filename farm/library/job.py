@@ -176,12 +176,12 @@ def retry_failed_fbx(location: Location, spec, timer: StageTimer | None = None) 
     `"blender": "failed: ..."`), as a resumed job should finish what a run left undone; returns how many assets
     were retried. Their other files are whole and stay as they are; each asset.json is rewritten (atomically)
     with the new outcome."""
-    from .catalog import _asset_ids
+    from .catalog import library_asset_ids
 
     if "fbx" not in spec.formats or not _wants_blender(spec, location):
         return 0
     pending = []
-    for ident in _asset_ids(location, spec):
+    for ident in library_asset_ids(location, spec):
         path = f"{ASSETS}/{ident}/asset.json"
         if not location.exists(path):
             continue

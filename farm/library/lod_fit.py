@@ -2,7 +2,8 @@
 cards in the proportion whose silhouette comes closest to LOD0's, seen from azimuths the quality figures never use.
 
 In: skeleton, LOD0 TreeMesh and its coverage tree, the spec's budgets and switch sizes, the process's
-CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. Out: one `species.lod.LodLevel` per budget.
+CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. Out: one `species.lod.LodLevel`
+per budget.
 """
 from __future__ import annotations
 

@@ -1,5 +1,6 @@
 """The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
-variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on coarser levels, a clump card), wind primvars.
+variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on
+coarser levels, a clump card), wind primvars.
 
 In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
 """

@@ -208,9 +208,9 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     points = framing_points(lod0)
 
     def score(lod):
+        lod_cover = coverage_tree(lod.mesh, lod0_fraction, card_fraction)
         return min(silhouette_iou(closed_silhouette(renderer.coverage(cover, switch_camera(points, az, 256))),
-                                  closed_silhouette(renderer.coverage(coverage_tree(lod.mesh, lod0_fraction, card_fraction),
-                                                                      switch_camera(points, az, 256))))
+                                  closed_silhouette(renderer.coverage(lod_cover, switch_camera(points, az, 256))))
                    for az in CALIBRATION_AZIMUTHS)
 
     def neighbours(index, count):
