@@ -67,7 +67,7 @@ def main(names: list[str]) -> None:
 
     renderer = CoverageRenderer(64)  # one EGL context for every size: the viewport follows the camera
     rows = {}
-    level_names = None
+    level_names = switch_sizes = None
     for name in tqdm(names, desc="presets", unit="tree"):
         spec = parse_library_spec({"species": {name: 1}})
         asset = build_asset(name, tree_seed(0, 0), spec, renderer, StageTimer())
@@ -76,10 +76,10 @@ def main(names: list[str]) -> None:
         points = framing_points(asset.lod0)
         levels = asset.levels[1:]
         level_names = [level.name for level in levels]
+        switch_sizes = [level.switch_px for level in levels]
         rows[name] = [(min(level.iou), *level_floors(renderer, cover, points, level.switch_px)) for level in levels]
 
-    for k, level_name in enumerate(level_names):
-        switch_px = parse_library_spec({"species": {names[0]: 1}}).switch_px[k]
+    for k, (level_name, switch_px) in enumerate(zip(level_names, switch_sizes)):
         print(f"\n{level_name} at {switch_px} px: least silhouette IoU over 8 azimuths (target {IOU_TARGET})")
         print(f"{'preset':28s} | " + " | ".join(f"{c:>20s}" for c in COLUMNS))
         for name, levels in rows.items():
