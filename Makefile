@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test env blender-env node-env browser-env bench clean
+.PHONY: run test env blender-env node-env browser-env bench golden clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -45,6 +45,10 @@ run: env
 
 test: env
 	$(PY) -m pytest -q
+
+# Rewrites tests/golden/*.json from the current code; a commit that changes outputs on purpose runs this.
+golden: env
+	$(PY) tests/golden/goldens.py
 
 bench: env
 	$(PY) benchmarks/bench_weber_penn.py
