@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
 from skeleton_drawing import front_view  # noqa: E402
-from species.colonization import grow  # noqa: E402
+from species.colonization.generator import grow  # noqa: E402
 
 # About 5,000 internodes from 20,000 markers: an ellipsoid crown of ~31,000 IL^3 at 0.65 markers per IL^3.
 MAIN = {"generator": "colonization", "crown_shape": "ellipsoid", "crown_radius": 20.0, "crown_height": 34.0,

@@ -17,8 +17,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
 from skeleton_drawing import front_view  # noqa: E402
-from species.lsystem import grow  # noqa: E402
-from species.lsystem_presets import PRESETS  # noqa: E402
+from species.lsystem.generator import grow  # noqa: E402
+from species.lsystem.presets import PRESETS  # noqa: E402
 
 # Thesis 003 prints no timings. For scale: the self-organizing model of thesis 000 grows a tree in 1.1-1.5 s
 # (i7-7700HQ); the task asks for under ~20k nodes per preset tree so trees mesh and render fast.

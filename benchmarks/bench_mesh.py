@@ -20,7 +20,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # the synthetic tree comes from the tests' skeleton factory
 
-from species.mesh import build_mesh  # noqa: E402
+from species.meshing.tubes_and_cards import build_mesh  # noqa: E402
 from species.skeleton import Skeleton  # noqa: E402
 from tests.species.skeleton_factory import random_tree  # noqa: E402
 

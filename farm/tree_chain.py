@@ -14,12 +14,11 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from species.errors import TreefarmError
 
 from .dataset import FLOAT_OUTPUTS
 from .image_codec import encode_map
 
-__all__ = ["BuiltTree", "StageTimer", "TreeTooLargeError", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
+__all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
            "tree_row", "view_rows", "failed_tree_row", "to_json"]
 
 
@@ -49,10 +48,6 @@ def to_json(value: Any) -> str:
         raise TypeError(f"{type(item).__name__} is not JSON-able")
 
     return json.dumps(value, sort_keys=True, separators=(",", ":"), default=plain)
-
-
-class TreeTooLargeError(TreefarmError):
-    """A tree exceeds the job's size limit (recorded as a failed tree; the job goes on)."""
 
 
 class StageTimer:
@@ -113,13 +108,8 @@ class SpeciesChain:
         with timer.stage("sample"):
             params = species.sample(species_name, sample_rng)
         built = BuiltTree(params=params, skeleton=None, mesh=None)
-        with timer.stage("grow"):
-            built.skeleton = species.grow(params, species.rng_for(params))
-            if built.skeleton.n_nodes > self.spec.max_nodes:
-                raise TreeTooLargeError(f"skeleton has {built.skeleton.n_nodes} nodes; the job allows "
-                                        f"max_nodes = {self.spec.max_nodes}")
-        with timer.stage("mesh"):
-            built.mesh = species.build_mesh(built.skeleton, params)
+        with timer.stage("grow"):  # growth and meshing; a tree over the job's max_nodes fails before meshing
+            built.skeleton, built.mesh = species.rebuild(params, max_nodes=self.spec.max_nodes)
         if self.spec.render.outputs:
             with timer.stage("render"):
                 built.views = self.renderer().render(built.mesh, built.skeleton, self.spec.render.rig,

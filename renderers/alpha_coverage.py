@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from species.errors import TreefarmError
-from species.lod import card_clumps
+from species.studio.lod import card_clumps
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import Camera

@@ -259,7 +259,7 @@ def time_blender_outputs(n_assets: int, preset: str = "balsam_fir", seed: int = 
         glbs, triangles = [], []
         for i, child in enumerate(np.random.SeedSequence(seed).spawn(n_assets)):
             params = species.sample(preset, np.random.default_rng(child))
-            mesh = species.build_mesh(species.grow(params, species.rng_for(params)), params)
+            _, mesh = species.rebuild(params)
             glbs.append(tmp / f"tree_{i:03d}.glb")
             glbs[-1].write_bytes(mesh.to_glb())
             triangles.append(len(mesh.bark.faces) + len(mesh.leaves.faces))

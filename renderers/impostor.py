@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from species.errors import TreefarmError
-from species.textures import linear_to_srgb
+from species.meshing.textures import linear_to_srgb
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction

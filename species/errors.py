@@ -1,7 +1,7 @@
 """Errors a user can act on. The CLI prints their message in one line; library code raises them."""
 from __future__ import annotations
 
-__all__ = ["TreefarmError", "ParameterError"]
+__all__ = ["TreefarmError", "ParameterError", "TreeTooLargeError"]
 
 
 class TreefarmError(ValueError):
@@ -14,3 +14,7 @@ class ParameterError(TreefarmError):
     def __init__(self, key: str, value, allowed: str):
         self.key, self.value, self.allowed = key, value, allowed
         super().__init__(f"parameter {key!r} = {value!r} is invalid: allowed {allowed}")
+
+
+class TreeTooLargeError(TreefarmError):
+    """A tree grows more stems or nodes than a dictionary's limits or its caller allow."""

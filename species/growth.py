@@ -9,16 +9,18 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import ParameterError
+from .errors import ParameterError, TreeTooLargeError
+from .meshing import build_mesh
 from .skeleton import Skeleton
+from .tree_mesh import TreeMesh
 
-__all__ = ["grow", "GENERATORS", "generator_of", "rng_for"]
+__all__ = ["grow", "rebuild", "GENERATORS", "generator_of", "rng_for"]
 
 # generator name -> "module:function" taking (params, rng) and returning a Skeleton.
 GENERATORS: dict[str, str] = {
-    "weber_penn": "species.weber_penn:grow",
-    "colonization": "species.colonization:grow",
-    "lsystem": "species.lsystem:grow",
+    "weber_penn": "species.weber_penn.generator:grow",
+    "colonization": "species.colonization.generator:grow",
+    "lsystem": "species.lsystem.generator:grow",
 }
 
 
@@ -49,3 +51,15 @@ def rng_for(params: dict) -> np.random.Generator:
     if isinstance(seed, bool) or not isinstance(seed, (int, float)) or seed < 0 or int(seed) != seed:
         raise ParameterError("seed", seed, "a non-negative integer")
     return np.random.default_rng(int(seed))
+
+
+def rebuild(params: dict, name: str | None = None, max_nodes: int | None = None) -> tuple[Skeleton, TreeMesh]:
+    """A dictionary's own tree: grown with `rng_for(params)` and meshed; `name` names the mesh (and its files).
+
+    With `max_nodes`, a skeleton of more nodes raises TreeTooLargeError before meshing, so one runaway draw
+    costs its growth and not a mesh of millions of triangles.
+    """
+    skeleton = grow(params, rng_for(params))
+    if max_nodes is not None and skeleton.n_nodes > max_nodes:
+        raise TreeTooLargeError(f"skeleton has {skeleton.n_nodes} nodes; allowed max_nodes = {max_nodes}")
+    return skeleton, build_mesh(skeleton, params if name is None else {**params, "name": name})

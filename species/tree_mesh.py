@@ -6,16 +6,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any, Callable
 
 import numpy as np
 
 from .errors import TreefarmError
 
-__all__ = ["MeshPart", "TreeMesh", "MeshError"]
+__all__ = ["MeshPart", "TreeMesh", "MeshError", "MESH_WRITERS"]
 
 
 class MeshError(TreefarmError):
-    """A mesh's arrays are inconsistent (shape, index range, NaN)."""
+    """A mesh's arrays are inconsistent (shape, index range, NaN), or a file format is unknown."""
+
+
+# File writers by format name ("glb", "obj"): species.meshing registers them when `species` is imported, so the
+# writers depend on this type and not the reverse.
+MESH_WRITERS: dict[str, Callable[["TreeMesh"], Any]] = {}
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,14 +123,16 @@ class TreeMesh:
         pts = np.concatenate([self.bark.vertices, self.leaves.vertices])
         return np.stack([pts.min(axis=0), pts.max(axis=0)])
 
+    def export(self, file_format: str) -> Any:
+        """The tree written in `file_format` (a `MESH_WRITERS` name)."""
+        if file_format not in MESH_WRITERS:
+            raise MeshError(f"mesh file format {file_format!r} is unknown: allowed {', '.join(sorted(MESH_WRITERS))}")
+        return MESH_WRITERS[file_format](self)
+
     def to_glb(self) -> bytes:
         """A binary glTF 2.0 file: Y up, two named meshes (bark, leaves) with textured PBR materials."""
-        from .gltf import tree_mesh_to_glb
-
-        return tree_mesh_to_glb(self)
+        return self.export("glb")
 
     def to_obj(self) -> dict[str, bytes]:
         """OBJ text, its MTL and the texture PNGs, by file name (`<name>.obj`, `<name>.mtl`, ...)."""
-        from .obj import tree_mesh_to_obj
-
-        return tree_mesh_to_obj(self)
+        return self.export("obj")

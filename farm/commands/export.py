@@ -21,13 +21,9 @@ def register(subparsers) -> None:
 
 
 def _rebuild(params_json: str, name: str):
-    import dataclasses
-
     import species
 
-    params = json.loads(params_json)
-    mesh = species.build_mesh(species.grow(params, species.rng_for(params)), params)
-    return dataclasses.replace(mesh, name=name)
+    return species.rebuild(json.loads(params_json), name=name)[1]
 
 
 def _write_glb(row: dict, folder: Path) -> None:

@@ -116,8 +116,7 @@ def run(args: argparse.Namespace) -> int:
         raise species.TreefarmError(f"--size {args.size} is too small: allowed 8 pixels or more")
     params = _tree_params(args)
     start = time.perf_counter()
-    skeleton = species.grow(params, species.rng_for(params))
-    mesh = species.build_mesh(skeleton, params)
+    skeleton, mesh = species.rebuild(params)
     print(f"tree: {len(skeleton)} nodes, {mesh.n_faces} triangles, grown and meshed in "
           f"{time.perf_counter() - start:.2f} s")
     out = Path(args.out)

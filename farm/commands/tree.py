@@ -31,8 +31,7 @@ def grow_tree(params: dict):
     import species
 
     start = time.perf_counter()
-    skeleton = species.grow(params, species.rng_for(params))
-    mesh = species.build_mesh(skeleton, params)
+    skeleton, mesh = species.rebuild(params)
     return skeleton, mesh, time.perf_counter() - start
 
 

@@ -79,7 +79,7 @@ class LibraryAsset:
                         "iou_mean": float(np.mean(lv.iou)) if lv.iou else 1.0,
                         "iou_per_azimuth": [round(v, 4) for v in lv.iou]} for lv in self.levels],
             "collision_capsules": [[round(float(v), 5) for v in row] for row in self.capsules],
-            "wind_layout": __import__("species.wind", fromlist=["WIND_LAYOUT"]).WIND_LAYOUT,
+            "wind_layout": __import__("species.studio.wind", fromlist=["WIND_LAYOUT"]).WIND_LAYOUT,
         }
 
 
@@ -102,7 +102,7 @@ def leaf_instances(skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
-    from species.wind import wind_attributes
+    from species.studio.wind import wind_attributes
 
     keys = None if original_node is None else original_node[skeleton.branch_starts]
     bark_wind, bark_pivot = wind_attributes(skeleton, mesh.bark.vertices, mesh.bark.attributes["branch"], keys)
@@ -178,8 +178,8 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
     import species
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import render_impostor
-    from species.collision import collision_capsules
-    from species.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
+    from species.studio.collision import collision_capsules
+    from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 
     from ..tree_chain import stage_rngs
     from .lod_fit import fit_lods
@@ -189,8 +189,7 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
     with timer.stage("sample"):
         params = species.sample(species_name, sample_rng)
     with timer.stage("grow"):
-        skeleton = species.grow(params, species.rng_for(params))
-        lod0 = species.build_mesh(skeleton, {**params, "name": ident})
+        skeleton, lod0 = species.rebuild(params, name=ident)
     with timer.stage("textures"):  # cached per species, colour and size: most assets hit the cache
         maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
         atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)

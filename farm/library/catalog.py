@@ -137,7 +137,7 @@ def write_catalog(location: Location, spec) -> dict:
 def validate_library(path: str) -> list[Problem]:
     """Problems of a library folder: not a library, missing catalog, missing or changed asset files, unreadable
     GLBs, failed FBX exports. An empty list means every catalogued file is present with its recorded checksum."""
-    from species.gltf import GlbError, read_glb_chunks
+    from species.meshing.gltf import GlbError, read_glb_chunks
 
     from .job import BLENDER_FAILED, LIBRARY_RECORD, LibraryError, read_library_spec
 

@@ -13,10 +13,10 @@ import struct
 
 import numpy as np
 
-from species.gltf import _BinaryBuffer, z_up_to_y_up
-from species.mesh import _CARD_FACES, _CARD_UVS
-from species.pbr_textures import SEASONS
-from species.lod import card_clumps
+from species.meshing.gltf import _BinaryBuffer, z_up_to_y_up
+from species.meshing.tubes_and_cards import _CARD_FACES, _CARD_UVS
+from species.studio.pbr_textures import SEASONS
+from species.studio.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 from .png_cache import encode_png
 

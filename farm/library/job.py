@@ -47,7 +47,7 @@ def blender_available() -> bool:
 
 
 def _obj_text(part, name: str) -> bytes:
-    from species.gltf import z_up_to_y_up
+    from species.meshing.gltf import z_up_to_y_up
 
     lines = [f"# treefarm collision capsules of {name}: metres, Y up\no {name}\n"]
     lines += [f"v {x:.5f} {y:.5f} {z:.5f}\n" for x, y, z in z_up_to_y_up(part.vertices).astype(np.float64)]
@@ -109,7 +109,7 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
             for name, data in asset.lod0.to_obj().items():  # side files keyed by their own name: stable keys
                 put("obj" if name.endswith(".obj") else f"obj_{name}", f"obj/{name}", data)
     if "collision" in spec.formats:
-        from species.collision import capsule_mesh
+        from species.studio.collision import capsule_mesh
 
         put("collision", f"{asset.asset_id}_collision.obj", _obj_text(capsule_mesh(asset.capsules),
                                                                        f"{asset.asset_id}_collision"))

@@ -39,8 +39,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
-    from species.leaf_clusters import CLUSTER_AREA_GAIN
-    from species.lod import LodBudgetError, TreeLods
+    from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
+    from species.studio.lod import LodBudgetError, TreeLods
 
     from .asset import framing_points
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from renderers.camera import perspective_camera
 from renderers.maps import combine_parts, normals_from_depth
-from species.textures import linear_to_srgb
+from species.meshing.textures import linear_to_srgb
 
 __all__ = ["shaded_view", "thumbnail", "turntable", "gallery_html", "THUMBNAIL_PX", "TURNTABLE_FRAMES",
            "TURNTABLE_PX"]

@@ -11,8 +11,8 @@ import tempfile
 
 import numpy as np
 
-from species.lod import card_clumps
-from species.pbr_textures import SEASONS
+from species.studio.lod import card_clumps
+from species.studio.pbr_textures import SEASONS
 from species.skeleton import LEAF_CARD_CORNERS
 
 from .asset import LibraryAsset, leaf_instances
@@ -111,7 +111,7 @@ def _leaf_instancer(stage, path: str, level, card_material):
     from pxr import Sdf, UsdGeom, UsdShade, Vt
     from scipy.spatial.transform import Rotation
 
-    from species.mesh import _CARD_FACES, _CARD_UVS
+    from species.meshing.tubes_and_cards import _CARD_FACES, _CARD_UVS
     from species.tree_mesh import MeshPart
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)

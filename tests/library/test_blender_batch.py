@@ -10,7 +10,7 @@ from farm.library import job
 from farm.library.spec import parse_library_spec
 from farm.pipeline import plan_shards, run_shard
 from farm.storage import Location
-from species.gltf import read_glb_chunks
+from species.meshing.gltf import read_glb_chunks
 
 SPEC = {"species": {"sc_young_sapling": 3}, "formats": ["glb", "fbx"], "texture_size": 64, "impostor_tile": 32,
         "shard_size": 2}

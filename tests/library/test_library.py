@@ -88,7 +88,7 @@ def test_usd_textures_wrap_as_the_glb_samplers_do(library):
     """Bark tiles (repeat); leaf atlases and the impostor atlas clamp, so a tile's edge never samples the next."""
     from pxr import Usd, UsdShade
 
-    from species.gltf import read_glb_chunks
+    from species.meshing.gltf import read_glb_chunks
 
     names = {10497: "repeat", 33071: "clamp"}
     usd = sorted(library.glob("assets/*/*.usdc"))[0]
@@ -112,7 +112,7 @@ def test_single_leaves_use_the_leaf_tile_and_clumps_the_clump_tile_in_glb_and_us
     number of cards of each kind in both files."""
     from pxr import Usd, UsdGeom
 
-    from species.gltf import read_accessor, read_glb_chunks
+    from species.meshing.gltf import read_accessor, read_glb_chunks
 
     kinds_seen = set()
     for glb in sorted(library.glob("assets/*/*.glb")):

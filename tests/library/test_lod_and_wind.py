@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 import species
-from species.collision import collision_capsules
-from species.lod import build_lod
-from species.wind import wind_attributes
+from species.studio.collision import collision_capsules
+from species.studio.lod import build_lod
+from species.studio.wind import wind_attributes
 
 
 def _tree(name: str, seed: int = 1):
@@ -71,7 +71,7 @@ def test_collision_capsules_cover_the_trunk_base_and_top():
 
 @pytest.mark.parametrize("name", ["palm", "weeping_willow"])
 def test_thick_branches_stay_within_a_pixel_of_their_lod0_axis_at_the_switch_size(name):
-    from species.lod import THICK_TOLERANCE_PX, metres_per_pixel
+    from species.studio.lod import THICK_TOLERANCE_PX, metres_per_pixel
 
     skeleton, lod0 = _tree(name, 0)
     for level, budget, px in ((1, 0.40, 512), (3, 0.04, 128)):
@@ -95,7 +95,7 @@ def test_within_a_roomy_budget_a_smaller_switch_size_keeps_less_bark():
 
 @pytest.mark.parametrize("switch_px", [0, 5000, 12.5, True])
 def test_a_switch_size_out_of_range_is_rejected_with_its_value(switch_px):
-    from species.lod import LodBudgetError
+    from species.studio.lod import LodBudgetError
 
     skeleton, lod0 = _tree("maple", 0)
     with pytest.raises(LodBudgetError, match="switch size"):
@@ -103,7 +103,7 @@ def test_a_switch_size_out_of_range_is_rejected_with_its_value(switch_px):
 
 
 def test_branches_thinner_than_two_pixels_at_the_switch_are_bare_three_sided_tubes():
-    from species.lod import THICK_BRANCH_PX, metres_per_pixel
+    from species.studio.lod import THICK_BRANCH_PX, metres_per_pixel
 
     skeleton, lod0 = _tree("sassafras", 0)
     lod = build_lod(skeleton, lod0, 2, 0.12, 256)
@@ -129,7 +129,7 @@ def test_the_bark_share_moves_triangles_between_bark_and_leaf_cards():
 
 @pytest.mark.parametrize("share", [-0.1, 1.5])
 def test_a_bark_share_outside_zero_to_one_is_rejected_with_its_value(share):
-    from species.lod import LodBudgetError
+    from species.studio.lod import LodBudgetError
 
     skeleton, lod0 = _tree("maple", 0)
     with pytest.raises(LodBudgetError, match=str(share)):
@@ -137,7 +137,7 @@ def test_a_bark_share_outside_zero_to_one_is_rejected_with_its_value(share):
 
 
 def test_branches_rank_by_the_largest_value_in_their_subtree():
-    from species.lod import _subtree_maximum
+    from species.studio.lod import _subtree_maximum
 
     # 0 <- 1 <- 2 <- 3 and 0 <- 4: a stub (1) carrying a long limb (2) ranks with the limb
     parent = np.array([-1, 0, 1, 2, 0])
@@ -164,7 +164,7 @@ def test_a_larger_card_area_gain_gives_larger_cluster_cards_within_the_same_budg
 
 
 def test_a_card_area_gain_that_is_not_positive_is_rejected_with_its_value():
-    from species.lod import LodBudgetError
+    from species.studio.lod import LodBudgetError
 
     skeleton, lod0 = _tree("maple", 0)
     with pytest.raises(LodBudgetError, match="card area gain 0"):
@@ -172,8 +172,8 @@ def test_a_card_area_gain_that_is_not_positive_is_rejected_with_its_value():
 
 
 def test_a_card_that_is_one_leaf_is_that_leaf_and_only_merged_cards_are_clumps():
-    from species.leaf_clusters import LeafCards
-    from species.lod import CLUMP_ATTRIBUTE, card_clumps
+    from species.studio.leaf_clusters import LeafCards
+    from species.studio.lod import CLUMP_ATTRIBUTE, card_clumps
 
     skeleton, lod0 = _tree("maple", 0)
     lod = build_lod(skeleton, lod0, 1, 0.4, 512)
@@ -191,7 +191,7 @@ def test_a_card_that_is_one_leaf_is_that_leaf_and_only_merged_cards_are_clumps()
 
 def test_a_coverage_tree_cuts_single_leaves_and_clumps_to_their_own_tiles_share():
     from renderers.alpha_coverage import coverage_tree
-    from species.lod import card_clumps
+    from species.studio.lod import card_clumps
 
     skeleton, lod0 = _tree("maple", 0)
     lod = build_lod(skeleton, lod0, 2, 0.12, 256)

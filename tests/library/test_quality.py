@@ -16,8 +16,8 @@ from farm.tree_chain import StageTimer, tree_seed
 from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
 from renderers.camera import orthographic_camera, perspective_camera
 from renderers.impostor import switch_camera
-from species.mesh import leaf_part
-from species.pbr_textures import leaf_atlas
+from species.meshing.tubes_and_cards import leaf_part
+from species.studio.pbr_textures import leaf_atlas
 from species.skeleton import Skeleton
 from species.tree_mesh import MeshPart, TreeMesh
 
@@ -194,8 +194,8 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     from farm.library.lod_fit import BARK_SHARE_SCALES, CALIBRATION_AZIMUTHS, CARD_AREA_GAINS, fit_lods
     from renderers.alpha_coverage import coverage_tree
     from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou
-    from species.leaf_clusters import CLUSTER_AREA_GAIN
-    from species.lod import TreeLods
+    from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
+    from species.studio.lod import TreeLods
 
     assert not set(CALIBRATION_AZIMUTHS) & set(QUALITY_AZIMUTHS)
     params = species.sample("sassafras", np.random.default_rng(2))

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from species.radii import pipe_model_radii
+from species.geometry.radii import pipe_model_radii
 from species.skeleton import Skeleton
 
 

@@ -6,15 +6,15 @@ import pytest
 from scipy.spatial import cKDTree
 
 import species
-from species.allocation import allocate, jump_tables, path_products, subtree_sums
-from species.colonization import Colonizer, _bole, _guide_seed, crown_space, grow, grow_in_space
-from species.colonization_params import at_iteration, validate
+from species.colonization.allocation import allocate, jump_tables, path_products, subtree_sums
+from species.colonization.generator import Colonizer, _bole, _guide_seed, crown_space, grow, grow_in_space
+from species.colonization.params import at_iteration, validate
 from species.errors import ParameterError
-from species.growth_space import (DepthMapCrown, MeshSpace, PointSpace, SuperquadricLobe, VoxelSpace,
+from species.colonization.growth_space import (DepthMapCrown, MeshSpace, PointSpace, SuperquadricLobe, VoxelSpace,
                                   profile_crown)
-from species.shadow import ShadowGrid
+from species.colonization.shadow import ShadowGrid
 from species.skeleton import Skeleton
-from species.steering import MarkerSteering
+from species.colonization.steering import MarkerSteering
 
 IL = 0.1
 SMALL = {"generator": "colonization", "crown_radius": 8.0, "crown_height": 12.0, "crown_base": 3.0,

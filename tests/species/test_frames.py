@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from species.frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
+from species.geometry.frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
 
 
 def _helix(n: int = 60, turns: float = 2.0) -> np.ndarray:

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from species.gltf import GlbError, read_accessor, read_glb_chunks, read_glb_json, tree_mesh_to_glb
-from species.mesh import build_mesh
+from species.meshing.gltf import GlbError, read_accessor, read_glb_chunks, read_glb_json, tree_mesh_to_glb
+from species.meshing.tubes_and_cards import build_mesh
 from species.tree_mesh import MeshError, MeshPart, TreeMesh
 from tests.gltf_validator import assert_valid_glb
 from tests.species.skeleton_factory import fork_with_leaves, random_tree, straight_trunk

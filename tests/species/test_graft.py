@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.graft import graft, pipe_smooth_radius, side_anchor, smooth_radius, subtree_mask
-from species.lstring_io import lstring_to_tree
+from species.lsystem.graft import graft, pipe_smooth_radius, side_anchor, smooth_radius, subtree_mask
+from species.lsystem.lstring_io import lstring_to_tree
 from species.skeleton import Skeleton
 
 

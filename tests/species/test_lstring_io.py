@@ -4,9 +4,9 @@ import re
 import numpy as np
 import pytest
 
-from species.graft import subtree_mask
-from species.lsystem import grow
-from species.lstring_io import LStringError, branch_orders, edge_angles, lstring_to_tree, tree_to_lstring
+from species.lsystem.graft import subtree_mask
+from species.lsystem.generator import grow
+from species.lsystem.lstring_io import LStringError, branch_orders, edge_angles, lstring_to_tree, tree_to_lstring
 from species.skeleton import Skeleton
 
 TREE = {"generator": "lsystem", "axiom": "X", "rules": ["X -> F[&X]/(137.5)[&X]", "F -> FF"], "iterations": 4,

@@ -4,8 +4,8 @@ import pytest
 
 import species
 from species.errors import ParameterError
-from species.lsystem import SCHEMA, grow, validate
-from species.lsystem_presets import PRESETS
+from species.lsystem.generator import SCHEMA, grow, validate
+from species.lsystem.presets import PRESETS
 
 BINARY = {"generator": "lsystem", "axiom": "X", "rules": ["X -> F[-X][+X]"], "iterations": 4, "angle": 30.0,
           "step": 0.5}

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.lsystem_rewrite import GrammarError, LSystem, format_modules, parse_rule, rewrite
+from species.lsystem.rewrite import GrammarError, LSystem, format_modules, parse_rule, rewrite
 
 THESIS_RULE = ["X -> F[-X][+X]"]
 THESIS_STRINGS = {

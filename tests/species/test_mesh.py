@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.mesh import MeshBuildError, build_mesh, radial_segments
+from species.meshing.tubes_and_cards import MeshBuildError, build_mesh, radial_segments
 from species.skeleton import Skeleton
 from tests.species.skeleton_factory import fork_with_leaves, leaf_transforms, random_tree, straight_trunk
 
@@ -214,7 +214,7 @@ def test_same_skeleton_gives_identical_arrays(random_skeleton, random_mesh):
 
 
 def test_branches_without_tip_cones_lose_exactly_their_cone_faces_and_apex(random_skeleton):
-    from species.mesh import bark_part
+    from species.meshing.tubes_and_cards import bark_part
 
     n_branches = random_skeleton.n_branches
     sides = np.full(n_branches, 3)
@@ -228,7 +228,7 @@ def test_branches_without_tip_cones_lose_exactly_their_cone_faces_and_apex(rando
 
 
 def test_branch_sides_override_the_sides_by_order(random_skeleton):
-    from species.mesh import bark_part
+    from species.meshing.tubes_and_cards import bark_part
 
     sides = np.where(np.arange(random_skeleton.n_branches) % 3 == 0, 5, 3)
     bark = bark_part(random_skeleton, branch_sides=sides)

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from species.ascii_numbers import AsciiNumberError, fixed6_rows, int_rows
-from species.gltf import z_up_to_y_up
-from species.mesh import build_mesh
-from species.obj import ObjError, tree_mesh_to_obj
+from species.meshing.ascii_numbers import AsciiNumberError, fixed6_rows, int_rows
+from species.meshing.gltf import z_up_to_y_up
+from species.meshing.tubes_and_cards import build_mesh
+from species.meshing.obj import ObjError, tree_mesh_to_obj
 from tests.species.skeleton_factory import fork_with_leaves, random_tree, straight_trunk
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.phyllotaxis import PATTERNS, add_twigs
+from species.lsystem.phyllotaxis import PATTERNS, add_twigs
 from species.skeleton import Skeleton
 
 # Nodes (F count) and leaf cards (terminal F count) of one twig of each pattern.

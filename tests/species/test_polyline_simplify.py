@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from species.polyline_simplify import simplification_keys
+from species.geometry.polyline_simplify import simplification_keys
 
 
 def _recursive_kept(points: np.ndarray, radius: np.ndarray, tolerance: float) -> set[int]:

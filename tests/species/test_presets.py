@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import species
-from species.weber_penn_schema import validate
+from species.weber_penn.schema import validate
 
 WEBER_PENN = [p.name for p in species.list_presets("weber_penn")]
 

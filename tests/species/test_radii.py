@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.radii import node_depths, pipe_model_radii
+from species.geometry.radii import node_depths, pipe_model_radii
 
 
 def test_fork_combines_children_by_the_pipe_rule():

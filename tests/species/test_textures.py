@@ -6,7 +6,7 @@ import pytest
 from PIL import Image
 
 from species.errors import ParameterError
-from species.textures import BARK_TEXTURE_SEED, bark_png, bark_texture, leaf_png, leaf_texture, png_bytes
+from species.meshing.textures import BARK_TEXTURE_SEED, bark_png, bark_texture, leaf_png, leaf_texture, png_bytes
 
 BARK = (0.36, 0.27, 0.19)
 LEAF = (0.24, 0.45, 0.14)

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from species.lsystem_rewrite import rewrite
-from species.turtle import initial_frame, interpret, leaf_cards
+from species.lsystem.rewrite import rewrite
+from species.lsystem.turtle import initial_frame, interpret, leaf_cards
 
 
 def draw(text, angle=30.0, step=1.0, width=0.2, width_ratio=0.5, **kwargs):

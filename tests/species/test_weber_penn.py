@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import species
-from species.weber_penn import grow
-from species.weber_penn_schema import SAPLING_KEYS
+from species.weber_penn.generator import grow
+from species.weber_penn.schema import SAPLING_KEYS
 
 SAPLING = Path(__file__).resolve().parents[3] / "shared" / "data" / "sapling"
 # Measured with Sapling 0.3.4 in Blender on the same dictionaries: (height m, crown radius m).

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from species.weber_penn_shapes import auto_taper, shape_ratio
+from species.weber_penn.shapes import auto_taper, shape_ratio
 
 
 @pytest.mark.parametrize("shape, ratio, expected", [(0, 1.0, 1.0), (0, 0.0, 0.05), (1, 0.5, 1.0), (3, 0.3, 1.0),

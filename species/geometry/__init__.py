@@ -1,0 +1,17 @@
+"""Geometry over plain arrays shared by every generator: rotations, curve frames, polyline simplification
+and pipe-model radii.
+"""
+from __future__ import annotations
+
+from .rotations import (apply, declination, euler_xyz, from_euler_xyz, premul, rot_axis, rot_x, rot_y, rot_z,
+    tilt_frames, track_frames, zxz)
+from .frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
+from .polyline_simplify import simplification_keys
+from .radii import node_depths, pipe_model_radii
+from .vectors import MIN_LENGTH, unit_vectors, unit_vectors_and_lengths
+
+__all__ = [
+    "rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
+    "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
+    "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths", "unit_vectors", "unit_vectors_and_lengths", "MIN_LENGTH",
+]

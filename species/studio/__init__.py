@@ -1,0 +1,21 @@
+"""What a studio asset adds to a tree: levels of detail, leaf cluster cards, wind data, collision capsules
+and PBR textures with season variants.
+"""
+from __future__ import annotations
+
+from .lod import (build_lod, card_clumps, CARDS_PER_CLUSTER, CLUMP_ATTRIBUTE, LOD_NODE_STEPS, LOD_SIDES,
+    LOD_SWITCH_PX, LodBudgetError, LodLevel, metres_per_pixel, nearest_kept_ancestor, simplify_skeleton,
+    TOLERANCE_LADDER_PX, TreeLods)
+from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
+from .wind import branch_phases, branch_pivots, GOLDEN_RATIO_CONJUGATE, wind_attributes, WIND_LAYOUT
+from .collision import BRANCH_CAPSULES, capsule_mesh, collision_capsules, MAX_BRANCHES, TRUNK_CAPSULES
+from .pbr_textures import bark_maps, BarkMaps, leaf_atlas, season_leaf_colour, SEASON_LEAF_COLOURS, SEASONS
+
+__all__ = [
+    "LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
+    "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
+    "CARDS_PER_CLUSTER", "CLUMP_ATTRIBUTE", "card_clumps", "LeafCards", "CLUSTER_AREA_GAIN", "WIND_LAYOUT",
+    "branch_pivots", "branch_phases", "wind_attributes", "GOLDEN_RATIO_CONJUGATE", "collision_capsules",
+    "capsule_mesh", "TRUNK_CAPSULES", "BRANCH_CAPSULES", "MAX_BRANCHES", "BarkMaps", "bark_maps", "leaf_atlas",
+    "SEASON_LEAF_COLOURS", "SEASONS", "season_leaf_colour",
+]
