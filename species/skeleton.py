@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import TreefarmError
+from .geometry.topology import node_depths
 
 __all__ = ["Skeleton", "SkeletonError", "LEAF_CARD_CORNERS"]
 
@@ -132,22 +133,8 @@ class Skeleton:
 
     @cached_property
     def depth(self) -> np.ndarray:
-        """(N,) int32, number of edges from the root."""
-        depth = np.zeros(len(self), np.int32)
-        # Parents precede children, so one forward pass in chunks of already-final parents suffices;
-        # pointer jumping keeps this vectorised: O(N log depth).
-        anc = self.parent.copy()
-        anc[0] = 0
-        hops = (self.parent >= 0).astype(np.int32)
-        while True:
-            next_anc = anc[anc]
-            moved = next_anc != anc
-            if not moved.any():
-                break
-            hops = hops + np.where(moved, hops[anc], 0)
-            anc = next_anc
-        depth[:] = hops
-        return depth
+        """(N,) int32, number of edges from the root (`geometry.topology.node_depths`)."""
+        return node_depths(self.parent)
 
     @cached_property
     def segment_lengths(self) -> np.ndarray:

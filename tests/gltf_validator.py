@@ -9,7 +9,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-import pytest
+from required_tools import missing_tool
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = REPO_ROOT / "tests" / "tools" / "validate_gltf.mjs"
@@ -17,14 +17,15 @@ PACKAGE = REPO_ROOT / "node_modules" / "gltf-validator"
 
 
 def validation_report(data: bytes, tmp_path: Path, name: str = "tree.glb") -> dict:
-    """The validator's report for `data` (written to tmp_path/name); skips the test when node is missing."""
+    """The validator's report for `data` (written to tmp_path/name); skips the test when node is missing (fails
+    with CI=true), and fails when npm is there but `make env` has not installed the validator."""
     node = shutil.which("node")
     if node is None:
-        pytest.skip("node is not installed, so the Khronos glTF validator cannot run (apt-get install nodejs)")
+        missing_tool("node is not installed, so the Khronos glTF validator cannot run (apt-get install nodejs)")
     if not PACKAGE.is_dir() and shutil.which("npm") is None:
-        pytest.skip("npm is not installed, so `make env` could not install gltf-validator (apt-get install npm)")
+        missing_tool("npm is not installed, so `make env` could not install gltf-validator (apt-get install npm)")
     if not PACKAGE.is_dir():
-        pytest.fail(f"{PACKAGE} is missing: run `make env` (it runs `npm ci` for the glTF validator)")
+        raise AssertionError(f"{PACKAGE} is missing: run `make env` (it runs `npm ci` for the glTF validator)")
     path = tmp_path / name
     path.write_bytes(data)
     done = subprocess.run([node, str(SCRIPT), str(path)], capture_output=True, text=True, timeout=120)

@@ -1,8 +1,10 @@
 """Self-organizing tree growth (Palubicki et al. 2009 as thesis 000 uses it): space colonization or shadow
 propagation, Borchert-Honda or priority allocation, in any growth space. Returns a `Skeleton` (metres, Z up).
 
-`grow(params, rng)` builds the crown from the dictionary; `grow_in_space(params, rng, space=..., guide=...,
-attraction=..., strokes=...)` takes non-JSON inputs. `Colonizer` is the growing tree, one `step()` at a time.
+`grow(params, rng)` builds the crown space from the dictionary and grows a bole into it; `grow_in_space(params,
+rng, space=..., guide=..., markers=..., steering=...)` takes what a dictionary cannot hold (any GrowthSpace, a
+guide skeleton, explicit markers, a MarkerSteering of direction field and brush strokes). `Colonizer` is the
+growing tree, one `step()` at a time; `bole_guide` and `seed_from_guide` make the skeleton it starts from.
 """
 from __future__ import annotations
 
@@ -14,11 +16,12 @@ from .params import at_iteration, validate
 from ..errors import ParameterError
 from .growth_space import GrowthSpace, SuperquadricLobe, profile_crown, random_lobes, PROFILE_SHAPES
 from ..geometry.radii import pipe_model_radii
+from ..geometry.vectors import unit_vectors, unit_vectors_and_lengths
 from .shadow import ShadowGrid
 from ..skeleton import Skeleton
 from .steering import MarkerSteering
 
-__all__ = ["grow", "grow_in_space", "crown_space", "Colonizer", "REFERENCE_INTERNODE"]
+__all__ = ["grow", "grow_in_space", "crown_space", "Colonizer", "bole_guide", "seed_from_guide", "REFERENCE_INTERNODE"]
 
 REFERENCE_INTERNODE = 0.1  # metres per internode length at reference scale (digest convention)
 _CANDIDATE_BUDS = 6        # nearest buds tested per marker for "nearest bud that perceives it"
@@ -26,15 +29,10 @@ _UP = np.array([0.0, 0.0, 1.0])
 _LEAF_TILT = np.radians(55.0)  # leaves point out of their twig at this angle
 
 
-def _unit(vectors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 1e-12), norm[..., 0]
-
-
 def _frame(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors perpendicular to each direction (N, 3) and to each other."""
     reference = np.where(np.abs(directions[:, 2:3]) < 0.9, _UP, np.array([1.0, 0.0, 0.0]))
-    u, _ = _unit(np.cross(directions, reference))
+    u = unit_vectors(np.cross(directions, reference))
     return u, np.cross(directions, u)
 
 
@@ -162,7 +160,7 @@ class Colonizer:
         count = np.bincount(owner, minlength=buds)
         for d in range(3):
             optimal[:, d] = np.bincount(owner, weights=unit[:, d], minlength=buds)
-        optimal, _ = _unit(optimal)
+        optimal = unit_vectors(optimal)
         light = (count > 0).astype(np.float64) if p["light_model"] == "binary" else count / (count + 3.0)
         steer = None
         if self.steering is not None:
@@ -221,7 +219,7 @@ class Colonizer:
             active = np.flatnonzero(remaining > sub)
             if not len(active):
                 break
-            direction, norm = _unit(p["default_weight"] * heading[active] + pull[active])
+            direction, norm = unit_vectors_and_lengths(p["default_weight"] * heading[active] + pull[active])
             direction = np.where(norm[:, None] > 1e-9, direction, heading[active])
             candidate = self.positions[current[active]] + direction * length[growing[active], None]
             inside = self.space.contains(candidate)
@@ -326,10 +324,10 @@ class Colonizer:
         nodes = np.repeat(np.flatnonzero(young), p["leaves_per_node"]) if p["leaf_age"] else np.zeros(0, int)
         if not len(nodes):
             return np.zeros((0, 4, 4), np.float32), np.zeros(0, np.int32)
-        twig, _ = _unit(positions[nodes] - positions[parent[nodes]])
+        twig = unit_vectors(positions[nodes] - positions[parent[nodes]])
         azimuth = self.rng.uniform(0, 2 * np.pi, len(nodes))
         along = _turn(twig, _LEAF_TILT, azimuth)
-        side, norm = _unit(np.cross(along, _UP))
+        side, norm = unit_vectors_and_lengths(np.cross(along, _UP))
         side = np.where(norm[:, None] > 1e-6, side, _frame(along)[0])
         facing = np.cross(along, side)
         width = p["leaf_size"] * self.il
@@ -343,7 +341,7 @@ class Colonizer:
 
 
 # ---------------------------------------------------------------------- seeds: guides and boles
-def _guide_seed(guide: Skeleton, buds_on: str, rng: np.random.Generator, p: dict) -> dict:
+def seed_from_guide(guide: Skeleton, buds_on: str, rng: np.random.Generator, p: dict) -> dict:
     """Seed arrays from a guide skeleton: its nodes kept as given, apical buds on its tips, laterals optional."""
     positions = guide.positions.astype(np.float64)
     parent = guide.parent.astype(np.int64)
@@ -353,12 +351,12 @@ def _guide_seed(guide: Skeleton, buds_on: str, rng: np.random.Generator, p: dict
     tips = guide.tips if len(guide) > 1 else np.zeros(1, np.int64)
     tip_dir = np.tile(_UP, (len(tips), 1))
     if len(guide) > 1:
-        segment, norm = _unit(positions[tips] - positions[parent[tips]])
+        segment, norm = unit_vectors_and_lengths(positions[tips] - positions[parent[tips]])
         tip_dir = np.where(norm[:, None] > 1e-12, segment, _UP)
     hosts, dirs, apical = [tips], [tip_dir], [np.ones(len(tips), bool)]
     if buds_on == "all" and len(guide) > 1:
         inner = np.arange(1, len(guide))
-        axis_dir, _ = _unit(positions[inner] - positions[parent[inner]])
+        axis_dir = unit_vectors(positions[inner] - positions[parent[inner]])
         azimuth = rng.uniform(0, 2 * np.pi) + np.arange(len(inner)) * np.radians(p["phyllotaxis"])
         hosts.append(inner)
         dirs.append(_turn(axis_dir, np.radians(p["branch_angle"]), azimuth))
@@ -374,7 +372,7 @@ def _guide_seed(guide: Skeleton, buds_on: str, rng: np.random.Generator, p: dict
     return {"positions": positions, "parent": parent, "order": order, "lateral": lateral, "buds": buds}
 
 
-def _bole(p: dict, rng: np.random.Generator, il: float) -> Skeleton:
+def bole_guide(p: dict, rng: np.random.Generator, il: float) -> Skeleton:
     """The stems from the ground to 1 IL inside the crown base, straight, as a guide (no lateral buds)."""
     top = (p["crown_base"] + 1.0) * il
     segments = max(1, int(np.ceil(top / il)))
@@ -419,13 +417,13 @@ def grow_in_space(params: dict, rng: np.random.Generator, *, space: GrowthSpace,
     """
     p = validate(params)
     if not isinstance(space, GrowthSpace):
-        raise ParameterError("space", type(space).__name__, "a species.growth_space.GrowthSpace")
+        raise ParameterError("space", type(space).__name__, "a species.colonization.GrowthSpace")
     if not internode_length > 0:
         raise ParameterError("internode_length", internode_length, "a length > 0 metres")
     if guide is None:
-        seed = _guide_seed(_bole(p, rng, internode_length), "tips", rng, p)
+        seed = seed_from_guide(bole_guide(p, rng, internode_length), "tips", rng, p)
     else:
-        seed = _guide_seed(guide, guide_buds, rng, p)
+        seed = seed_from_guide(guide, guide_buds, rng, p)
     colonizer = Colonizer(p, rng, space, internode_length, seed, markers=markers, steering=steering)
     return colonizer.run().to_skeleton()
 

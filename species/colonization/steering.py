@@ -12,14 +12,10 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 from scipy.spatial import cKDTree
 
+from ..geometry.vectors import unit_vectors
 from .growth_space import GrowthSpaceError, PointSpace
 
 __all__ = ["MarkerSteering", "revolved_field", "hermite_curve", "stroke_tube"]
-
-
-def _unit(vectors: np.ndarray) -> np.ndarray:
-    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 1e-12)
 
 
 def _resample(stroke: np.ndarray, spacing: float) -> np.ndarray:
@@ -54,7 +50,7 @@ class MarkerSteering:
         attraction = None
         if self.attraction is not None:
             attraction = self.attraction(markers) if callable(self.attraction) else self.attraction
-            attraction = _unit(np.asarray(attraction, np.float64))
+            attraction = unit_vectors(np.asarray(attraction, np.float64))
             if attraction.shape != markers.shape:
                 raise GrowthSpaceError(f"attraction directions have shape {attraction.shape}; the markers "
                                        f"need {markers.shape}")
@@ -64,7 +60,7 @@ class MarkerSteering:
                 raise GrowthSpaceError(f"stroke sigma must be > 0 metres; got {self.sigma}")
             resampled = [_resample(s, self.sigma / 2) for s in self.strokes]  # few strokes, loop is fine
             points = np.concatenate(resampled)
-            tangents = np.concatenate([_unit(np.gradient(s, axis=0)) for s in resampled])
+            tangents = np.concatenate([unit_vectors(np.gradient(s, axis=0)) for s in resampled])
             distance, nearest = cKDTree(points).query(markers, k=1)
             stroke_dir = tangents[nearest]
             stroke_weight = np.exp(-0.5 * (distance / self.sigma) ** 2)

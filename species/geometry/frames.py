@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import TreefarmError
+from .vectors import unit_vectors
 
 __all__ = ["FrameError", "polyline_tangents", "parallel_transport_frames", "rotation_minimizing_frames"]
 
@@ -16,11 +17,6 @@ _EPS = 1e-12
 
 class FrameError(TreefarmError):
     """Polyline arrays that cannot carry frames (wrong shape, repeated points, bad offsets)."""
-
-
-def _normalized(vectors: np.ndarray) -> np.ndarray:
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return vectors / np.maximum(length, _EPS)
 
 
 def _check_polylines(points: np.ndarray, offsets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -54,7 +50,7 @@ def polyline_tangents(points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     if np.any(inner_seg & (seg_len * seg_len < _EPS)):
         k = int(np.flatnonzero(inner_seg & (seg_len * seg_len < _EPS))[0])
         raise FrameError(f"points {k} and {k + 1} coincide: merge repeated points before computing frames")
-    direction = seg / np.maximum(seg_len, _EPS)[:, None]
+    direction = unit_vectors(seg)
     incoming = np.empty_like(points)
     outgoing = np.empty_like(points)
     incoming[1:] = direction
@@ -65,7 +61,7 @@ def polyline_tangents(points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     summed = incoming + outgoing
     reversed_ = np.einsum("ij,ij->i", summed, summed) < 1e-8
     summed[reversed_] = incoming[reversed_]
-    return _normalized(summed)
+    return unit_vectors(summed)
 
 
 def _reference_normals(tangents: np.ndarray) -> np.ndarray:
@@ -74,7 +70,7 @@ def _reference_normals(tangents: np.ndarray) -> np.ndarray:
     near_y = np.abs(tangents[:, 1]) > 0.9
     ref[~near_y, 1] = 1.0
     ref[near_y, 0] = 1.0
-    return _normalized(np.cross(tangents, ref))
+    return unit_vectors(np.cross(tangents, ref))
 
 
 def _transport(vectors: np.ndarray, t_from: np.ndarray, t_to: np.ndarray) -> np.ndarray:
@@ -109,7 +105,7 @@ def parallel_transport_frames(points: np.ndarray, offsets: np.ndarray,
     if tangents is None:
         tangents = polyline_tangents(points, offsets)
     else:
-        tangents = _normalized(np.asarray(tangents, np.float64))
+        tangents = unit_vectors(np.asarray(tangents, np.float64))
         if tangents.shape != points.shape:
             raise FrameError(f"tangents must have shape {points.shape}; got {tangents.shape}")
     reference = _reference_normals(tangents)
@@ -125,7 +121,7 @@ def parallel_transport_frames(points: np.ndarray, offsets: np.ndarray,
     binormal_ref = np.cross(tangents, reference)
     cos_t, sin_t = np.cos(twist)[:, None], np.sin(twist)[:, None]
     normals = cos_t * reference + sin_t * binormal_ref
-    normals = _normalized(normals - tangents * np.einsum("ij,ij->i", normals, tangents)[:, None])
+    normals = unit_vectors(normals - tangents * np.einsum("ij,ij->i", normals, tangents)[:, None])
     binormals = np.cross(tangents, normals)
     return tangents, normals, binormals
 

@@ -7,25 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ParameterError
+from .topology import depth_levels, node_depths
 
-__all__ = ["pipe_model_radii", "node_depths"]
-
-
-def node_depths(parent: np.ndarray) -> np.ndarray:
-    """(N,) int32, edges from the root, for a parent array with parent[0] = -1 and parent[i] < i.
-
-    Pointer jumping (each pass doubles the hop length) keeps this vectorized: O(N log depth).
-    """
-    parent = np.asarray(parent, np.int64)
-    ancestor = np.where(parent < 0, np.arange(len(parent)), parent)
-    hops = (parent >= 0).astype(np.int64)
-    while True:
-        next_ancestor = ancestor[ancestor]
-        moved = next_ancestor != ancestor
-        if not moved.any():
-            return hops.astype(np.int32)
-        hops = hops + np.where(moved, hops[ancestor], 0)
-        ancestor = next_ancestor
+__all__ = ["pipe_model_radii"]
 
 
 def pipe_model_radii(parent: np.ndarray, tip_radius, exponent: float = 2.5) -> np.ndarray:
@@ -56,10 +40,6 @@ def pipe_model_radii(parent: np.ndarray, tip_radius, exponent: float = 2.5) -> n
     has_child[parent[1:]] = True
     # Work in r^n: tips start with their own value, inner nodes accumulate their children's.
     powered = np.where(has_child, 0.0, tip ** exponent)
-    depth = node_depths(parent)
-    by_depth = np.argsort(depth, kind="stable")
-    level_starts = np.searchsorted(depth[by_depth], np.arange(int(depth.max()) + 2))
-    for level in range(int(depth.max()), 0, -1):
-        nodes = by_depth[level_starts[level]:level_starts[level + 1]]
+    for nodes in depth_levels(node_depths(parent), tips_first=True):
         np.add.at(powered, parent[nodes], powered[nodes])
     return (powered ** (1.0 / exponent)).astype(np.float32)

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from ..geometry.radii import pipe_model_radii
+from ..geometry.topology import depth_levels
 from ..skeleton import Skeleton
 
 __all__ = ["side_anchor", "graft", "smooth_radius", "pipe_smooth_radius", "subtree_mask"]
@@ -86,11 +87,7 @@ def subtree_mask(skeleton: Skeleton, start: int) -> np.ndarray:
     start = _check_node(skeleton, start, "start")
     mask = np.zeros(len(skeleton), bool)
     mask[start] = True
-    depth = skeleton.depth
-    by_depth = np.argsort(depth, kind="stable")
-    starts = np.searchsorted(depth[by_depth], np.arange(int(depth.max()) + 2))
-    for level in range(int(depth[start]) + 1, int(depth.max()) + 1):
-        idx = by_depth[starts[level]:starts[level + 1]]
+    for idx in depth_levels(skeleton.depth, first=int(skeleton.depth[start]) + 1):
         mask[idx] = mask[skeleton.parent[idx]]
     return mask
 

@@ -20,7 +20,8 @@ import re
 import numpy as np
 
 from ..errors import TreefarmError
-from ..geometry.radii import node_depths, pipe_model_radii
+from ..geometry.radii import pipe_model_radii
+from ..geometry.topology import depth_levels, node_depths
 from ..skeleton import Skeleton
 
 __all__ = ["LStringError", "tree_to_lstring", "lstring_to_tree", "edge_angles", "branch_orders"]
@@ -146,11 +147,7 @@ def branch_orders(positions: np.ndarray, parent: np.ndarray) -> np.ndarray:
     step[0] = 0
     step[child[keys][first]] = 0
     order = step.copy()
-    depth = node_depths(parent)
-    by_depth = np.argsort(depth, kind="stable")
-    starts = np.searchsorted(depth[by_depth], np.arange(int(depth.max()) + 2))
-    for level in range(1, int(depth.max()) + 1):
-        idx = by_depth[starts[level]:starts[level + 1]]
+    for idx in depth_levels(node_depths(parent)):
         order[idx] += order[parent[idx]]
     return np.minimum(order, 255).astype(np.uint8)
 
@@ -182,11 +179,7 @@ def lstring_to_tree(lstring: str, rng: np.random.Generator, degree_diff: float =
     parent = np.concatenate(([-1], move_parent + 1))  # node 0 is the root; F k is node k + 1
     positions = np.zeros((count + 1, 3))
     positions[1:] = offsets
-    depth = node_depths(parent)
-    by_depth = np.argsort(depth, kind="stable")
-    starts = np.searchsorted(depth[by_depth], np.arange(int(depth.max()) + 2))
-    for level in range(2, int(depth.max()) + 1):  # level 1 hangs from the root at the origin
-        idx = by_depth[starts[level]:starts[level + 1]]
+    for idx in depth_levels(node_depths(parent), first=2):  # level 1 hangs from the root at the origin
         positions[idx] += positions[parent[idx]]
     return Skeleton(positions=positions, parent=parent, radius=pipe_model_radii(parent, tip_radius, pipe_exponent),
                     order=branch_orders(positions, parent))

@@ -22,7 +22,7 @@ from itertools import chain
 import numpy as np
 
 from .rewrite import Module
-from ..geometry.radii import node_depths
+from ..geometry.topology import depth_levels, node_depths
 
 __all__ = ["TurtlePath", "interpret", "initial_frame", "turn_matrices", "leaf_cards"]
 
@@ -200,11 +200,7 @@ def interpret(modules: list[Module], *, angle: float, step: float, width: float,
     anchor = np.arange(n_moves + 1)  # nearest drawn point at or above each point
     tropism = np.asarray(tropism, np.float64)
     bend = bool(np.any(tropism))
-    depth = node_depths(tree_parent)
-    by_depth = np.argsort(depth, kind="stable")
-    starts = np.searchsorted(depth[by_depth], np.arange(int(depth.max()) + 2))
-    for level in range(1, int(depth.max()) + 1):
-        idx = by_depth[starts[level]:starts[level + 1]]
+    for idx in depth_levels(node_depths(tree_parent)):
         par = tree_parent[idx]
         frames[idx] = after[par] @ local[idx - 1]
         points[idx] = points[par] + frames[idx, :, 0] * lengths[idx - 1, None]

@@ -51,7 +51,8 @@ def test_ray_data_reads_every_view(standin_dataset, ray_session):
 
 
 def test_torch_dataset_decodes_images_lazily_to_channel_first_tensors(standin_dataset):
-    torch = pytest.importorskip("torch")
+    import torch
+
     from farm.torch_dataset import ViewsDataset
 
     _, path = standin_dataset

@@ -10,12 +10,13 @@ import shutil
 import numpy as np
 import pytest
 from PIL import Image
+from playwright import sync_api
 
 from conftest import running_server
+from required_tools import missing_tool
 
 if shutil.which("chromium") is None:
-    pytest.skip("chromium is not installed: run `make browser-env`", allow_module_level=True)
-sync_api = pytest.importorskip("playwright.sync_api")
+    missing_tool("chromium is not installed: run `make browser-env`", allow_module_level=True)
 
 # A WebXR device stand-in: immersive-vr supported, a session whose frames the test plays with __xrStep().
 FAKE_XR = """

@@ -7,7 +7,7 @@ from scipy.spatial import cKDTree
 
 import species
 from species.colonization.allocation import allocate, jump_tables, path_products, subtree_sums
-from species.colonization.generator import Colonizer, _bole, _guide_seed, crown_space, grow, grow_in_space
+from species.colonization.generator import Colonizer, bole_guide, seed_from_guide, crown_space, grow, grow_in_space
 from species.colonization.params import at_iteration, validate
 from species.errors import ParameterError
 from species.colonization.growth_space import (DepthMapCrown, MeshSpace, PointSpace, SuperquadricLobe, VoxelSpace,
@@ -25,7 +25,7 @@ def _colonizer(params: dict, seed: int = 0) -> Colonizer:
     p = validate(params)
     rng = np.random.default_rng(seed)
     space = crown_space(p, rng)
-    return Colonizer(p, rng, space, IL, _guide_seed(_bole(p, rng, IL), "tips", rng, p))
+    return Colonizer(p, rng, space, IL, seed_from_guide(bole_guide(p, rng, IL), "tips", rng, p))
 
 
 def _sphere_space(radius: float = 0.8, centre_z: float = 0.9) -> SuperquadricLobe:
@@ -73,7 +73,7 @@ def test_every_grown_node_lies_inside_the_growth_space(space_kind):
         space = DepthMapCrown(front, back, extent=(-1, 1, 0.1, 1.7), depth_range=(-1, 1))
     params = {**SMALL, "crown_base": 1.0}
     rng = np.random.default_rng(3)
-    bole = _bole(validate(params), rng, IL)
+    bole = bole_guide(validate(params), rng, IL)
     skeleton = grow_in_space(params, rng, space=space, guide=bole, guide_buds="tips")
     grown = skeleton.positions[len(bole):]
     assert len(grown) > 30

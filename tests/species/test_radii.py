@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.geometry.radii import node_depths, pipe_model_radii
+from species.geometry.radii import pipe_model_radii
+from species.geometry.topology import depth_levels, node_depths
 
 
 def test_fork_combines_children_by_the_pipe_rule():
