@@ -6,8 +6,21 @@ Usage: python benchmarks/bench_blender_outputs.py [--assets N] [--presets NAME .
 from __future__ import annotations
 
 import argparse
+import tempfile
+import time
+from pathlib import Path
 
-from renderers.blender_assets import time_blender_outputs
+import numpy as np
+
+import species
+from farm.library.asset import build_asset
+from farm.library.blender_catalog import write_blender_library
+from farm.library.gltf_asset import asset_to_glb
+from farm.library.spec import parse_library_spec
+from farm.tree_chain import StageTimer
+from renderers.blender import BlenderError
+from renderers.blender_assets import export_fbx_batch
+from renderers.impostor import CoverageRenderer
 
 PRESETS = ("sc_young_sapling", "maple", "balsam_fir")
 # The budget we hold these to (issue 11 gives none for the Blender outputs): a full asset without them in
@@ -40,24 +53,42 @@ def main(argv=None) -> None:
           "tags per asset plus its share of the save (previews drawn from the mesh, none given).")
 
 
+def time_blender_outputs(n_assets: int, preset: str = "balsam_fir", seed: int = 0) -> dict:
+    """Seconds for the Blender outputs of `n_assets` grown trees: Blender's start-up (wall time of the FBX batch
+    less the time its exports took inside Blender), per FBX (one batch) and per asset of one `.blend` library
+    (save included)."""
+    if n_assets < 1:
+        raise BlenderError(f"n_assets {n_assets} must be >= 1")
+    with tempfile.TemporaryDirectory(prefix="treefarm-bench-blender-") as tmp:
+        tmp = Path(tmp)
+        glbs, triangles = [], []
+        for i, child in enumerate(np.random.SeedSequence(seed).spawn(n_assets)):
+            params = species.sample(preset, np.random.default_rng(child))
+            _, mesh = species.rebuild(params)
+            glbs.append(tmp / f"tree_{i:03d}.glb")
+            glbs[-1].write_bytes(mesh.to_glb())
+            triangles.append(len(mesh.bark.faces) + len(mesh.leaves.faces))
+        t0 = time.perf_counter()
+        rows = export_fbx_batch([(g, tmp / f"{g.stem}.fbx") for g in glbs])
+        fbx_wall = time.perf_counter() - t0
+        fbx_inside = sum(r["seconds"] for r in rows)
+        library = write_blender_library([{"id": g.stem, "glb_path": g, "tags": ["bench"], "catalog_path": "Bench"}
+                                         for g in glbs], tmp / "bench.blend")
+        library_inside = sum(r["seconds"] for r in library["assets"]) + library["save_seconds"]
+        return {"n_assets": n_assets, "preset": preset, "triangles_mean": float(np.mean(triangles)),
+                "startup_seconds": fbx_wall - fbx_inside, "fbx_seconds_each": fbx_inside / n_assets,
+                "fbx_batch_seconds": fbx_wall, "asset_seconds_each": library_inside / n_assets,
+                "library_seconds": library["seconds"], "blend_bytes": library["bytes"],
+                "fbx_bytes_mean": float(np.mean([r["bytes"] for r in rows]))}
+
+
 def library_asset_rows(n_assets: int, species_name: str) -> None:
     """What the library job asks of Blender per asset: one FBX per level from the asset GLB (one batch), and
     the asset's LOD0 in a .blend; from the instanced GLB and from the one with leaves baked (instanced=False)."""
-    import tempfile
-    import time
-    from pathlib import Path
-
-    from farm.library.asset import build_asset
-    from farm.library.gltf_asset import asset_to_glb
-    from farm.library.spec import parse_library_spec
-    from farm.tree_chain import StageTimer
-    from renderers.blender_assets import export_fbx_batch, write_asset_library
-    from renderers.impostor import CoverageRenderer
-
     spec = parse_library_spec({"species": [species_name], "per_species": n_assets})
     renderer = CoverageRenderer(64)
     try:
-        # Seeds from 3: maple seed 0 trips the LOD3 budget check of species.lod (LodBudgetError; reported).
+        # Seeds from 3: maple seed 0 trips the LOD3 budget check of species.studio.lod (LodBudgetError; reported).
         assets = [build_asset(species_name, seed, spec, renderer, StageTimer()) for seed in range(3, 3 + n_assets)]
     finally:
         renderer.close()
@@ -78,7 +109,7 @@ def library_asset_rows(n_assets: int, species_name: str) -> None:
             start = time.perf_counter()
             rows = export_fbx_batch(jobs)
             fbx_wall = time.perf_counter() - start
-            written = write_asset_library(library, Path(tmp) / "library.blend")
+            written = write_blender_library(library, Path(tmp) / "library.blend")
             per_asset = (sum(r["seconds"] for r in written["assets"]) + written["save_seconds"]) / n_assets
             print(f"{'instanced' if instanced else 'baked':<12} {fbx_wall:>12.2f} "
                   f"{sum(r['seconds'] for r in rows) / n_assets:>11.2f} {written['seconds']:>13.2f} {per_asset:>14.2f}")

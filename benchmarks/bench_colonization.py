@@ -19,13 +19,12 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-from PIL import Image  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
-from skeleton_drawing import front_view  # noqa: E402
+from skeleton_drawing import front_view, save_sheet  # noqa: E402
 from species.colonization.generator import grow  # noqa: E402
 
 # About 5,000 internodes from 20,000 markers: an ellipsoid crown of ~31,000 IL^3 at 0.65 markers per IL^3.
@@ -99,11 +98,7 @@ def main() -> int:
         profiler.runcall(grow, MAIN, np.random.default_rng(0))
         pstats.Stats(profiler).sort_stats("tottime").print_stats(12)
 
-    sheet = Image.new("RGB", (420 * len(tiles), 420), "white")
-    for k, tile in enumerate(tiles):
-        sheet.paste(tile, (420 * k, 0))
-    args.png.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(args.png)
+    save_sheet(tiles, len(tiles), args.png)
     print(f"front views: {args.png}")
     return 0
 

@@ -10,13 +10,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PIL import Image
 from tqdm import tqdm
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import species  # noqa: E402
-from skeleton_drawing import front_view  # noqa: E402
+from skeleton_drawing import front_view, save_sheet  # noqa: E402
 from species.lsystem.generator import grow  # noqa: E402
 from species.lsystem.presets import PRESETS  # noqa: E402
 
@@ -56,12 +55,7 @@ def main() -> int:
     print(f"reference: node limit {NODE_LIMIT} per tree; thesis 000 grows a tree in {REFERENCE_GROW_S}-1.5 s "
           "(thesis 003 gives no timings)")
 
-    columns = 4
-    sheet = Image.new("RGB", (columns * 320, -(-len(tiles) // columns) * 320), "white")
-    for k, tile in enumerate(tiles):
-        sheet.paste(tile, ((k % columns) * 320, (k // columns) * 320))
-    args.png.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(args.png)
+    save_sheet(tiles, 4, args.png)
     print(f"contact sheet: {args.png}")
     return 0
 

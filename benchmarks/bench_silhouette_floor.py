@@ -58,11 +58,12 @@ def level_floors(renderer, cover, points, switch_px: int) -> tuple[float, ...]:
 def main(names: list[str]) -> None:
     from tqdm import tqdm
 
-    from farm.library.asset import build_asset, framing_points, leaf_fractions
+    from farm.library.asset import build_asset, leaf_fractions
     from farm.library.catalog import IOU_TARGET
     from farm.library.spec import parse_library_spec
     from farm.tree_chain import StageTimer, tree_seed
     from renderers.alpha_coverage import coverage_tree
+    from renderers.framing import framing_points
     from renderers.impostor import CoverageRenderer
 
     renderer = CoverageRenderer(64)  # one EGL context for every size: the viewport follows the camera

@@ -22,11 +22,9 @@ import species  # noqa: E402
 from farm.table import format_table  # noqa: E402
 
 SAPLING_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "sapling"
-# Blender Sapling 0.3.4 on this machine: seconds to grow one mesh (the figures), height and crown radius.
-SAPLING_SECONDS = {"0_acer_2": 0.2, "9_cherry_blossom_3": 11.0}
-SAPLING_MEDIAN_SECONDS = 1.85
-SAPLING_SHAPE = {"0_acer_2": (5.34, 2.58), "3_palm_3": (9.85, 2.91), "6_pine": (4.29, 1.57),
-                 "9_cherry_blossom_3": (12.75, 7.00), "12_bonsai": (0.94, 0.57)}
+# Blender Sapling 0.3.4 on this machine: seconds to grow one mesh where measured, height and crown radius.
+SAPLING = json.loads((Path(__file__).resolve().parent / "references" / "sapling.json").read_text())
+SAPLING_MEDIAN_SECONDS = SAPLING["median_seconds"]
 
 
 def time_tree(params: dict, repeats: int) -> tuple[float, float, float, object, object]:
@@ -55,8 +53,9 @@ def main() -> None:
         params = json.loads(path.read_text())
         g, m, t, skeleton, mesh = time_tree(params, args.repeats)
         totals.append(t)
-        ref_h, ref_c = SAPLING_SHAPE[path.stem]
-        sapling = SAPLING_SECONDS.get(path.stem)
+        reference = SAPLING["trees"][path.stem]
+        ref_h, ref_c = reference["height_m"], reference["crown_radius_m"]
+        sapling = reference.get("seconds")
         rows.append((path.stem, round(g * 1000, 1), round(m * 1000, 1), round(t * 1000, 1),
                      f"{sapling:.2f}" if sapling else "-", f"{sapling / t:.0f}x" if sapling else "-",
                      mesh.n_vertices, mesh.n_faces, f"{skeleton.height:.2f} / {ref_h:.2f}",

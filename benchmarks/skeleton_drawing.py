@@ -24,3 +24,13 @@ def front_view(skeleton: species.Skeleton, title: str, size: int = 320, leaves: 
         draw.point([tuple(p) for p in centres], fill=(0, 140, 0))
     draw.text((4, 4), title, fill="black")
     return image
+
+
+def save_sheet(tiles: list[Image.Image], columns: int, path) -> None:
+    """Paste equal-size tiles row by row, `columns` wide, onto one white sheet saved as PNG at `path`."""
+    width, height = tiles[0].size
+    sheet = Image.new("RGB", (columns * width, -(-len(tiles) // columns) * height), "white")
+    for k, tile in enumerate(tiles):
+        sheet.paste(tile, ((k % columns) * width, (k // columns) * height))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    sheet.save(path)

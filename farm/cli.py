@@ -1,12 +1,18 @@
 """The `farm` command line: one subcommand module per job in `farm/commands/`.
 
-Errors a user can act on are printed as one line (`farm: error: ...`) with exit status 2, never a traceback.
+Errors a user can act on (`TreefarmError`, and file errors of paths named on the command line) are printed as one
+line (`farm: error: ...`) with exit status 2; anything else is a bug: its traceback, a line asking to report it,
+and exit status 1. `farm --debug COMMAND` prints the traceback of a user error too. Statuses: docs/cli.md.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
+import traceback
+
+from species.errors import TreefarmError
 
 # Each module defines `register(subparsers)`, adding its parser with `set_defaults(run=function)`.
 COMMAND_MODULES = [
@@ -22,9 +28,16 @@ COMMAND_MODULES = [
     "farm.commands.library",
 ]
 
+EXIT_USER_ERROR = 2
+EXIT_BUG = 1
+EXIT_INTERRUPTED = 130
+BUG_REPORT = "farm: internal error (a bug): please report it with the traceback above"
+
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="farm", description="treefarm: procedural trees and training data")
+    parser.add_argument("--debug", action="store_true",
+                        help="print the traceback of every error, a user error's too (before the command)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
@@ -32,18 +45,54 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _named_paths(argv: list[str]) -> list[str]:
+    """Absolute forms of the command-line words that may be local paths (`--out=DIR` gives DIR)."""
+    words = [word.split("=", 1)[1] if word.startswith("-") and "=" in word else word for word in argv]
+    return [os.path.abspath(os.path.expanduser(word)) for word in words
+            if word and not word.startswith("-") and "://" not in word]
+
+
+def _names_a_user_path(exc: OSError, argv: list[str]) -> bool:
+    """True when the file error is about a path given on the command line: the path itself, a file inside it,
+    or a folder above it (making the parents of --out)."""
+    files = [os.path.abspath(str(name)) for name in (exc.filename, exc.filename2) if name is not None]
+    for named in _named_paths(argv):
+        for file in files:
+            if os.path.commonpath([file, named]) in (file, named):
+                return True
+    return False
+
+
+def _user_error_message(exc: BaseException, argv: list[str]) -> str | None:
+    """The one line a user error is shown as, or None when the exception is a bug."""
+    if isinstance(exc, TreefarmError):
+        text = str(exc).strip()
+        return text.splitlines()[0] if text else type(exc).__name__
+    if isinstance(exc, OSError) and _names_a_user_path(exc, argv):
+        return f"{exc.filename}: {exc.strerror or exc}"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         result = args.run(args)
     except KeyboardInterrupt:
+        if args.debug:
+            traceback.print_exc()
         print("farm: interrupted", file=sys.stderr)
-        return 130
-    except (ValueError, OSError, KeyError) as exc:  # user-facing errors: bad values, files, names
-        message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # sorted here into a user's error (one line) and a bug (traceback)
+        message = _user_error_message(exc, argv)
+        if message is None or args.debug:
+            traceback.print_exc()
+        if message is None:
+            print(BUG_REPORT, file=sys.stderr)
+            return EXIT_BUG
         print(f"farm: error: {message}", file=sys.stderr)
-        return 2
+        return EXIT_USER_ERROR
     return int(result or 0)
 
 

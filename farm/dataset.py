@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 from typing import Iterable, Sequence
 
+from species.errors import TreefarmError
+
 from .storage import Location
 
 __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_schema", "part_name",
@@ -23,7 +25,7 @@ _PARQUET_OPTIONS = dict(compression="zstd", compression_level=3, row_group_size=
                         write_statistics=True, data_page_version="2.0", version="2.6")
 
 
-class DatasetError(ValueError):
+class DatasetError(TreefarmError):
     """A dataset folder is missing, incomplete or damaged; the message names the file."""
 
 

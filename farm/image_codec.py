@@ -2,12 +2,16 @@
 
 A float map is stored as pixel values p (uint16) with per-image `scale` and `offset`: value = offset + scale * p.
 Encoding is deterministic (libpng via OpenCV, fixed compression level, no timestamps or text chunks).
+`encode_pixels` is the codec's PNG writer for pixels already quantized (`farm render` writes its map files with
+it). Pictures that are not maps (textures, thumbnails, contact sheets) go through `species.meshing.png`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["encode_map", "decode_map", "ImageCodecError", "METRIC_MAPS", "PNG_COMPRESSION"]
+from species.errors import TreefarmError
+
+__all__ = ["encode_map", "decode_map", "encode_pixels", "ImageCodecError", "METRIC_MAPS", "PNG_COMPRESSION"]
 
 PNG_COMPRESSION = 3
 # Float maps in metres: 0 means background and stays 0; the 16-bit range is fitted to each image's
@@ -16,7 +20,7 @@ METRIC_MAPS = frozenset({"depth", "depth_back"})
 _UINT16_MAX = 65535
 
 
-class ImageCodecError(ValueError):
+class ImageCodecError(TreefarmError):
     """A map has a dtype, shape or value range the views table cannot store."""
 
 
@@ -26,11 +30,21 @@ def _cv2():
     return cv2
 
 
-def _png(pixels: np.ndarray) -> bytes:
+def encode_pixels(pixels: np.ndarray, compression: int | None = PNG_COMPRESSION) -> bytes:
+    """PNG bytes of (H, W) grey or (H, W, 3) RGB pixels, uint8 (8-bit PNG) or uint16 (16-bit PNG), as they are.
+
+    compression : zlib level 0-9, or None for OpenCV's own default settings (what the library previews use).
+    """
+    pixels = np.asarray(pixels)
+    if pixels.dtype not in (np.uint8, np.uint16) or pixels.ndim not in (2, 3) \
+            or (pixels.ndim == 3 and pixels.shape[2] != 3):
+        raise ImageCodecError(f"pixels of shape {pixels.shape}, dtype {pixels.dtype} are invalid: allowed "
+                              f"(H, W) or (H, W, 3), uint8 or uint16")
     # OpenCV writes 3-channel arrays as BGR; reverse so the file is RGB for every other reader.
     if pixels.ndim == 3:
         pixels = np.ascontiguousarray(pixels[..., ::-1])
-    ok, buffer = _cv2().imencode(".png", pixels, [_cv2().IMWRITE_PNG_COMPRESSION, PNG_COMPRESSION])
+    settings = [] if compression is None else [_cv2().IMWRITE_PNG_COMPRESSION, compression]
+    ok, buffer = _cv2().imencode(".png", pixels, settings)
     if not ok:
         raise ImageCodecError(f"PNG encoding failed for an array of shape {pixels.shape}, dtype {pixels.dtype}")
     return buffer.tobytes()
@@ -46,7 +60,7 @@ def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
         raise ImageCodecError(f"map {name!r} has shape {image.shape}; allowed (H, W) or (H, W, 3)")
     if image.dtype == np.uint8:
-        return _png(image), None, None
+        return encode_pixels(image), None, None
     if not np.issubdtype(image.dtype, np.floating):
         raise ImageCodecError(f"map {name!r} has dtype {image.dtype}; allowed uint8 or float32")
     if not np.all(np.isfinite(image)):
@@ -55,17 +69,17 @@ def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float
     if name in METRIC_MAPS:
         foreground = values > 0
         if not foreground.any():
-            return _png(np.zeros(image.shape, np.uint16)), 1.0, 0.0
+            return encode_pixels(np.zeros(image.shape, np.uint16)), 1.0, 0.0
         low, high = values[foreground].min(), values[foreground].max()
         scale = max((high - low) / (_UINT16_MAX - 1), 1e-9)
         offset = low - scale  # pixel 1 is the nearest foreground value; pixel 0 stays background
         pixels = np.where(foreground, np.rint((values - offset) / scale), 0)
-        return _png(np.clip(pixels, 0, _UINT16_MAX).astype(np.uint16)), float(scale), float(offset)
+        return encode_pixels(np.clip(pixels, 0, _UINT16_MAX).astype(np.uint16)), float(scale), float(offset)
     if values.min() < -1e-6 or values.max() > 1 + 1e-6:
         raise ImageCodecError(f"map {name!r} has values in [{values.min():.4g}, {values.max():.4g}]; "
                               f"allowed [0, 1] for a non-metric float map")
     pixels = np.rint(np.clip(values, 0, 1) * _UINT16_MAX).astype(np.uint16)
-    return _png(pixels), 1.0 / _UINT16_MAX, 0.0
+    return encode_pixels(pixels), 1.0 / _UINT16_MAX, 0.0
 
 
 def decode_map(png: bytes, scale: float | None = None, offset: float | None = None,

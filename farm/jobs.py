@@ -16,8 +16,9 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-__all__ = ["JobSpec", "RenderSpec", "JobSpecError", "load_spec", "parse_spec", "default_spec", "spec_to_yaml",
-           "species_of_trees"]
+__all__ = ["JobSpec", "RenderSpec", "JobSpecError", "PipelineSpec", "DatasetTables", "load_spec", "parse_spec",
+           "default_spec", "spec_to_yaml", "species_of_trees", "check_keys", "check_int", "check_number", "check_seed",
+           "check_resources", "preset_names"]
 
 _NAME_PATTERN = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
 
@@ -46,8 +47,25 @@ class RenderSpec:
     outputs: tuple[str, ...] = ()
 
 
-class ShardedCounts:
-    """Tree and shard counts of any job the pipeline plans (a `species_counts` mapping and a `shard_size`)."""
+@dataclass(frozen=True)
+class DatasetTables:
+    """What a job's trees and views tables hold besides the columns every job writes (`farm.dataset` schemas).
+
+    view_outputs : the views table's map and sketch-style columns (`renderers.OUTPUTS` names); empty: no views.
+    store_glb    : each trees-table row carries the tree's GLB bytes.
+    """
+
+    view_outputs: tuple[str, ...] = ()
+    store_glb: bool = False
+
+
+class PipelineSpec:
+    """What `farm.pipeline` reads from a job spec, whatever the kind of job (`JobSpec`, the asset library's
+    `LibrarySpec`): fields `name`, `seed`, `shard_size` and `resources` (Ray resources per worker actor), and
+    `species_counts` (trees per species), `tables` (a `DatasetTables`), `to_dict()` (the job record, whose
+    `render.outputs` readers of the views table use) and `digest()`. Tree i of the plan is
+    `species_of_trees(spec)[i]`, grown from `farm.tree_chain.tree_seed(spec.seed, i)`.
+    """
 
     @property
     def n_trees(self) -> int:
@@ -59,7 +77,7 @@ class ShardedCounts:
 
 
 @dataclass(frozen=True)
-class JobSpec(ShardedCounts):
+class JobSpec(PipelineSpec):
     """One generation job.
 
     name          : job name; tree ids are f"{name}-{index:08d}".
@@ -88,6 +106,11 @@ class JobSpec(ShardedCounts):
 
     # ------------------------------------------------------------------ derived plan facts
     @property
+    def tables(self) -> DatasetTables:
+        """The render's outputs as views-table columns, and the GLB column when `store_glb`."""
+        return DatasetTables(view_outputs=self.render.outputs, store_glb=self.store_glb)
+
+    @property
     def species_counts(self) -> dict[str, int]:
         """Trees per species: the weights as counts, or `trees` split by weight (largest remainder)."""
         names = list(self.species)
@@ -115,14 +138,14 @@ class JobSpec(ShardedCounts):
 
     def with_trees(self, total: int) -> "JobSpec":
         """The same job with `total` trees split over the species (`farm generate --trees N`)."""
-        _check_int("trees", total, 0)
+        check_int("trees", total, 0)
         weights = self.species if self.trees is not None else {n: 1.0 for n in self.species}
         if total > 0 and sum(weights.values()) <= 0:
             raise JobSpecError("species", weights, "at least one positive weight")
         return replace(self, species=dict(weights), trees=total)
 
 
-def species_of_trees(spec: JobSpec) -> list[str]:
+def species_of_trees(spec: PipelineSpec) -> list[str]:
     """The species of every tree, index order: species interleaved evenly, so any shard mixes them."""
     keys, names = [], []
     for name, count in spec.species_counts.items():
@@ -132,14 +155,14 @@ def species_of_trees(spec: JobSpec) -> list[str]:
     return [names[i] for i in order]
 
 
-# ---------------------------------------------------------------------- parsing and validation
-_TOP_KEYS = {"name", "seed", "species", "trees", "render", "store_glb", "shard_size", "max_nodes", "output",
-             "resources"}
-_RENDER_KEYS = {"rig", "size", "outputs"}
+# ---------------------------------------------------------------------- field checks of every spec
+# Each raises JobSpecError naming the field, its value and what is allowed; the library spec re-raises them as
+# its own error class.
 _RESOURCE_KEYS = {"num_cpus", "num_gpus"}
 
 
-def _check_keys(where: str, mapping: Any, allowed: set[str]) -> dict:
+def check_keys(where: str, mapping: Any, allowed: set[str]) -> dict:
+    """`mapping` itself when it is a dict whose keys are all in `allowed`; `where` names it in the error."""
     if not isinstance(mapping, dict):
         raise JobSpecError(where or "spec", mapping, "a mapping")
     for key in mapping:
@@ -149,7 +172,8 @@ def _check_keys(where: str, mapping: Any, allowed: set[str]) -> dict:
     return mapping
 
 
-def _check_int(name: str, value: Any, low: int, high: int | None = None) -> int:
+def check_int(name: str, value: Any, low: int, high: int | None = None) -> int:
+    """`value` as an int when it is an integer (not a bool) in [low, high] (no upper bound when high is None)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise JobSpecError(name, value, f"an integer >= {low}")
     if value < low or (high is not None and value > high):
@@ -157,16 +181,37 @@ def _check_int(name: str, value: Any, low: int, high: int | None = None) -> int:
     return int(value)
 
 
-def _check_number(name: str, value: Any, low: float) -> float:
+def check_number(name: str, value: Any, low: float) -> float:
+    """`value` as a float when it is a finite number (not a bool) >= low."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < low:
         raise JobSpecError(name, value, f"a number >= {low}")
     return float(value)
 
 
-def _known_species() -> list[str]:
+def check_seed(value: Any) -> int:
+    """A job seed: an integer in [0, 2^63 - 1] (numpy's SeedSequence takes it whole)."""
+    return check_int("seed", value, 0, 2**63 - 1)
+
+
+def check_resources(raw: Any) -> dict[str, float]:
+    """Ray resources per worker actor from a spec's `resources` mapping: num_cpus (default 1) and num_gpus
+    (default 0), each a number >= 0."""
+    resources = check_keys("resources", raw, _RESOURCE_KEYS)
+    return {"num_cpus": check_number("resources.num_cpus", resources.get("num_cpus", 1), 0.0),
+            "num_gpus": check_number("resources.num_gpus", resources.get("num_gpus", 0), 0.0)}
+
+
+def preset_names() -> list[str]:
+    """The names of every species preset (`species.list_presets()`), the default set a spec may name."""
     import species
 
     return [p.name for p in species.list_presets()]
+
+
+# ---------------------------------------------------------------------- job spec parsing
+_TOP_KEYS = {"name", "seed", "species", "trees", "render", "store_glb", "shard_size", "max_nodes", "output",
+             "resources"}
+_RENDER_KEYS = {"rig", "size", "outputs"}
 
 
 def _known_outputs() -> Sequence[str]:
@@ -196,34 +241,34 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
 
     `known_species` / `known_outputs` default to `species.list_presets()` / `renderers.OUTPUTS`.
     """
-    raw = _check_keys("", raw, _TOP_KEYS)
+    raw = check_keys("", raw, _TOP_KEYS)
     name = raw.get("name", "default")
     if not isinstance(name, str) or not _NAME_PATTERN.match(name):
         raise JobSpecError("name", name, "1-64 letters, digits, '_', '-' or '.', starting with a letter or digit")
-    seed = _check_int("seed", raw.get("seed", 0), 0, 2**63 - 1)
+    seed = check_seed(raw.get("seed", 0))
 
     trees = raw.get("trees")
     if trees is not None:
-        trees = _check_int("trees", trees, 0)
+        trees = check_int("trees", trees, 0)
     mix = raw.get("species")
     if not isinstance(mix, dict) or not mix:
         raise JobSpecError("species", mix, "a non-empty mapping of preset name -> count (or weight with `trees`)")
-    known = list(known_species) if known_species is not None else _known_species()
+    known = list(known_species) if known_species is not None else preset_names()
     species_mix: dict[str, float] = {}
     for preset, amount in mix.items():
         if preset not in known:
             raise JobSpecError(f"species.{preset}", preset, f"a known species: {', '.join(sorted(known))}")
         if trees is None:
-            species_mix[preset] = float(_check_int(f"species.{preset}", amount, 0))
+            species_mix[preset] = float(check_int(f"species.{preset}", amount, 0))
         else:
-            species_mix[preset] = _check_number(f"species.{preset}", amount, 0.0)
+            species_mix[preset] = check_number(f"species.{preset}", amount, 0.0)
     if trees is not None and trees > 0 and sum(species_mix.values()) <= 0:
         raise JobSpecError("species", mix, "at least one positive weight")
 
-    render_raw = _check_keys("render", raw.get("render", {}), _RENDER_KEYS)
+    render_raw = check_keys("render", raw.get("render", {}), _RENDER_KEYS)
     rig = render_raw.get("rig", "tsn4")
     _check_rig(rig)
-    size = _check_int("render.size", render_raw.get("size", 256), 16, 4096)
+    size = check_int("render.size", render_raw.get("size", 256), 16, 4096)
     outputs_known = list(known_outputs) if known_outputs is not None else list(_known_outputs())
     outputs = render_raw.get("outputs")
     if outputs is None:
@@ -239,14 +284,12 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
     store_glb = raw.get("store_glb", True)
     if not isinstance(store_glb, bool):
         raise JobSpecError("store_glb", store_glb, "true or false")
-    shard_size = _check_int("shard_size", raw.get("shard_size", 8), 1, 100_000)
-    max_nodes = _check_int("max_nodes", raw.get("max_nodes", 300_000), 1)
+    shard_size = check_int("shard_size", raw.get("shard_size", 8), 1, 100_000)
+    max_nodes = check_int("max_nodes", raw.get("max_nodes", 300_000), 1)
     output = raw.get("output")
     if output is not None and (not isinstance(output, str) or not output):
         raise JobSpecError("output", output, "a path or URI string")
-    res_raw = _check_keys("resources", raw.get("resources", {}), _RESOURCE_KEYS)
-    resources = {"num_cpus": _check_number("resources.num_cpus", res_raw.get("num_cpus", 1), 0.0),
-                 "num_gpus": _check_number("resources.num_gpus", res_raw.get("num_gpus", 0), 0.0)}
+    resources = check_resources(raw.get("resources", {}))
     return JobSpec(name=name, seed=seed, species=species_mix, trees=trees,
                    render=RenderSpec(rig=rig, size=size, outputs=tuple(outputs)), store_glb=store_glb,
                    shard_size=shard_size, max_nodes=max_nodes, output=output, resources=resources)
@@ -270,7 +313,7 @@ def load_spec(path: str | Path, parse: Callable[..., Any] | None = None, **known
 
 def default_spec() -> JobSpec:
     """The built-in job: every preset, 2 trees each, default outputs, rig tsn4 at 256 px, shards of 8."""
-    return parse_spec({"name": "default", "seed": 0, "species": {name: 2 for name in _known_species()},
+    return parse_spec({"name": "default", "seed": 0, "species": {name: 2 for name in preset_names()},
                        "render": {"rig": "tsn4", "size": 256, "outputs": list(_default_outputs())},
                        "shard_size": 8})
 

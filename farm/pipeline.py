@@ -1,6 +1,7 @@
 """The generation pipeline: plan shards, run them on Ray actors (one renderer each), write the manifest last.
 
-Input: a JobSpec and an output location; output: trees/ and views/ part files, _shards/ records, manifest.json.
+Input: a job spec (a `farm.jobs.PipelineSpec`: JobSpec, LibrarySpec) and an output location; output: trees/ and
+views/ part files, _shards/ records, manifest.json.
 Same spec and seed, same part-file bytes, whatever the number of workers or their finishing order.
 """
 from __future__ import annotations
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 from species.errors import TreefarmError
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
-from .jobs import JobSpec, species_of_trees
+from .jobs import PipelineSpec, species_of_trees
 from .manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
 from .storage import Location
@@ -29,7 +30,7 @@ WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
 ACTOR_RETRIES = 3
 
 
-def worker_env(spec: JobSpec) -> dict[str, str]:
+def worker_env(spec: PipelineSpec) -> dict[str, str]:
     """Environment of a worker actor: EGL, and Mesa's rasterizer threads matched to the actor's CPUs
     (llvmpipe would otherwise start one thread per core in every actor and oversubscribe the machine)."""
     return {**WORKER_ENV, "LP_NUM_THREADS": str(max(1, int(spec.resources["num_cpus"])))}
@@ -56,14 +57,14 @@ class ShardPlan:
         return range(self.first_index, self.first_index + self.n_trees)
 
 
-def plan_shards(spec: JobSpec) -> list[ShardPlan]:
+def plan_shards(spec: PipelineSpec) -> list[ShardPlan]:
     """Fixed ranges of `spec.shard_size` trees (the last shard may be shorter)."""
     species = species_of_trees(spec)
     size = spec.shard_size
     return [ShardPlan(k, k * size, tuple(species[k * size:(k + 1) * size])) for k in range(spec.n_shards)]
 
 
-def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worker: dict | None = None) -> dict:
+def run_shard(spec: PipelineSpec, plan: ShardPlan, location: Location, builder, worker: dict | None = None) -> dict:
     """Build every tree of a shard, write its two part files atomically, then its record; returns the record.
 
     worker : facts about the process to note in the record (the Ray node id).
@@ -91,7 +92,7 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worke
         tree_timings.append({"index": index, **timer.seconds})
     start = time.perf_counter()
     trees_bytes = serialize_table(tree_rows, trees_schema())
-    views_bytes = serialize_table(all_view_rows, views_schema(spec.render.outputs))
+    views_bytes = serialize_table(all_view_rows, views_schema(spec.tables.view_outputs))
     location.write_atomic(part_name("trees", plan.shard), trees_bytes)
     location.write_atomic(part_name("views", plan.shard), views_bytes)
     stages: dict[str, float] = {}
@@ -115,16 +116,20 @@ def run_shard(spec: JobSpec, plan: ShardPlan, location: Location, builder, worke
 class ShardWorker:
     """A Ray actor: one tree builder (so one offscreen renderer) per process, taking shard tasks."""
 
-    def __init__(self, spec: JobSpec, uri: str, builder_factory: BuilderFactory):
+    def __init__(self, spec: PipelineSpec, uri: str, builder_factory: BuilderFactory):
         import cv2
 
         cv2.setNumThreads(max(1, int(spec.resources["num_cpus"])))  # as LP_NUM_THREADS: one actor, its CPUs
         self.spec, self.location = spec, Location.resolve(uri)
-        self.builder = builder_factory(spec)
+        # Made by the first task: Ray gives the driver an error raised in a task as itself, one raised in
+        # __init__ only as the text of a dead actor.
+        self.builder_factory, self.builder = builder_factory, None
 
     def run(self, plan: ShardPlan) -> dict:
         import ray
 
+        if self.builder is None:
+            self.builder = self.builder_factory(self.spec)
         return run_shard(self.spec, plan, self.location, self.builder,
                          worker={"node": ray.get_runtime_context().get_node_id()})
 
@@ -132,7 +137,7 @@ class ShardWorker:
         return os.getpid()
 
 
-def _check_output_belongs_to(spec: JobSpec, location: Location) -> None:
+def _check_output_belongs_to(spec: PipelineSpec, location: Location) -> None:
     """Refuse to mix two jobs in one folder: the job record and every shard record must carry this spec's digest."""
     digest = spec.digest()
     digests = []
@@ -164,7 +169,7 @@ def _connect_ray(address: str | None, workers: int | None) -> bool:
     return True
 
 
-def _run_pending(spec: JobSpec, location: Location, pending: list[ShardPlan], records: dict[int, dict],
+def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan], records: dict[int, dict],
                  workers: int | None, builder_factory: BuilderFactory, bar) -> None:
     """Start the actors, keep each one busy with one shard at a time, collect the records as they land."""
     import ray
@@ -185,26 +190,32 @@ def _run_pending(spec: JobSpec, location: Location, pending: list[ShardPlan], re
             plan = queue.pop()
             in_flight[actor.run.remote(plan)] = (actor, plan)
 
-    for actor in actors:
-        submit(actor)
-    while in_flight:
-        ready, _ = ray.wait(list(in_flight), num_returns=1)
-        actor, plan = in_flight.pop(ready[0])
-        try:
-            record = ray.get(ready[0])
-        except ray.exceptions.RayError as exc:  # Ray's own restarts and retries are exhausted by now
-            raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
-                           f"{' '.join(str(exc).split())[:300]}") from exc
-        records[plan.shard] = record
-        views_done += record["views"]["rows"]
-        bar.update(record["n_trees"])
-        bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
-        submit(actor)
-    for actor in actors:
-        ray.kill(actor)
+    try:
+        for actor in actors:
+            submit(actor)
+        while in_flight:
+            ready, _ = ray.wait(list(in_flight), num_returns=1)
+            actor, plan = in_flight.pop(ready[0])
+            try:
+                record = ray.get(ready[0])
+            except ray.exceptions.RayTaskError as exc:  # the task raised: a user's error as itself, a bug as is
+                if isinstance(exc.cause, TreefarmError):
+                    raise exc.cause from exc  # its one line; Ray's text (the worker's traceback) is its cause
+                raise
+            except ray.exceptions.RayError as exc:  # the worker died and Ray's restarts and retries are exhausted
+                raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
+                               f"{' '.join(str(exc).split())[:300]}") from exc
+            records[plan.shard] = record
+            views_done += record["views"]["rows"]
+            bar.update(record["n_trees"])
+            bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
+            submit(actor)
+    finally:  # a failed shard ends the job: its actors must not go on holding their CPUs
+        for actor in actors:
+            ray.kill(actor)
 
 
-def run_job(spec: JobSpec, out: str, workers: int | None = None, address: str | None = None,
+def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: str | None = None,
             builder_factory: BuilderFactory = SpeciesChain, progress: bool = True) -> dict:
     """Run (or resume) a job into `out` and return its manifest.
 

@@ -2,6 +2,7 @@
 
 `Location` resolves a path once and reads, lists and writes files under it; `write_atomic` writes a whole
 file under a hidden temporary name and renames it, so a crash never leaves a half file that looks finished.
+A location is a path the user named: its file errors are raised as `PathError`s naming the file.
 """
 from __future__ import annotations
 
@@ -9,6 +10,8 @@ import hashlib
 import os
 import uuid
 from dataclasses import dataclass
+
+from species.errors import PathError, user_path
 
 __all__ = ["Location", "sha256_hex", "TEMP_PREFIX"]
 
@@ -50,17 +53,20 @@ class Location:
     def exists(self, relative: str) -> bool:
         from pyarrow.fs import FileType
 
-        return self.filesystem.get_file_info(self.path(relative)).type == FileType.File
+        with user_path(self.path(relative), "look up"):
+            return self.filesystem.get_file_info(self.path(relative)).type == FileType.File
 
     def read_bytes(self, relative: str) -> bytes:
-        with self.filesystem.open_input_stream(self.path(relative)) as stream:
+        path = self.path(relative)
+        with user_path(path, "read"), self.filesystem.open_input_stream(path) as stream:
             return stream.read()
 
     def list(self, folder: str) -> list[str]:
         """Names of the files directly in `folder` (relative to the root), sorted; [] if it does not exist."""
         from pyarrow.fs import FileSelector, FileType
 
-        infos = self.filesystem.get_file_info(FileSelector(self.path(folder), allow_not_found=True))
+        with user_path(self.path(folder), "list"):
+            infos = self.filesystem.get_file_info(FileSelector(self.path(folder), allow_not_found=True))
         return sorted(info.base_name for info in infos if info.type == FileType.File)
 
     def write_atomic(self, relative: str, data: bytes) -> None:
@@ -68,14 +74,16 @@ class Location:
         fs = self.filesystem
         final = self.path(relative)
         folder, name = final.rsplit("/", 1)
-        fs.create_dir(folder, recursive=True)
         temporary = f"{folder}/{TEMP_PREFIX}{uuid.uuid4().hex}-{name}"
-        with fs.open_output_stream(temporary) as stream:
-            stream.write(data)
-        fs.move(temporary, final)
+        with user_path(final, "write"):
+            fs.create_dir(folder, recursive=True)
+            with fs.open_output_stream(temporary) as stream:
+                stream.write(data)
+            fs.move(temporary, final)
 
     def delete(self, relative: str) -> None:
-        self.filesystem.delete_file(self.path(relative))
+        with user_path(self.path(relative), "delete"):
+            self.filesystem.delete_file(self.path(relative))
 
     def remove_temporaries(self, folder: str) -> int:
         """Delete files a crashed writer left under temporary names; returns how many."""
@@ -86,6 +94,12 @@ class Location:
 
 
 def _filesystem_and_path(uri: str):
+    import pyarrow
     from pyarrow.fs import FileSystem
 
-    return FileSystem.from_uri(uri)
+    try:
+        with user_path(uri, "open"):
+            return FileSystem.from_uri(uri)
+    except pyarrow.ArrowInvalid as exc:
+        raise PathError(f"{uri!r} is not a path or a file system URI pyarrow knows ({exc}): allowed a local path, "
+                        f"file://, s3://, gs:// or hdfs://") from None

@@ -15,7 +15,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 
-from .dataset import FLOAT_OUTPUTS
+from .dataset import FLOAT_OUTPUTS, trees_schema
 from .image_codec import encode_map
 
 __all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
@@ -135,7 +135,7 @@ def tree_row(spec, index: int, shard: int, species_name: str, seed: int, built: 
         "parent": _list(skeleton.parent, np.int32), "radius": _list(skeleton.radius, np.float32),
         "order": _list(skeleton.order, np.uint8), "leaves": _list(skeleton.leaves, np.float32),
         "leaf_node": _list(skeleton.leaf_node, np.int32),
-        "glb": mesh.to_glb() if (spec.store_glb and mesh is not None) else None,
+        "glb": mesh.to_glb() if (spec.tables.store_glb and mesh is not None) else None,
         "height": float(skeleton.height), "crown_radius": float(skeleton.crown_radius),
         "n_branches": int(len(skeleton.branch_starts)), "n_leaves": int(skeleton.n_leaves),
         "bark_triangles": int(mesh.bark.n_faces) if mesh is not None else None,
@@ -148,8 +148,6 @@ def tree_row(spec, index: int, shard: int, species_name: str, seed: int, built: 
 
 @functools.cache
 def _tree_columns() -> tuple[str, ...]:
-    from .dataset import trees_schema
-
     return tuple(trees_schema().names)
 
 
@@ -177,7 +175,7 @@ def view_rows(spec, index: int, shard: int, views: list) -> list[dict]:
     for view in sorted(views, key=lambda v: v.index):
         row = {"tree_id": tree_id(spec.name, index), "index": index, "shard": shard, "view": int(view.index),
                "view_name": str(view.name), "camera_json": to_json(view.camera.to_dict())}
-        for name in spec.render.outputs:
+        for name in spec.tables.view_outputs:
             image = np.asarray(view.images[name])
             if (name in FLOAT_OUTPUTS) == (image.dtype == np.uint8):
                 raise TypeError(f"output {name!r} came back as {image.dtype}; the views schema stores it as "

@@ -138,7 +138,7 @@ def shrunk_cards(cards: MeshPart, fraction) -> MeshPart:
 def coverage_tree(tree: TreeMesh, fraction: float, clump_fraction: float | None = None) -> TreeMesh:
     """The tree with its leaf cards shrunk to the opaque share of the tile each is textured with (see
     `shrunk_cards`), for opaque depth-only coverage passes: `fraction` (the single leaf) for every card, or
-    `clump_fraction` for the cards a LOD marks as merged clumps (`species.lod.card_clumps`) when given. The bark
+    `clump_fraction` for the cards a LOD marks as merged clumps (`species.studio.lod.card_clumps`) when given. The bark
     is kept as it is."""
     if tree.leaves.n_faces == 0:
         return tree

@@ -19,8 +19,9 @@ from species.errors import TreefarmError
 from .blender_worker import WORKER_SCRIPT
 from .camera import Camera
 
-__all__ = ["BlenderError", "BlenderPhotos", "blender_python", "run_job", "run_jobs", "render_photos", "glb_info",
-           "load_view", "resize_camera", "time_cycles_view", "BLENDER_PYTHON_ENV"]
+__all__ = ["BlenderError", "BlenderPhotos", "blender_python", "blender_available", "run_job", "run_jobs",
+           "render_photos", "glb_info", "load_view", "resize_camera", "time_cycles_view", "BLENDER_PYTHON_ENV",
+           "DEFAULT_TIMEOUT_S"]
 
 BLENDER_PYTHON_ENV = "TREEFARM_BLENDER_PYTHON"
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -41,6 +42,16 @@ def blender_python() -> Path:
         raise BlenderError(f"the Blender environment is missing ({where} is not an executable Python): "
                            f"run `make env` (or `make blender-env`) in {REPO_ROOT}")
     return path
+
+
+def blender_available() -> bool:
+    """True when the Blender environment exists (`blender_python()` finds its Python); callers that can do
+    without Blender's outputs ask this instead of catching the error."""
+    try:
+        blender_python()
+    except BlenderError:
+        return False
+    return True
 
 
 def _tail(text: str, lines: int = LOG_TAIL_LINES) -> str:

@@ -1,6 +1,6 @@
 """Contact sheets: one grid PNG of trees (rows) x images (columns) with labels, for looking at a batch at a glance.
 
-In: rows of labelled images (uint8 grey or RGB, float maps in [0, 1]); out: a PNG file.
+In: rows of labelled images (uint8 grey or RGB, float maps in [0, 1]); out: a PNG file (`species.meshing.png`).
 """
 from __future__ import annotations
 
@@ -10,9 +10,13 @@ from typing import Sequence
 import cv2
 import numpy as np
 
+from species.meshing.png import png_bytes
+
 __all__ = ["to_rgb8", "viewable", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
 
 LABEL_PX = 18
+# Sheets are looked at, not archived: a fast zlib level.
+_PNG_COMPRESS_LEVEL = 2
 
 
 def to_rgb8(image: np.ndarray) -> np.ndarray:
@@ -82,7 +86,5 @@ def write_contact_sheet(path: str | Path, rows: Sequence[tuple[str, Sequence[tup
     """Write `contact_sheet(rows, cell)` as a PNG at `path` (folders created); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    sheet = contact_sheet(rows, cell)
-    if not cv2.imwrite(str(path), cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"could not write the contact sheet {path}")
+    path.write_bytes(png_bytes(contact_sheet(rows, cell), _PNG_COMPRESS_LEVEL))
     return path

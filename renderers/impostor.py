@@ -18,11 +18,12 @@ from species.meshing.textures import linear_to_srgb
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import LEAVES, DepthRenderer, PartDepths, combine_parts, normals_from_depth
+from .maps import LEAVES, DepthRenderer, PartDepths, combine_parts, normals_from_depth, single_sample_renderer_class
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
-           "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS"]
+           "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS", "AXIS_SHARE",
+           "SECTOR_OVERLAP", "sector_groups"]
 
 # Switch sizes are pixels of tree height on a reference screen this tall with this vertical field of view.
 REFERENCE_SCREEN_PX = 1080
@@ -41,19 +42,16 @@ _ATLAS_COLUMNS = 4
 # The planes' square spans the tree's horizontal radius about the trunk and half height about the box centre, plus
 # this margin.
 _PLANE_MARGIN = 1.02
-# Alpha of the impostor is grown by this many texels. None: at the impostor's switch size a texel is about a
+# The impostor's alpha is the rendered coverage, not grown: at the impostor's switch size a texel is about a
 # screen pixel, and growing sparse crowns (conifer branch tips, isolated clusters) by a texel each way inflates
-# them far beyond the tree's closed silhouette (measured min IoU at 64 px, 1 -> 0 texels: maple .855 -> .894,
-# balsam_fir .275 -> .414, douglas_fir .477 -> .545, cherry .752 -> .808).
-_ALPHA_DILATE_TEXELS = 0
+# them beyond the tree's closed silhouette (docs/library.md, "Impostor"; `benchmarks/bench_impostor.py`).
 # Faces this close to the vertical axis (share of the planes' half side) go on every plane. Seen between two
 # planes, the crown's middle would otherwise come only from the planes nearly edge-on to the view, whose texels
 # it samples sparsely: a hole. Faces in this outer share of a sector, on either side, go on the neighbouring plane
-# too, for the same reason. Measured on the 45 presets (tree_seed(0, 0), least IoU at 64 px over the quality
-# azimuths): mean .718 with 0.04 and no overlap, .737 with 0.2 and none, .745 with 0.2 and 0.15 (presets at
-# >= 0.9: 6 -> 10); an overlap of 0.3 or 0.5 (every face on two planes) smears, .746 and .740.
-_AXIS_SHARE = 0.2
-_SECTOR_OVERLAP = 0.15
+# too, for the same reason; a wider overlap smears the crown across planes. Both chosen by least IoU at the
+# impostor's switch size over the presets (docs/library.md, "Impostor"; `benchmarks/bench_impostor.py`).
+AXIS_SHARE = 0.2
+SECTOR_OVERLAP = 0.15
 
 
 class ImpostorError(TreefarmError):
@@ -171,9 +169,7 @@ def _unculled_renderer_class():
     from OpenGL import GL
     from pyrender.constants import RenderFlags
 
-    from .maps import _single_sample_renderer_class
-
-    class UnculledDepthRenderer(_single_sample_renderer_class()):
+    class UnculledDepthRenderer(single_sample_renderer_class()):
         read_coverage = False
 
         def _read_main_framebuffer(self, scene, flags):
@@ -260,29 +256,17 @@ def _plane_camera(centre: np.ndarray, half: float, reach: float, azimuth: float,
                   name=f"impostor_az{azimuth:05.1f}")
 
 
-def _dilate(mask: np.ndarray, texels: int) -> np.ndarray:
-    out = mask.copy()
-    for _ in range(texels):
-        grown = out.copy()
-        grown[1:] |= out[:-1]
-        grown[:-1] |= out[1:]
-        grown[:, 1:] |= out[:, :-1]
-        grown[:, :-1] |= out[:, 1:]
-        out = grown
-    return out
-
-
 def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The vertices the faces use, and the faces renumbered into them."""
     used, inverse = np.unique(faces, return_inverse=True)
     return np.asarray(vertices, np.float32)[used], inverse.reshape(faces.shape).astype(np.int32)
 
 
-def _sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int,
-                   axis_radius: float) -> dict[str, tuple[np.ndarray, np.ndarray, bool]]:
+def sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int, axis_radius: float,
+                  overlap: float = SECTOR_OVERLAP) -> dict[str, tuple[np.ndarray, np.ndarray, bool]]:
     """Faces grouped by the plane they are drawn on: "bark_p"/"leaves_p" hold the faces whose centroid lies in
     plane p's two azimuth sectors (within 90 / planes degrees of the plane's line, either side of the axis), and
-    those in the outer _SECTOR_OVERLAP of a neighbouring sector next to them; "bark_axis"/"leaves_axis" the faces
+    those in the outer `overlap` share of a neighbouring sector next to them; "bark_axis"/"leaves_axis" the faces
     within `axis_radius` of the vertical axis and the trunk, drawn on every plane. Every face is in the axis
     group or in one or two plane groups."""
     order = tree.bark.attributes.get("order")
@@ -300,7 +284,7 @@ def _sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int,
         sector = np.floor(position).astype(np.int64) % planes
         across = position - np.floor(position)  # 0..1 across the sector
         neighbour = np.where(across < 0.5, sector - 1, sector + 1) % planes
-        shared = np.abs(across - 0.5) > 0.5 - _SECTOR_OVERLAP
+        shared = np.abs(across - 0.5) > 0.5 - overlap
         axis = np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius
         if kind == "bark" and order is not None:
             axis |= np.asarray(order)[part.faces[:, 0]] == 0
@@ -314,13 +298,13 @@ def _sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int,
     return groups
 
 
-def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
-                    planes: int = IMPOSTOR_PLANES) -> ImpostorAtlas:
+def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128, planes: int = IMPOSTOR_PLANES,
+                    axis_share: float = AXIS_SHARE, sector_overlap: float = SECTOR_OVERLAP) -> ImpostorAtlas:
     """Render a tree's impostor atlas: for each plane an orthographic view along its normal of the slice of the
-    tree nearest that plane (`_sector_groups`: the faces within 90 / planes degrees of azimuth of it, a margin
-    shared with its neighbours, the trunk and the axis in every plane), giving albedo (bark or leaf colour by the
-    rendered mask, sRGB), alpha (coverage, grown by _ALPHA_DILATE_TEXELS texels) and tangent-space normals (from
-    the rendered depth). Slicing puts most of the crown on one plane only, so a view between planes sees the
+    tree nearest that plane (`sector_groups`: the faces within 90 / planes degrees of azimuth of it, a margin of
+    `sector_overlap` shared with its neighbours, the trunk and the faces within `axis_share` of the planes' half
+    side of the axis in every plane), giving albedo (bark or leaf colour by the rendered mask, sRGB), alpha 255
+    on the rendered coverage and tangent-space normals (from the rendered depth). Slicing puts most of the crown on one plane only, so a view between planes sees the
     crown about once, not the union of every plane's whole view (which fills in a sparse crown). The slices are
     uploaded once, two depth-only passes (bark, leaves) per plane. `renderer` is the process's
     CoverageRenderer."""
@@ -337,7 +321,7 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
     normal[...] = (128, 128, 255)
     bark_rgb = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
     leaf_rgb = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
-    renderer.load_groups(_sector_groups(tree, centre, planes, _AXIS_SHARE * half))
+    renderer.load_groups(sector_groups(tree, centre, planes, axis_share * half, sector_overlap))
     for plane, azimuth in enumerate(azimuths):
         camera = _plane_camera(centre, half, reach, float(azimuth), tile)
         parts = PartDepths({"bark": renderer.group_depth(camera, ("bark_axis", f"bark_{plane}")),
@@ -349,10 +333,7 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
         tile_albedo = np.zeros((tile, tile, 4), np.uint8)
         tile_albedo[mask == 1, :3] = bark_rgb
         tile_albedo[mask == 2, :3] = leaf_rgb
-        # Grown texels take the colour of a covered neighbour's kind: leaves, the usual outer layer.
-        grown = _dilate(covered, _ALPHA_DILATE_TEXELS)
-        tile_albedo[grown & ~covered, :3] = leaf_rgb if (mask == 2).any() else bark_rgb
-        tile_albedo[grown, 3] = 255
+        tile_albedo[covered, 3] = 255
         tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
         row, col = (plane // columns) * tile, (plane % columns) * tile
         albedo[row:row + tile, col:col + tile] = tile_albedo

@@ -2,13 +2,16 @@
 
 In: a TreeMesh uploaded once into `DepthRenderer` and a `Camera`; out: (H, W) arrays (see each function).
 
-Every map comes from depth-only passes (measured: a depth-only pass costs about a quarter of a colour pass on
-Mesa's CPU rasterizer, and needs no anti-aliased colour that would blur ids). Each part of the tree (bark of each
+Every map comes from depth-only passes (far cheaper than a colour pass on Mesa's CPU rasterizer, see
+docs/renderers.md, and with no anti-aliased colour that would blur ids). Each part of the tree (bark of each
 branch order, leaves) is drawn alone; the nearest part wins per pixel, which gives depth, mask and order ids
 exactly. The back surface for the silhouette comes from one more pass with the depth row of the projection
 negated (the depth test then keeps the farthest surface) and x mirrored (so back-face culling, which pyrender
 forces in depth-only passes, drops the near walls instead of the far ones); the image is mirrored back into the
 front frame, pixel for pixel, as seed 000 mirrors its back camera.
+
+GL platform: `use_headless_gl()` picks EGL for PyOpenGL unless PYOPENGL_PLATFORM is set; `DepthRenderer` calls it
+before importing pyrender, so importing this module changes no environment variable.
 """
 from __future__ import annotations
 
@@ -22,12 +25,17 @@ from species.tree_mesh import TreeMesh
 
 from .camera import Camera
 
-__all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "silhouette_map"]
-
-# pyrender picks its GL platform at import; headless machines need EGL (set only if the user did not choose).
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+__all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "silhouette_map",
+           "use_headless_gl", "single_sample_renderer_class", "LEAVES"]
 
 LEAVES = "leaves"
+
+
+def use_headless_gl() -> None:
+    """Make EGL PyOpenGL's platform unless the user chose one (PYOPENGL_PLATFORM): farm workers and CI have no
+    display for GLX. PyOpenGL reads the variable once, when it is first imported, so this runs before anything
+    imports pyrender or OpenGL (`DepthRenderer.__init__` does)."""
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
 def _bark_part(order: int) -> str:
@@ -127,12 +135,13 @@ class DepthRenderer:
     """
 
     def __init__(self, size: int = 256):
+        use_headless_gl()
         import pyrender
 
         self._pyrender = pyrender
         self._renderer = pyrender.OffscreenRenderer(size, size)
-        # Swap in a renderer without multisampling (see _single_sample_renderer_class).
-        self._renderer._renderer = _single_sample_renderer_class()(size, size)
+        # Swap in a renderer without multisampling (see single_sample_renderer_class).
+        self._renderer._renderer = single_sample_renderer_class()(size, size)
         self._scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0])
         self._camera_node = None
         self._mesh_nodes: dict[str, object] = {}
@@ -258,7 +267,7 @@ class DepthRenderer:
 
 
 @functools.cache
-def _single_sample_renderer_class():
+def single_sample_renderer_class():
     """pyrender's Renderer with its 4x multisampled framebuffer made single-sample.
 
     Why: pyrender resolves depth from the 4x buffer by taking one sample, which sits off the pixel centre, so

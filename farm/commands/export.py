@@ -9,6 +9,10 @@ import argparse
 import json
 from pathlib import Path
 
+from species.errors import user_path
+
+from farm.commands import CommandLineError
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("export", help="write the trees of a dataset as GLB or OBJ files",
@@ -28,14 +32,17 @@ def _rebuild(params_json: str, name: str):
 
 def _write_glb(row: dict, folder: Path) -> None:
     data = row["glb"] if row["glb"] is not None else _rebuild(row["params_json"], row["tree_id"]).to_glb()
-    (folder / f"{row['tree_id']}.glb").write_bytes(data)
+    with user_path(folder, "write into"):
+        (folder / f"{row['tree_id']}.glb").write_bytes(data)
 
 
 def _write_obj(row: dict, folder: Path) -> None:
+    files = _rebuild(row["params_json"], row["tree_id"]).to_obj()
     tree_folder = folder / row["tree_id"]
-    tree_folder.mkdir(parents=True, exist_ok=True)
-    for file_name, data in _rebuild(row["params_json"], row["tree_id"]).to_obj().items():
-        (tree_folder / file_name).write_bytes(data)
+    with user_path(folder, "write into"):
+        tree_folder.mkdir(parents=True, exist_ok=True)
+        for file_name, data in files.items():
+            (tree_folder / file_name).write_bytes(data)
 
 
 EXPORTERS = {"glb": _write_glb, "obj": _write_obj}
@@ -49,14 +56,15 @@ def run(args: argparse.Namespace) -> int:
     from farm.dataset import open as open_table
 
     if args.format not in EXPORTERS:
-        raise ValueError(f"--format {args.format!r} is unknown: allowed {', '.join(EXPORTERS)}")
+        raise CommandLineError(f"--format {args.format!r} is unknown: allowed {', '.join(EXPORTERS)}")
     columns = ["tree_id", "params_json", "error"] + (["glb"] if args.format == "glb" else [])
     table = open_table(args.dir, "trees").to_table(columns=columns)
     table = table.filter(pc.is_null(table["error"]))
     if args.format != "glb":
         table = table.append_column("glb", pa.nulls(table.num_rows, pa.binary()))
     folder = Path(args.to)
-    folder.mkdir(parents=True, exist_ok=True)
+    with user_path(folder, "make the folder"):
+        folder.mkdir(parents=True, exist_ok=True)
     for row in tqdm(table.to_pylist(), unit="tree", desc=f"export {args.format}", disable=args.quiet):
         EXPORTERS[args.format](row, folder)
     print(f"wrote {table.num_rows} trees as {args.format} to {folder}")

@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from farm.commands import CommandLineError
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("generate", help="grow, render and write a dataset of trees (resumable)",
@@ -39,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     out = args.out or spec.output
     if not out:
-        raise ValueError("no output location: pass --out DIR (or set `output` in the spec)")
+        raise CommandLineError("no output location: pass --out DIR (or set `output` in the spec)")
     from farm.pipeline import run_job
 
     manifest = run_job(spec, out, workers=args.workers, address=args.address, progress=not args.quiet)

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from species.errors import user_path
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("inspect", help="summary table and contact sheet PNG of a dataset",
@@ -85,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     location = Location.resolve(args.dir)
     png = Path(args.png) if args.png else (Path(location.root) if location.is_local else Path(".")) / "contact_sheet.png"
-    write_contact_sheet(png, rows)
+    with user_path(png, "write"):
+        write_contact_sheet(png, rows)
     print(f"contact sheet: {png}")
     return 0

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from farm.commands import CommandLineError
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("library", help="build a studio asset library of trees (resumable)",
@@ -25,7 +27,7 @@ def register(subparsers) -> None:
 
 
 def _load(args):
-    from farm.library.spec import LibrarySpecError, load_library_spec, parse_library_spec
+    from farm.library.spec import LibrarySpecError, library_spec_from_record, load_library_spec, parse_library_spec
 
     if args.spec:
         spec = load_library_spec(args.spec)
@@ -35,7 +37,7 @@ def _load(args):
         if args.per_species < 1:
             raise LibrarySpecError("--per-species", args.per_species, "an integer >= 1")
         raw = {**spec.to_dict(), "species": {name: args.per_species for name in spec.species}}
-        spec = parse_library_spec({k: v for k, v in raw.items() if k not in ("kind", "render", "store_glb")})
+        spec = library_spec_from_record(raw)
     return spec
 
 
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         from farm.library.catalog import IOU_TARGET, quality_shortfalls, validate_library
 
         if not args.folder:
-            raise ValueError("farm library validate needs the library folder: farm library validate DIR")
+            raise CommandLineError("farm library validate needs the library folder: farm library validate DIR")
         problems = validate_library(args.folder)
         for problem in problems:
             print(problem, file=sys.stderr)
@@ -61,15 +63,15 @@ def run(args: argparse.Namespace) -> int:
         from farm.library.job import add_asset
 
         if not args.folder or args.species is None or args.seed is None:
-            raise ValueError("usage: farm library add DIR --species NAME --seed N")
+            raise CommandLineError("usage: farm library add DIR --species NAME --seed N")
         record = add_asset(args.folder, args.species, args.seed)
         print(f"{args.folder}: added {record['id']}")
         return 0
     spec = _load(args)
     if not args.out:
-        raise ValueError("no output location: pass --out DIR")
+        raise CommandLineError("no output location: pass --out DIR")
     if args.workers is not None and args.workers < 1:
-        raise ValueError(f"--workers {args.workers} is invalid: allowed an integer >= 1")
+        raise CommandLineError(f"--workers {args.workers} is invalid: allowed an integer >= 1")
     from farm.library.job import run_library
 
     result = run_library(spec, args.out, workers=args.workers, address=args.address, progress=not args.quiet)

@@ -13,6 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from species.errors import user_path
+
+from farm.commands import CommandLineError
+
 BACKENDS = ("pyrender", "blender")
 # Float maps in [0, 1] are written as 16-bit PNGs: value = round(x * 65535).
 UNIT_SCALE = 1.0 / 65535.0
@@ -43,7 +47,7 @@ def _tree_params(args: argparse.Namespace) -> dict:
 
         return load_params(args.params)
     if not args.species:
-        raise species.TreefarmError("give --species NAME (see `farm species`) or --params DICT.json")
+        raise CommandLineError("give --species NAME (see `farm species`) or --params DICT.json")
     return species.sample(args.species, np.random.default_rng(args.seed))
 
 
@@ -59,11 +63,11 @@ def encode_image(name: str, image: np.ndarray, camera) -> tuple[np.ndarray, dict
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:
-    import cv2
+    """One view's output as a PNG file, by the dataset's map codec (8- or 16-bit, RGB or grey)."""
+    from farm.image_codec import encode_pixels
 
-    data = cv2.cvtColor(image, cv2.COLOR_RGB2BGR) if image.ndim == 3 else image
-    if not cv2.imwrite(str(path), data):
-        raise OSError(f"could not write {path}")
+    with user_path(path, "write"):
+        path.write_bytes(encode_pixels(image))
 
 
 def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
@@ -84,7 +88,8 @@ def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
         records.append({"index": view.index, **view.camera.to_dict(), "images": files})
         print(f"view {view.index} {view.name:>12}: {per_view * 1000:.0f} ms (pyrender, {len(outputs)} outputs)")
     renderer.close()
-    write_contact_sheet(out / "contact_sheet.png", views_sheet_rows(views), cell=min(args.size, 256))
+    with user_path(out / "contact_sheet.png", "write"):
+        write_contact_sheet(out / "contact_sheet.png", views_sheet_rows(views), cell=min(args.size, 256))
     return records
 
 
@@ -92,9 +97,11 @@ def _render_blender(args, mesh, out: Path) -> list[dict]:
     try:
         from renderers import blender
     except ImportError as exc:
-        raise OSError(f"the blender backend is unavailable ({exc}); run `make env` to build .venv-blender") from None
+        raise CommandLineError(f"--backend blender is unavailable ({exc}): run `make env` to build .venv-blender, "
+                               f"or use --backend pyrender") from None
     if not hasattr(blender, "render_photos"):
-        raise OSError("renderers.blender has no render_photos(); the blender backend is not installed in this tree")
+        raise CommandLineError("--backend blender is not installed in this tree (renderers.blender has no "
+                               "render_photos()): use --backend pyrender")
     from renderers import make_rig
 
     points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
@@ -113,21 +120,24 @@ def run(args: argparse.Namespace) -> int:
                             else [s.strip() for s in args.styles.split(",") if s.strip()])
     parse_rig(args.rig)
     if args.size < 8:
-        raise species.TreefarmError(f"--size {args.size} is too small: allowed 8 pixels or more")
+        raise CommandLineError(f"--size {args.size} is too small: allowed 8 pixels or more")
     params = _tree_params(args)
     start = time.perf_counter()
     skeleton, mesh = species.rebuild(params)
     print(f"tree: {len(skeleton)} nodes, {mesh.n_faces} triangles, grown and meshed in "
           f"{time.perf_counter() - start:.2f} s")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    with user_path(out, "make the folder"):
+        out.mkdir(parents=True, exist_ok=True)
     if args.backend == "blender":
         records = _render_blender(args, mesh, out)
     else:
         records = _render_pyrender(args, mesh, skeleton, outputs, out)
-    (out / "cameras.json").write_text(json.dumps({
+    cameras = json.dumps({
         "convention": "opencv: x right, y down, z forward; world Z up, metres; pixel centres at integers",
         "backend": args.backend, "rig": args.rig, "size": args.size, "species": args.species,
-        "seed": args.seed, "params": params, "views": records}, indent=1, default=float))
+        "seed": args.seed, "params": params, "views": records}, indent=1, default=float)
+    with user_path(out / "cameras.json", "write"):
+        (out / "cameras.json").write_text(cameras)
     print(f"wrote {len(records)} views to {out}")
     return 0

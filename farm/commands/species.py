@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from farm.commands import CommandLineError
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("species", help="list species presets", description=__doc__)
@@ -15,7 +17,8 @@ def run(args: argparse.Namespace) -> int:
     from farm.table import format_table
 
     if args.generator is not None and args.generator not in species.GENERATORS:
-        raise ValueError(f"unknown generator {args.generator!r}; known: {', '.join(sorted(species.GENERATORS))}")
+        raise CommandLineError(f"unknown generator {args.generator!r}; known: "
+                               f"{', '.join(sorted(species.GENERATORS))}")
     presets = species.list_presets(args.generator)
     print(format_table(["name", "generator", "description"], [(p.name, p.generator, p.description) for p in presets]))
     return 0

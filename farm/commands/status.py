@@ -22,7 +22,7 @@ def _print_stages(stage_seconds: dict, n_trees: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from farm.dataset import read_manifest
+    from farm.dataset import DatasetError, read_manifest
     from farm.manifest import SHARDS_FOLDER, JOB_RECORD, read_shard_record
     from farm.storage import Location
 
@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
         failures = manifest["failures"]
     else:
         if not location.exists(JOB_RECORD):
-            raise ValueError(f"{location.uri} holds no treefarm job (no manifest.json, no {JOB_RECORD})")
+            raise DatasetError(f"{location.uri} holds no treefarm job (no manifest.json, no {JOB_RECORD})")
         job = json.loads(location.read_bytes(JOB_RECORD))
         names = [n for n in location.list(SHARDS_FOLDER) if n.startswith("part-")]
         records = [r for r in (read_shard_record(location, int(n[5:10])) for n in names) if r is not None]

@@ -10,7 +10,13 @@ import json
 import time
 from pathlib import Path
 
+from species.errors import TreefarmError, user_path
+
 FORMATS = ("glb", "obj")
+
+
+class ParamsFileError(TreefarmError):
+    """A --params file is missing, not JSON, or not a JSON object of parameters."""
 
 
 def register(subparsers) -> None:
@@ -37,28 +43,28 @@ def grow_tree(params: dict):
 
 def write_tree(mesh, path: Path, fmt: str) -> list[Path]:
     """Write one tree as `path` (GLB) or as OBJ + MTL + textures beside it; returns the files written."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if fmt == "glb":
-        path.write_bytes(mesh.to_glb())
-        return [path]
-    written = []
-    for name, data in mesh.to_obj().items():
-        target = path.parent / name
-        target.write_bytes(data)
-        written.append(target)
-    return written
+    files = {path.name: mesh.to_glb()} if fmt == "glb" else mesh.to_obj()
+    with user_path(path, "write"):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        for name, data in files.items():
+            (path.parent / name).write_bytes(data)
+    return [path.parent / name for name in files]
 
 
 def load_params(path: str) -> dict:
     file = Path(path)
     if not file.is_file():
-        raise FileNotFoundError(f"parameter file {path} does not exist")
+        raise ParamsFileError(f"parameter file {path} is missing or not a file: allowed a JSON file of parameters")
+    with user_path(path, "read"):
+        data = file.read_bytes()
     try:
-        params = json.loads(file.read_text())
+        params = json.loads(data)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{path} is not valid JSON: {exc.msg} at line {exc.lineno}") from None
+        raise ParamsFileError(f"{path} is not valid JSON: {exc.msg} at line {exc.lineno}") from None
+    except UnicodeDecodeError:
+        raise ParamsFileError(f"{path} is not valid JSON: allowed UTF-8 text") from None
     if not isinstance(params, dict):
-        raise ValueError(f"{path} must hold a JSON object of parameters, not {type(params).__name__}")
+        raise ParamsFileError(f"{path} must hold a JSON object of parameters, not {type(params).__name__}")
     return params
 
 

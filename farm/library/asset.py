@@ -9,8 +9,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "framing_points", "leaf_instances", "leaf_alphas",
-           "leaf_fractions", "measure_chain"]
+import species
+from renderers.alpha_coverage import coverage_tree, opaque_fraction, triangle_coverage
+from renderers.framing import framing_points
+from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostor, silhouette_iou, switch_camera
+from species.studio.collision import collision_capsules
+from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
+from species.studio.wind import WIND_LAYOUT, wind_attributes
+
+from ..tree_chain import stage_rngs
+from .lod_fit import fit_lods
+
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
+           "measure_chain"]
 
 
 def asset_id(species_name: str, seed: int) -> str:
@@ -59,7 +70,7 @@ class LibraryAsset:
     levels: list[LevelData]
     impostor: object  # renderers.impostor.ImpostorAtlas
     capsules: np.ndarray
-    bark_maps: object  # species.pbr_textures.BarkMaps
+    bark_maps: object  # species.studio.pbr_textures.BarkMaps
     leaf_atlases: dict[str, np.ndarray]
 
     @property
@@ -79,7 +90,7 @@ class LibraryAsset:
                         "iou_mean": float(np.mean(lv.iou)) if lv.iou else 1.0,
                         "iou_per_azimuth": [round(v, 4) for v in lv.iou]} for lv in self.levels],
             "collision_capsules": [[round(float(v), 5) for v in row] for row in self.capsules],
-            "wind_layout": __import__("species.studio.wind", fromlist=["WIND_LAYOUT"]).WIND_LAYOUT,
+            "wind_layout": WIND_LAYOUT,
         }
 
 
@@ -102,8 +113,6 @@ def leaf_instances(skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
-    from species.studio.wind import wind_attributes
-
     keys = None if original_node is None else original_node[skeleton.branch_starts]
     bark_wind, bark_pivot = wind_attributes(skeleton, mesh.bark.vertices, mesh.bark.attributes["branch"], keys)
     if skeleton.n_leaves:
@@ -125,23 +134,7 @@ def leaf_alphas(atlas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def leaf_fractions(atlas: np.ndarray) -> tuple[float, float]:
     """Opaque shares of a leaf atlas's two tiles (single leaf, clump): how much of its card each leaf or
     cluster card covers, the rule `renderers.alpha_coverage` measures silhouettes by."""
-    from renderers.alpha_coverage import opaque_fraction
-
     return tuple(opaque_fraction(alpha) for alpha in leaf_alphas(atlas))
-
-
-def framing_points(tree) -> np.ndarray:
-    """(K, 3) float32 metres: the vertices of the convex hull of a TreeMesh's vertices, or all of them when they
-    span no volume. Cameras fitted to points (box centre, the distance at which all fit, near/far) depend only
-    on extremes of linear or linear-fractional functions of the points, which convex hull vertices attain, so
-    they come out bit-identical from a few hundred points instead of every vertex (32 cameras per asset)."""
-    from scipy.spatial import ConvexHull, QhullError
-
-    points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
-    try:
-        return points[np.sort(ConvexHull(points.astype(np.float64)).vertices)]
-    except QhullError:  # flat or too few points: no hull, and no cheaper set of extremes to take
-        return points
 
 
 def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float, card_fraction: float,
@@ -151,9 +144,6 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
     of the tile it uses (`lod0_fraction` of the single leaf for LOD0's cards and for LOD cards that are one
     leaf; `card_fraction` of the clump for cards that merge several), the impostor cut by its atlas alpha.
     Each LOD0 reference (azimuth, size) is rendered once."""
-    from renderers.alpha_coverage import coverage_tree, triangle_coverage
-    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
-
     lod0 = levels[0].mesh
     lod0_cover = lod0_cover or coverage_tree(lod0, lod0_fraction)
     points = framing_points(lod0)
@@ -175,15 +165,6 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
 
 def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryAsset:
     """Grow, simplify, texture and measure one asset (no files written)."""
-    import species
-    from renderers.alpha_coverage import coverage_tree
-    from renderers.impostor import render_impostor
-    from species.studio.collision import collision_capsules
-    from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
-
-    from ..tree_chain import stage_rngs
-    from .lod_fit import fit_lods
-
     sample_rng, _ = stage_rngs(seed)
     ident = asset_id(species_name, seed)
     with timer.stage("sample"):

@@ -8,14 +8,26 @@ from __future__ import annotations
 import io
 import json
 
+import cv2
 import numpy as np
 
+from renderers.blender import blender_available
+from renderers.contact_sheet import contact_sheet
+from species.meshing.gltf import GlbError, read_glb_chunks
+
+from ..image_codec import encode_pixels
 from ..manifest import Problem
 from ..storage import Location, sha256_hex
-from ..tree_chain import to_json, tree_seed
+from ..tree_chain import to_json
+from .blender_catalog import DEFAULT_CATALOG, write_blender_library
+from .previews import gallery_html
+from .records import (BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
+                      library_asset_ids, read_library_spec)
+from .spec import LibrarySpec
+from .wind_viewer import write_wind_viewer
 
-__all__ = ["catalog_rows", "library_asset_ids", "write_catalog", "validate_library", "quality_shortfalls",
-           "CATALOG_COLUMNS", "IOU_TARGET"]
+__all__ = ["catalog_rows", "write_catalog", "validate_library", "quality_shortfalls", "CATALOG_COLUMNS",
+           "IOU_TARGET"]
 
 # Silhouette IoU against LOD0 every level should reach at its switch size (issue 11's target).
 IOU_TARGET = 0.9
@@ -25,25 +37,11 @@ CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_
                    "tags", "thumbnail", "turntable", "glb_bytes", "glb_bytes_without_instancing")
 
 
-def library_asset_ids(location: Location, spec) -> list[str]:
-    """Sorted ids of every asset a library holds or should hold: its spec's trees and those `farm library add`
-    added (whether or not their asset.json was written)."""
-    from .asset import asset_id
-    from .spec import species_of_trees
-
-    ids = [asset_id(name, tree_seed(spec.seed, i)) for i, name in enumerate(species_of_trees(spec))]
-    for name in location.list("_added"):
-        if name.endswith(".json") and not name.startswith("."):
-            added = json.loads(location.read_bytes(f"_added/{name}"))
-            ids.append(asset_id(added["species"], added["seed"]))
-    return sorted(set(ids))
-
-
-def catalog_rows(location: Location, spec) -> list[dict]:
+def catalog_rows(location: Location, spec: LibrarySpec) -> list[dict]:
     """One row per asset present (asset.json written), sorted by id."""
     rows = []
     for ident in library_asset_ids(location, spec):
-        path = f"assets/{ident}/asset.json"
+        path = asset_record_path(ident)
         if not location.exists(path):
             continue  # a failed tree: the manifest's failures name it
         record = json.loads(location.read_bytes(path))
@@ -82,17 +80,9 @@ def _parquet_bytes(rows: list[dict]) -> bytes:
     return sink.getvalue()
 
 
-def write_catalog(location: Location, spec) -> dict:
+def write_catalog(location: Location, spec: LibrarySpec) -> dict:
     """Write catalog.parquet, catalog.json, previews/<species>.png, the wind example (wind_viewer), index.html
     (and blender/<species>.blend when asked and available); returns {"assets": n, "blender": status}."""
-    import cv2
-
-    from renderers.contact_sheet import contact_sheet
-
-    from .job import BLENDER_FAILED, BLENDER_PENDING, blender_available
-    from .previews import gallery_html
-    from .wind_viewer import write_wind_viewer
-
     rows = catalog_rows(location, spec)
     location.write_atomic("catalog.parquet", _parquet_bytes(rows))
     location.write_atomic("catalog.json", json.dumps(
@@ -108,25 +98,22 @@ def write_catalog(location: Location, spec) -> dict:
             image = cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
             cells.append((row["id"].split("-")[-1][-6:], image))
         sheet = contact_sheet([(name, cells)], cell=192)
-        ok, png = cv2.imencode(".png", cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
-        location.write_atomic(f"previews/{name}.png", png.tobytes())
+        location.write_atomic(f"previews/{name}.png", encode_pixels(sheet, compression=None))
     write_wind_viewer(location)
     location.write_atomic("index.html", gallery_html(rows).encode())
     blender = "not asked"
     if "blend" in spec.formats:
         blender = BLENDER_PENDING
         if blender_available() and location.is_local and rows:
-            from renderers.blender_assets import write_asset_library
-
             for name, group in by_species.items():
-                # The non-instanced GLB when there is one: Blender imports instanced leaves ~14x slower.
+                # The non-instanced GLB when there is one: Blender imports instanced leaves far slower.
                 assets = [{"id": r["id"][:60], "node": f"{r['id']}_LOD0",
                            "glb_path": location.path(r["files"].get("glb_flat", r["files"]["glb"])),
                            "preview_png": location.path(r["thumbnail"]), "tags": r["tags"],
-                           "catalog_path": f"Trees/{name}", "description": f"{name} ({r['generator']})"}
+                           "catalog_path": f"{DEFAULT_CATALOG}/{name}", "description": f"{name} ({r['generator']})"}
                           for r in group if "glb" in r["files"]]
                 if assets:
-                    write_asset_library(assets, location.path(f"blender/{name}.blend"))
+                    write_blender_library(assets, location.path(f"blender/{name}.blend"))
             blender = "written"
     failed = sum(row["blender"].startswith(BLENDER_FAILED) for row in rows)
     if failed:
@@ -137,10 +124,6 @@ def write_catalog(location: Location, spec) -> dict:
 def validate_library(path: str) -> list[Problem]:
     """Problems of a library folder: not a library, missing catalog, missing or changed asset files, unreadable
     GLBs, failed FBX exports. An empty list means every catalogued file is present with its recorded checksum."""
-    from species.meshing.gltf import GlbError, read_glb_chunks
-
-    from .job import BLENDER_FAILED, LIBRARY_RECORD, LibraryError, read_library_spec
-
     location = Location.resolve(path)
     try:
         read_library_spec(location)
@@ -150,7 +133,7 @@ def validate_library(path: str) -> list[Problem]:
         return [Problem(location.path("catalog.json"), "missing (the job has not finished: run it again)")]
     problems = []
     for row in json.loads(location.read_bytes("catalog.json")):
-        record_path = f"assets/{row['id']}/asset.json"
+        record_path = asset_record_path(row["id"])
         if not location.exists(record_path):
             problems.append(Problem(location.path(record_path), "missing"))
             continue
@@ -180,6 +163,6 @@ def quality_shortfalls(path: str, target: float = IOU_TARGET) -> list[Problem]:
     for row in json.loads(location.read_bytes("catalog.json")):
         for name, px, iou in zip(row["level_names"], row["switch_px"], row["iou_min"]):
             if iou < target:
-                problems.append(Problem(location.path(f"assets/{row['id']}/asset.json"),
+                problems.append(Problem(location.path(asset_record_path(row["id"])),
                                         f"{name} at {px} px: silhouette IoU {iou:.3f} is below the target {target}"))
     return problems

@@ -9,56 +9,46 @@ from __future__ import annotations
 import json
 import os
 from functools import partial
-from pathlib import Path
 
 import numpy as np
 
-from species.errors import TreefarmError
+from renderers.blender import BlenderError, blender_available
+from renderers.blender_assets import export_fbx_batch
+from renderers.impostor import CoverageRenderer
+from species.meshing.gltf import z_up_to_y_up
+from species.studio.collision import capsule_mesh
 
+from ..jobs import preset_names
+from ..pipeline import run_job
 from ..storage import Location, sha256_hex
-from ..tree_chain import BuiltTree, StageTimer, to_json
+from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
 from .asset import LibraryAsset, build_asset
+from .catalog import write_catalog
+from .gltf_asset import asset_to_glb, glb_size
+from .png_cache import PngCache
+from .previews import thumbnail, turntable
+from .records import (ASSETS, BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
+                      library_asset_ids, read_library_spec, write_added_record, write_library_record)
+from .spec import LibrarySpec, species_of_trees
+from .usd_asset import TEXTURE_FILES, asset_to_usdc
 
 __all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
-           "retry_failed_fbx", "LibraryError", "LIBRARY_RECORD",
-           "blender_available", "BLENDER_PENDING", "BLENDER_FAILED"]
-
-LIBRARY_RECORD = "library.json"
-ASSETS = "assets"
-BLENDER_PENDING = "blender outputs pending (renderers.blender_assets is not available)"
-BLENDER_FAILED = "failed: "  # how an asset.json's "blender" starts when its FBX export failed
-
-
-class LibraryError(TreefarmError):
-    """A folder that is not a library, or an asset that cannot be added."""
-
-
-def blender_available() -> bool:
-    """True when the Blender engineer's adapter (renderers.blender_assets) and its worker venv exist."""
-    try:
-        from renderers import blender_assets  # noqa: F401
-        from renderers.blender import blender_python
-    except ImportError:
-        return False
-    try:
-        return Path(blender_python()).exists()
-    except TreefarmError:
-        return False
+           "retry_failed_fbx"]
 
 
 def _obj_text(part, name: str) -> bytes:
-    from species.meshing.gltf import z_up_to_y_up
-
     lines = [f"# treefarm collision capsules of {name}: metres, Y up\no {name}\n"]
     lines += [f"v {x:.5f} {y:.5f} {z:.5f}\n" for x, y, z in z_up_to_y_up(part.vertices).astype(np.float64)]
     lines += [f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in part.faces]
     return "".join(lines).encode("ascii")
 
 
-def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
+def write_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer,
+                      pngs: PngCache | None = None) -> dict:
     """Write every file of one asset under assets/<id>/ (each atomically; asset.json last) and return the
     asset record: metadata plus files {kind: relative path}, sizes {kind: bytes} and sha256 {path: hex}."""
-    return finish_assets([stage_asset_files(asset, location, spec, renderer, timer)], location, spec, timer)[0]
+    return finish_assets([stage_asset_files(asset, location, spec, renderer, timer, pngs)], location, spec,
+                         timer)[0]
 
 
 def _wants_blender(spec, location: Location) -> bool:
@@ -66,15 +56,12 @@ def _wants_blender(spec, location: Location) -> bool:
         and blender_available()
 
 
-def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer) -> dict:
+def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, timer: StageTimer,
+                      pngs: PngCache | None = None) -> dict:
     """Write every file of one asset but its FBX files and asset.json; return the pending asset: its record
     (without FBX entries), the asset and the folder. `finish_assets` exports the FBX files of many pending
-    assets in one Blender process and writes each asset.json."""
-    from .gltf_asset import asset_to_glb, glb_size
-    from .png_cache import encode_png
-    from .previews import thumbnail, turntable
-    from .usd_asset import TEXTURE_FILES, asset_to_usdc
-
+    assets in one Blender process and writes each asset.json. `pngs` encodes every texture and picture (the
+    worker's cache; None: a cache for this asset)."""
     folder = f"{ASSETS}/{asset.asset_id}"
     files: dict[str, bytes] = {}
     kinds: dict[str, str] = {}
@@ -84,6 +71,7 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
         kinds[kind] = f"{folder}/{relative}"
 
     sizes = {}
+    pngs = PngCache() if pngs is None else pngs
     with timer.stage("textures"):
         maps = asset.bark_maps
         images = {"bark_base_color": maps.base_color, "bark_normal": maps.normal,
@@ -92,15 +80,16 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
                   **{f"leaf_atlas_{s}": image for s, image in asset.leaf_atlases.items()}}
         if "usd" in spec.formats:
             for name, relative in TEXTURE_FILES.items():
-                put(f"texture_{name}", relative, encode_png(images[name]))
+                put(f"texture_{name}", relative, pngs.encode(images[name]))
     if "glb" in spec.formats:
         with timer.stage("glb"):
-            put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset))
-            sizes["glb_without_instancing"] = glb_size(asset, instanced=False)
+            put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset, pngs=pngs))
+            sizes["glb_without_instancing"] = glb_size(asset, instanced=False, pngs=pngs)
             if _wants_blender(spec, location):
-                # Blender's input: leaves baked, not instanced (it imports instanced leaves ~14x slower, and FBX
+                # Blender's input: leaves baked, not instanced (it imports instanced leaves far slower, and FBX
                 # has no instancing an engine reads anyway).
-                put("glb_flat", f"blender/{asset.asset_id}_flat.glb", asset_to_glb(asset, instanced=False))
+                put("glb_flat", f"blender/{asset.asset_id}_flat.glb",
+                    asset_to_glb(asset, instanced=False, pngs=pngs))
     if "usd" in spec.formats:
         with timer.stage("usd"):
             put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
@@ -109,13 +98,11 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
             for name, data in asset.lod0.to_obj().items():  # side files keyed by their own name: stable keys
                 put("obj" if name.endswith(".obj") else f"obj_{name}", f"obj/{name}", data)
     if "collision" in spec.formats:
-        from species.studio.collision import capsule_mesh
-
         put("collision", f"{asset.asset_id}_collision.obj", _obj_text(capsule_mesh(asset.capsules),
                                                                        f"{asset.asset_id}_collision"))
     with timer.stage("previews"):
-        put("thumbnail", "thumbnail.png", encode_png(thumbnail(renderer, asset.lod0)))
-        put("turntable", "turntable.png", encode_png(turntable(renderer, asset.lod0)))
+        put("thumbnail", "thumbnail.png", pngs.encode(thumbnail(renderer, asset.lod0)))
+        put("turntable", "turntable.png", pngs.encode(turntable(renderer, asset.lod0)))
     with timer.stage("write"):
         for relative, data in files.items():
             location.write_atomic(relative, data)
@@ -149,9 +136,6 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
                          "node": f"{ident}_{name}", "name": f"{ident}_{name}"})
             owners.append((index, name))
     if jobs:
-        from renderers.blender import BlenderError
-        from renderers.blender_assets import export_fbx_batch
-
         try:
             with timer.stage("blender"):
                 rows = export_fbx_batch(jobs)
@@ -167,7 +151,7 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
             record["all_files"] = sorted([*record["all_files"], relative])
             record["blender"] = "written"
     for item in pending:
-        location.write_atomic(f"{item['folder']}/asset.json", to_json(item["record"]).encode())
+        location.write_atomic(asset_record_path(item["record"]["id"]), to_json(item["record"]).encode())
     return [item["record"] for item in pending]
 
 
@@ -176,13 +160,11 @@ def retry_failed_fbx(location: Location, spec, timer: StageTimer | None = None) 
     `"blender": "failed: ..."`), as a resumed job should finish what a run left undone; returns how many assets
     were retried. Their other files are whole and stay as they are; each asset.json is rewritten (atomically)
     with the new outcome."""
-    from .catalog import library_asset_ids
-
     if "fbx" not in spec.formats or not _wants_blender(spec, location):
         return 0
     pending = []
     for ident in library_asset_ids(location, spec):
-        path = f"{ASSETS}/{ident}/asset.json"
+        path = asset_record_path(ident)
         if not location.exists(path):
             continue
         record = json.loads(location.read_bytes(path))
@@ -203,15 +185,13 @@ def _tags(asset: LibraryAsset) -> list[str]:
 
 class LibraryChain:
     """A farm tree builder: one asset per call, files written as a side effect, the tree returned for the
-    pipeline's trees table. One CoverageRenderer per worker process. The Blender outputs of a shard's assets
-    are made together, in one Blender process, when the shard's last tree has been built."""
+    pipeline's trees table. One CoverageRenderer and one PngCache per worker process. The Blender outputs of a
+    shard's assets are made together, in one Blender process, when the shard's last tree has been built."""
 
-    def __init__(self, spec, out: str) -> None:
-        from ..tree_chain import tree_seed
-        from .spec import species_of_trees
-
+    def __init__(self, spec: LibrarySpec, out: str) -> None:
         self.spec, self.location = spec, Location.resolve(out)
         self._renderer = None
+        self._pngs = PngCache()
         self._pending: list[dict] = []
         names = species_of_trees(spec)
         size = spec.shard_size
@@ -221,15 +201,14 @@ class LibraryChain:
 
     def renderer(self):
         if self._renderer is None:
-            from renderers.impostor import CoverageRenderer
-
             self._renderer = CoverageRenderer(64)
         return self._renderer
 
     def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree:
         try:
             asset = build_asset(species_name, seed, self.spec, self.renderer(), timer)
-            self._pending.append(stage_asset_files(asset, self.location, self.spec, self.renderer(), timer))
+            self._pending.append(stage_asset_files(asset, self.location, self.spec, self.renderer(), timer,
+                                                   self._pngs))
         finally:  # a failed last tree still finishes the shard's other assets
             if (species_name, seed) in self._shard_ends:
                 pending, self._pending = self._pending, []
@@ -237,23 +216,15 @@ class LibraryChain:
         return BuiltTree(params=asset.params, skeleton=asset.skeleton, mesh=asset.lod0)
 
 
-def _write_library_record(location: Location, spec) -> None:
-    location.write_atomic(LIBRARY_RECORD, json.dumps({"format": "treefarm-library", "spec": spec.to_dict(),
-                                                      "spec_digest": spec.digest()}, indent=1).encode())
-
-
-def run_library(spec, out: str, workers: int | None = None, address: str | None = None,
+def run_library(spec: LibrarySpec, out: str, workers: int | None = None, address: str | None = None,
                 progress: bool = True) -> dict:
     """Run (or resume) a library job into `out` on the farm pipeline, then write the catalog; returns it."""
-    from ..pipeline import run_job
-    from .catalog import write_catalog
-
     location = Location.resolve(out)
     if location.exists(LIBRARY_RECORD):
         existing = json.loads(location.read_bytes(LIBRARY_RECORD))
         if existing.get("spec_digest") != spec.digest():
             raise LibraryError(f"{location.uri} holds a library of another spec; write this one to another --out")
-    _write_library_record(location, spec)
+    write_library_record(location, spec)
     manifest = run_job(spec, out, workers=workers, address=address,
                        builder_factory=partial(LibraryChain, out=location.uri), progress=progress)
     retry_failed_fbx(location, spec)  # a run whose Blender batch failed is finished by the next one
@@ -261,33 +232,15 @@ def run_library(spec, out: str, workers: int | None = None, address: str | None 
     return {"manifest": manifest, "catalog": catalog}
 
 
-def read_library_spec(location: Location):
-    """The LibrarySpec a library folder was made with; LibraryError when the folder is not a library."""
-    from .spec import parse_library_spec
-
-    if not location.exists(LIBRARY_RECORD):
-        raise LibraryError(f"{location.uri} is not an asset library (no {LIBRARY_RECORD}); make one with "
-                           f"`farm library --out DIR`")
-    raw = json.loads(location.read_bytes(LIBRARY_RECORD))["spec"]
-    raw = {k: v for k, v in raw.items() if k not in ("kind", "render", "store_glb")}
-    return parse_library_spec(raw)
-
-
 def add_asset(out: str, species_name: str, seed: int) -> dict:
     """Build one more asset (species, tree seed) into an existing library with its spec; rewrite the catalog."""
-    import species
-
-    from .catalog import write_catalog
-
     location = Location.resolve(out)
     spec = read_library_spec(location)
-    known = [p.name for p in species.list_presets()]
+    known = preset_names()
     if species_name not in known:
         raise LibraryError(f"species {species_name!r} is unknown: allowed {', '.join(sorted(known))}")
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
         raise LibraryError(f"seed {seed!r} is invalid: allowed an integer in [0, 2^63)")
-    from renderers.impostor import CoverageRenderer
-
     renderer = CoverageRenderer(64)
     try:
         timer = StageTimer()
@@ -295,6 +248,6 @@ def add_asset(out: str, species_name: str, seed: int) -> dict:
         record = write_asset_files(asset, location, spec, renderer, timer)
     finally:
         renderer.close()
-    location.write_atomic(f"_added/{asset.asset_id}.json", to_json({"species": species_name, "seed": seed}).encode())
+    write_added_record(location, species_name, seed)
     write_catalog(location, spec)
     return record

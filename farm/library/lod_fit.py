@@ -2,30 +2,36 @@
 cards in the proportion whose silhouette comes closest to LOD0's, seen from azimuths the quality figures never use.
 
 In: skeleton, LOD0 TreeMesh and its coverage tree, the spec's budgets and switch sizes, the process's
-CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. Out: one `species.lod.LodLevel`
-per budget.
+CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. Out: one
+`species.studio.lod.LodLevel` per budget.
 """
 from __future__ import annotations
+
+from renderers.alpha_coverage import coverage_tree
+from renderers.framing import framing_points
+from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
+from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
+from species.studio.lod import LodBudgetError, TreeLods
 
 __all__ = ["fit_lods", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
 # card). A simplified branch draws more silhouette per triangle than a merged leaf card on a sparse crown and less
-# on a dense one, and leaf cards gain on coarser levels, so no single proportion suits every tree and level
-# (measured over the 45 presets: LOD1 mostly takes 0.75, LOD2 and LOD3 mostly 0.25-0.5; needle trees and bare
-# L-systems more than 1: Douglas fir's LOD2/LOD3 least IoU .693/.521 at 1.0 -> .752/.621 at 1.25-1.5).
+# on a dense one, and leaf cards gain on coarser levels, so no single proportion suits every tree and level: the
+# ladder reaches below and above LOD0's own share (docs/library.md gives the shares the presets choose).
 BARK_SHARE_SCALES = (0.125, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
 # Where the search starts on that ladder for LOD1; each coarser level starts where the one before ended.
 _FIRST_SCALE = 0.75
-# Candidate area gains of the cluster cards (species.leaf_clusters.CLUSTER_AREA_GAIN is the default): how much of
-# the gap between a cluster's leaves its card fills depends on how many pixels the leaves span at the switch size.
+# Candidate area gains of the cluster cards (species.studio.leaf_clusters.CLUSTER_AREA_GAIN is the default): how
+# much of the gap between a cluster's leaves its card fills depends on how many pixels the leaves span at the
+# switch size.
 CARD_AREA_GAINS = (0.75, 1.0, 1.5, 2.25, 3.5)
-# Levels from which the gain is fitted: at LOD1's size the leaves span several pixels and the default suits (over
-# 12 presets fitting it raised the mean least IoU of LOD1 by 0.003, of LOD2 by 0.012 and of LOD3 by 0.031).
+# Levels from which the gain is fitted: at LOD1's size the leaves span several pixels and the default suits, so
+# fitting it there gains little for its cost (docs/library.md has the figures).
 _FIRST_GAIN_LEVEL = 2
 # Azimuths (degrees) the split is judged from: 22.5 deg off both the quality azimuths
 # (renderers.impostor.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test. One view
-# chose the same shares as two perpendicular ones on 10 presets (min IoU within 0.003) at 60 % of the cost.
+# chooses the shares two perpendicular ones would, for less (docs/library.md).
 CALIBRATION_AZIMUTHS = (33.75,)
 
 
@@ -37,13 +43,6 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     from LOD2 on, at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same
     way. A level costs three to six builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
-    from renderers.alpha_coverage import coverage_tree
-    from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
-    from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
-    from species.studio.lod import LodBudgetError, TreeLods
-
-    from .asset import framing_points
-
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
     points = framing_points(lod0)

@@ -1,7 +1,8 @@
-"""Previews of library assets: a shaded thumbnail, an 8-frame turntable strip, per-species contact sheets and a
-static `index.html` gallery that opens from disk.
+"""Previews of library assets: a shaded thumbnail, an 8-frame turntable strip and a static `index.html` gallery
+that opens from disk (the per-species contact sheets are `catalog.write_catalog`'s).
 
-In: a LibraryAsset and the process's depth renderer; out: uint8 RGB images and PNG/HTML bytes.
+In: a LibraryAsset's LOD0 and the process's depth renderer (drawn by `renderers.shading.shaded_view`), or catalog
+rows; out: uint8 RGB images and HTML text.
 """
 from __future__ import annotations
 
@@ -9,59 +10,35 @@ import html
 
 import numpy as np
 
-from renderers.camera import perspective_camera
-from renderers.maps import combine_parts, normals_from_depth
-from species.meshing.textures import linear_to_srgb
+from renderers.framing import framing_points
+from renderers.shading import shaded_view
 
-__all__ = ["shaded_view", "thumbnail", "turntable", "gallery_html", "THUMBNAIL_PX", "TURNTABLE_FRAMES",
+from .wind_viewer import wind_link
+
+__all__ = ["thumbnail", "turntable", "gallery_html", "THUMBNAIL_PX", "THUMBNAIL_AZIMUTH_DEG", "TURNTABLE_FRAMES",
            "TURNTABLE_PX"]
 
 THUMBNAIL_PX = 512
+THUMBNAIL_AZIMUTH_DEG = 30.0  # front three-quarter
 TURNTABLE_FRAMES = 8
 TURNTABLE_PX = 128
-# Light from the upper front left, in camera axes (x right, y down, z forward), and the ambient share.
-_LIGHT = np.array([-0.4, -0.6, -0.7]) / np.linalg.norm([-0.4, -0.6, -0.7])
-_AMBIENT = 0.35
-
-
-def shaded_view(renderer, tree, azimuth_deg: float, size: int, points: np.ndarray | None = None) -> np.ndarray:
-    """(size, size, 3) uint8 sRGB: the tree from `azimuth_deg` (10 deg elevation), bark and leaves in their base
-    colours under one directional light, on white. `points` (K, 3) metres frame the view (default: every
-    vertex; `framing_points(tree)` gives the same camera)."""
-    if points is None:
-        points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])
-    camera = perspective_camera(points, azimuth_deg, 10.0, size)
-    renderer.load(tree)
-    depth, mask, _ = combine_parts(renderer.part_depths(camera, split_orders=False))
-    normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
-    covered = mask > 0  # shade only the tree's pixels: the sRGB curve is the costly step
-    light = np.clip(-(normals[covered] @ _LIGHT), 0.0, 1.0) * (1 - _AMBIENT) + _AMBIENT
-    albedo = np.where((mask[covered] == 1)[:, None], np.asarray(tree.bark_color, np.float64),
-                      np.asarray(tree.leaf_color, np.float64))
-    colour = np.full(mask.shape + (3,), 255, np.uint8)
-    colour[covered] = np.round(linear_to_srgb(albedo * light[:, None]) * 255).astype(np.uint8)
-    return colour
 
 
 def thumbnail(renderer, tree) -> np.ndarray:
     """(512, 512, 3) uint8: the front three-quarter view."""
-    return shaded_view(renderer, tree, 30.0, THUMBNAIL_PX)
+    return shaded_view(renderer, tree, THUMBNAIL_AZIMUTH_DEG, THUMBNAIL_PX)
 
 
 def turntable(renderer, tree) -> np.ndarray:
-    """(128, 8 x 128, 3) uint8: eight views 45 deg apart, side by side."""
-    from .asset import framing_points
-
+    """(128, 8 x 128, 3) uint8: eight views 45 deg apart, side by side, all framed by the same points."""
     points = framing_points(tree)
-    return np.concatenate([shaded_view(renderer, tree, 45.0 * k, TURNTABLE_PX, points)
+    return np.concatenate([shaded_view(renderer, tree, 360.0 / TURNTABLE_FRAMES * k, TURNTABLE_PX, points)
                            for k in range(TURNTABLE_FRAMES)], axis=1)
 
 
 def gallery_html(rows: list[dict]) -> str:
     """A self-contained gallery page: one card per asset (thumbnail, turntable, facts, file links), relative
     paths only, so it opens from disk (but for the wind example's link). rows: catalog rows (dicts)."""
-    from .wind_viewer import wind_link
-
     cards = []
     for row in rows:
         files = " ".join(f'<a href="{html.escape(path)}">{html.escape(kind)}</a>'

@@ -1,7 +1,8 @@
 """Library job specifications: species and variants, LOD budgets and switch sizes, formats, texture size.
 
-Input: a YAML mapping (or none: every preset, 4 variants each); output: a frozen `LibrarySpec` that the farm's
-pipeline runs like a JobSpec (same planner, seeds, shards and resume), or a `LibrarySpecError` naming the field.
+Input: a YAML mapping (or none: every preset, 4 variants each); output: a frozen `LibrarySpec`, a
+`farm.jobs.PipelineSpec` the farm's pipeline plans and runs (same planner, seeds, shards and resume), or a
+`LibrarySpecError` naming the field.
 """
 from __future__ import annotations
 
@@ -12,18 +13,27 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from farm.jobs import (JobSpecError, RenderSpec, ShardedCounts, _check_int, _check_keys, _known_species, load_spec,
-                       species_of_trees)
+from farm.jobs import (DatasetTables, JobSpecError, PipelineSpec, check_int, check_keys, check_resources, check_seed,
+                       load_spec, preset_names, species_of_trees)
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
-           "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "species_of_trees"]
+           "library_spec_from_record", "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "LIBRARY_TABLES",
+           "species_of_trees"]
 
-FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")
-DEFAULT_FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")
+FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
 DEFAULT_BUDGETS = (0.40, 0.12, 0.04)
 DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
              "impostor_tile", "shard_size", "resources"}
+# The library's trees table holds the skeletons (and carries resume); the meshes are the assets' own files, so
+# no views and no GLB column.
+LIBRARY_TABLES = DatasetTables(view_outputs=(), store_glb=False)
+# The job record's `render` says what the views table holds, as a JobSpec's does (dataset readers take its
+# outputs from there); its rig and size are the values library records have always carried, kept so that
+# library.json, _job.json and the spec digest keep their bytes.
+_RECORD_RENDER = {"rig": "tsn4", "size": 64}
+# Keys `to_dict` adds to the spec's own fields: `library_spec_from_record` leaves them out.
+_RECORD_ONLY_KEYS = ("kind", "render", "store_glb")
 
 
 class LibrarySpecError(JobSpecError):
@@ -44,7 +54,7 @@ def _library_errors():
 
 
 @dataclass(frozen=True)
-class LibrarySpec(ShardedCounts):
+class LibrarySpec(PipelineSpec):
     """One asset-library job.
 
     name          : job name (the dataset tables' tree ids are f"{name}-{index:08d}").
@@ -64,16 +74,16 @@ class LibrarySpec(ShardedCounts):
     species: dict[str, float] = field(default_factory=dict)
     lod_budgets: tuple[float, ...] = DEFAULT_BUDGETS
     switch_px: tuple[int, ...] = DEFAULT_SWITCH_PX
-    formats: tuple[str, ...] = DEFAULT_FORMATS
+    formats: tuple[str, ...] = FORMATS
     texture_size: int = 256
     impostor_tile: int = 128
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
 
-    # What the farm's pipeline reads from a job spec: no views rendered, no GLB column in the trees table.
-    trees = None
-    render = RenderSpec(rig="tsn4", size=64, outputs=())
-    store_glb = False
+    @property
+    def tables(self) -> DatasetTables:
+        """No views and no GLB column (`LIBRARY_TABLES`): what the pipeline writes of a library's trees."""
+        return LIBRARY_TABLES
 
     @property
     def species_counts(self) -> dict[str, int]:
@@ -85,8 +95,8 @@ class LibrarySpec(ShardedCounts):
             out[key] = list(out[key])
         out["species"] = {name: int(count) for name, count in self.species.items()}
         out["kind"] = "library"
-        out["render"] = {"rig": self.render.rig, "size": self.render.size, "outputs": []}
-        out["store_glb"] = False
+        out["render"] = {**_RECORD_RENDER, "outputs": list(self.tables.view_outputs)}
+        out["store_glb"] = self.tables.store_glb
         return out
 
     def digest(self) -> str:
@@ -117,13 +127,13 @@ def parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
 
 
 def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
-    raw = _check_keys("", raw or {}, _TOP_KEYS)
-    known = list(known_species) if known_species is not None else _known_species()
+    raw = check_keys("", raw or {}, _TOP_KEYS)
+    known = list(known_species) if known_species is not None else preset_names()
     name = raw.get("name", "library")
     if not isinstance(name, str) or not name.replace("_", "").replace("-", "").isalnum():
         raise LibrarySpecError("name", name, "letters, digits, '_' and '-'")
-    seed = _check_int("seed", raw.get("seed", 0), 0, 2**63 - 1)
-    per_species = _check_int("per_species", raw.get("per_species", 4), 1, 100_000)
+    seed = check_seed(raw.get("seed", 0))
+    per_species = check_int("per_species", raw.get("per_species", 4), 1, 100_000)
     mix = raw.get("species")
     if mix is None:
         mix = {preset: per_species for preset in known}
@@ -135,7 +145,7 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     for preset, count in mix.items():
         if preset not in known:
             raise LibrarySpecError(f"species.{preset}", preset, f"a known species: {', '.join(sorted(known))}")
-        species[preset] = float(_check_int(f"species.{preset}", count, 1, 100_000))
+        species[preset] = float(check_int(f"species.{preset}", count, 1, 100_000))
     budgets = _check_fractions("lod_budgets", raw.get("lod_budgets", list(DEFAULT_BUDGETS)))
     switch = raw.get("switch_px", list(DEFAULT_SWITCH_PX[:len(budgets)]) + [DEFAULT_SWITCH_PX[-1]])
     allowed = f"a strictly decreasing list of {len(budgets) + 1} pixel heights (LODs then the impostor)"
@@ -143,19 +153,18 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
             or any(isinstance(v, bool) or not isinstance(v, int) or not 8 <= v <= 4096 for v in switch)
             or any(b >= a for a, b in zip(switch, switch[1:]))):
         raise LibrarySpecError("switch_px", switch, allowed + " in [8, 4096]")
-    formats = raw.get("formats", list(DEFAULT_FORMATS))
+    formats = raw.get("formats", list(FORMATS))
     if not isinstance(formats, (list, tuple)) or not formats:
         raise LibrarySpecError("formats", formats, f"a list from: {', '.join(FORMATS)}")
     for item in formats:
         if item not in FORMATS:
             raise LibrarySpecError("formats", item, f"formats from: {', '.join(FORMATS)}")
-    texture_size = _check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
+    texture_size = check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
     if texture_size % 4:
         raise LibrarySpecError("texture_size", texture_size, "a multiple of 4 in [32, 4096]")
-    tile = _check_int("impostor_tile", raw.get("impostor_tile", 128), 16, 2048)
-    shard_size = _check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
-    res = _check_keys("resources", raw.get("resources", {}), {"num_cpus", "num_gpus"})
-    resources = {"num_cpus": float(res.get("num_cpus", 1)), "num_gpus": float(res.get("num_gpus", 0))}
+    tile = check_int("impostor_tile", raw.get("impostor_tile", 128), 16, 2048)
+    shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
+    resources = check_resources(raw.get("resources", {}))
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
                        formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, impostor_tile=tile,
                        shard_size=shard_size, resources=resources)
@@ -169,3 +178,8 @@ def load_library_spec(path: str | Path, **known) -> LibrarySpec:
 
 def default_library_spec(per_species: int = 4) -> LibrarySpec:
     return parse_library_spec({"per_species": per_species})
+
+
+def library_spec_from_record(record: dict, known_species=None) -> LibrarySpec:
+    """The LibrarySpec of a `LibrarySpec.to_dict()` mapping (library.json's `spec`), validated again."""
+    return parse_library_spec({k: v for k, v in record.items() if k not in _RECORD_ONLY_KEYS}, known_species)

@@ -11,9 +11,11 @@ import tempfile
 
 import numpy as np
 
+from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
 from species.studio.lod import card_clumps
 from species.studio.pbr_textures import SEASONS
 from species.skeleton import LEAF_CARD_CORNERS
+from species.tree_mesh import MeshPart
 
 from .asset import LibraryAsset, leaf_instances
 
@@ -111,11 +113,9 @@ def _leaf_instancer(stage, path: str, level, card_material):
     from pxr import Sdf, UsdGeom, UsdShade, Vt
     from scipy.spatial.transform import Rotation
 
-    from species.meshing.tubes_and_cards import _CARD_FACES, _CARD_UVS
-    from species.tree_mesh import MeshPart
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
-    card = MeshPart(LEAF_CARD_CORNERS, _CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), _CARD_UVS)
+    card = MeshPart(LEAF_CARD_CORNERS, CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), CARD_UVS)
     # One prototype per card kind present: `leaf` (single-leaf tile) for cards that are one leaf, `clump`
     # (clump tile) for cards that merge several.
     clumps = card_clumps(level.mesh.leaves)

@@ -14,6 +14,7 @@ import numpy as np
 
 from farm.dataset import FLOAT_OUTPUTS, read_manifest
 from farm.storage import Location
+from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
 
@@ -28,8 +29,8 @@ LABEL_MAPS = frozenset({"mask", "order"})
 _CACHE_ENTRIES = 8
 
 
-class NotFound(KeyError):
-    """A tree, view, output or batch that the dataset does not have."""
+class NotFound(TreefarmError, KeyError):
+    """A tree, view, output or batch that the dataset does not have (a KeyError too: a lookup that missed)."""
 
     def __str__(self) -> str:
         return str(self.args[0]) if self.args else "not found"

@@ -3,7 +3,8 @@ parameter schema, growth spaces, resource allocation, the shadow grid, steering,
 """
 from __future__ import annotations
 
-from .generator import bole_guide, Colonizer, crown_space, grow, grow_in_space, REFERENCE_INTERNODE, seed_from_guide
+from .generator import (bole_guide, Colonizer, crown_space, grow, grow_in_space, REFERENCE_INTERNODE,
+    seed_from_guide)
 from .params import at_iteration, CROWN_SHAPES, Field, SCHEDULABLE, SCHEMA, validate
 from .growth_space import (DepthMapCrown, GrowthSpace, GrowthSpaceError, MeshSpace, PointSpace, profile_crown,
     PROFILE_SHAPES, ProfileCrown, random_lobes, SuperquadricLobe, UnionSpace, VoxelSpace)
@@ -12,7 +13,8 @@ from .shadow import ShadowGrid
 from .steering import hermite_curve, MarkerSteering, revolved_field, stroke_tube
 
 __all__ = [
-    "grow", "grow_in_space", "crown_space", "Colonizer", "bole_guide", "seed_from_guide", "REFERENCE_INTERNODE", "Field", "SCHEMA", "SCHEDULABLE",
+    "grow", "grow_in_space", "crown_space", "Colonizer", "bole_guide", "seed_from_guide", "REFERENCE_INTERNODE",
+    "Field", "SCHEMA", "SCHEDULABLE",
     "validate", "at_iteration", "CROWN_SHAPES", "GrowthSpaceError", "GrowthSpace", "ProfileCrown",
     "SuperquadricLobe", "UnionSpace", "MeshSpace", "VoxelSpace", "PointSpace", "DepthMapCrown", "random_lobes",
     "PROFILE_SHAPES", "profile_crown", "jump_tables", "subtree_sums", "path_products", "allocate",

@@ -1,6 +1,8 @@
-"""Binary glTF 2.0 (GLB) writer for a TreeMesh, written with struct and json so every byte is ours.
+"""Binary glTF 2.0 (GLB), written with struct and json so every byte is ours: the one GLB writer (`GlbWriter`,
+`GlbBuffer`), a TreeMesh's GLB with it, and readers for GLB bytes.
 
-In: a TreeMesh (Z up). Out: GLB bytes (Y up), two textured PBR meshes "bark" and "leaves"; same input, same bytes.
+In: a TreeMesh (Z up), or any scene built entry by entry with `GlbWriter` (the asset library's LODs, instancing
+and variants, `farm.library.gltf_asset`). Out: GLB bytes (Y up); same input, same bytes.
 """
 from __future__ import annotations
 
@@ -13,16 +15,23 @@ from ..errors import TreefarmError
 from .textures import bark_png, leaf_png
 from ..tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["tree_mesh_to_glb", "read_glb_json", "read_glb_chunks", "read_accessor", "z_up_to_y_up", "GlbError"]
+__all__ = ["tree_mesh_to_glb", "GlbBuffer", "GlbWriter", "read_glb_json", "read_glb_chunks", "read_accessor",
+           "z_up_to_y_up", "Z_UP_TO_Y_UP", "GlbError", "ARRAY_BUFFER", "ELEMENT_ARRAY_BUFFER", "REPEAT",
+           "CLAMP_TO_EDGE", "TRIANGLES"]
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
 _CHUNK_JSON = 0x4E4F534A  # "JSON"
 _CHUNK_BIN = 0x004E4942  # "BIN\0"
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+# Buffer view targets (vertex attributes, indices), sampler wrap modes and the triangle-list primitive mode.
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+REPEAT, CLAMP_TO_EDGE = 10497, 33071
+TRIANGLES = 4
 _FLOAT, _UNSIGNED_SHORT, _UNSIGNED_INT = 5126, 5123, 5125
 _LINEAR, _LINEAR_MIPMAP_LINEAR = 9729, 9987
-_REPEAT, _CLAMP_TO_EDGE = 10497, 33071
-_TRIANGLES = 4
+_COMPONENTS = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _UNSIGNED_SHORT, np.dtype(np.uint32): _UNSIGNED_INT}
+# Our Z-up world (x, y, z) to glTF's Y-up frame (x, z, -y), a rotation: v_gltf = Z_UP_TO_Y_UP @ v.
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+Z_UP_TO_Y_UP.setflags(write=False)
 
 
 class GlbError(TreefarmError):
@@ -30,19 +39,31 @@ class GlbError(TreefarmError):
 
 
 def z_up_to_y_up(vectors: np.ndarray) -> np.ndarray:
-    """(K, 3) float32: our Z-up world (x, y, z) in glTF's Y-up frame, (x, z, -y). A rotation, so normals too."""
+    """(K, 3) float32: our Z-up world (x, y, z) in glTF's Y-up frame, (x, z, -y) (`Z_UP_TO_Y_UP` applied by
+    reordering, so no value is rounded). A rotation, so normals too."""
     vectors = np.asarray(vectors, np.float32)
     return np.ascontiguousarray(np.stack([vectors[:, 0], vectors[:, 2], -vectors[:, 1]], axis=1))
 
 
-class _BinaryBuffer:
-    """Accumulates buffer views (each 4-byte aligned) and accessors for one GLB binary chunk."""
+class GlbBuffer:
+    """The binary chunk of a GLB: buffer views (each padded to 4 bytes) and the accessors that read them.
 
-    def __init__(self) -> None:
+    `keep_bytes=False` records the same views and accessors and counts their bytes without keeping any (for the
+    exact length of a file that is not packed, `GlbWriter.glb_length`).
+    """
+
+    def __init__(self, keep_bytes: bool = True) -> None:
+        self.keep_bytes = keep_bytes
         self.blobs: list[bytes] = []
-        self.size = 0
+        self.size = 0  # bytes of the chunk, padding included
         self.views: list[dict] = []
         self.accessors: list[dict] = []
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        """Index of a new buffer view holding `data` (`target`: ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER or None)."""
+        if self.keep_bytes:
+            self.blobs.append(data + b"\0" * ((-len(data)) % 4))
+        return self._record_view(len(data), target)
 
     def _record_view(self, length: int, target: int | None) -> int:
         entry = {"buffer": 0, "byteOffset": self.size, "byteLength": length}
@@ -52,19 +73,16 @@ class _BinaryBuffer:
         self.views.append(entry)
         return len(self.views) - 1
 
-    def view(self, data: bytes, target: int | None = None) -> int:
-        self.blobs.append(data + b"\0" * ((-len(data)) % 4))
-        return self._record_view(len(data), target)
-
-    def _payload(self, array: np.ndarray) -> bytes:
-        """What an accessor's view holds: the array's little-endian bytes (a size-only buffer counts them)."""
-        return np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<")).tobytes()
-
-    def accessor(self, array: np.ndarray, kind: str, target: int, with_bounds: bool = False) -> int:
-        component = {np.dtype(np.float32): _FLOAT, np.dtype(np.uint16): _UNSIGNED_SHORT,
-                     np.dtype(np.uint32): _UNSIGNED_INT}[array.dtype]
-        entry = {"bufferView": self.view(self._payload(array), target),
-                 "componentType": component, "count": int(len(array)), "type": kind}
+    def accessor(self, array: np.ndarray, kind: str, target: int | None, with_bounds: bool = False) -> int:
+        """Index of a new accessor over a view of `array` ((count,) or (count, width) float32, uint16 or uint32;
+        `kind` "SCALAR", "VEC2", ...), with its per-component min and max when `with_bounds` (POSITION needs
+        them)."""
+        component = _COMPONENTS[array.dtype]
+        if self.keep_bytes:
+            view = self.view(np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<")).tobytes(), target)
+        else:
+            view = self._record_view(int(array.nbytes), target)
+        entry = {"bufferView": view, "componentType": component, "count": int(len(array)), "type": kind}
         if with_bounds:
             entry["min"] = [float(x) for x in array.min(axis=0)]
             entry["max"] = [float(x) for x in array.max(axis=0)]
@@ -72,22 +90,108 @@ class _BinaryBuffer:
         return len(self.accessors) - 1
 
     def tobytes(self) -> bytes:
+        if not self.keep_bytes:
+            raise TypeError("this GlbBuffer counts bytes without keeping them (keep_bytes=False)")
         return b"".join(self.blobs)
 
 
-def _primitive(buffer: _BinaryBuffer, part: MeshPart, material: int) -> dict:
-    positions = z_up_to_y_up(part.vertices)
-    normals = z_up_to_y_up(part.normals)
-    uvs = np.ascontiguousarray(part.uvs, np.float32).copy()
-    uvs[:, 1] = 1.0 - uvs[:, 1]  # glTF puts v = 0 at the top of the image
-    index_type = np.uint16 if part.n_vertices <= 0xFFFF else np.uint32
-    attributes = {
-        "POSITION": buffer.accessor(positions, "VEC3", _ARRAY_BUFFER, with_bounds=True),
-        "NORMAL": buffer.accessor(normals, "VEC3", _ARRAY_BUFFER),
-        "TEXCOORD_0": buffer.accessor(uvs, "VEC2", _ARRAY_BUFFER),
-    }
-    indices = buffer.accessor(part.faces.reshape(-1).astype(index_type), "SCALAR", _ELEMENT_ARRAY_BUFFER)
-    return {"attributes": attributes, "indices": indices, "material": material, "mode": _TRIANGLES}
+class GlbWriter:
+    """One glTF 2.0 document and its binary chunk, filled entry by entry, packed by `to_glb`.
+
+    Each adder returns the new entry's index. Vertices and normals go in Z up and are written Y up; UVs go in
+    OBJ convention (v = 0 at the bottom) and are written with v flipped, as glTF reads images from the top.
+    `head` (for `document`, `to_glb`, `glb_length`) is the document's first keys: "asset", "scene", "scenes"
+    and any extension keys; nodes and the non-empty lists follow.
+    """
+
+    def __init__(self, keep_bytes: bool = True) -> None:
+        self.buffer = GlbBuffer(keep_bytes)
+        self.nodes: list[dict] = []
+        self.meshes: list[dict] = []
+        self.materials: list[dict] = []
+        self.textures: list[dict] = []
+        self.images: list[dict] = []
+        self.samplers: list[dict] = []
+
+    def texture(self, name: str, png: bytes, wrap: int) -> int:
+        """A texture of an embedded PNG image named `name`, trilinear, wrapping by `wrap` (REPEAT or
+        CLAMP_TO_EDGE) in both directions."""
+        self.samplers.append({"magFilter": _LINEAR, "minFilter": _LINEAR_MIPMAP_LINEAR, "wrapS": wrap, "wrapT": wrap})
+        self.images.append({"name": name, "bufferView": self.buffer.view(png), "mimeType": "image/png"})
+        self.textures.append({"sampler": len(self.samplers) - 1, "source": len(self.images) - 1})
+        return len(self.textures) - 1
+
+    def material(self, entry: dict) -> int:
+        self.materials.append(entry)
+        return len(self.materials) - 1
+
+    def mesh(self, name: str, primitive: dict) -> int:
+        """A mesh of one primitive."""
+        self.meshes.append({"name": name, "primitives": [primitive]})
+        return len(self.meshes) - 1
+
+    def node(self, entry: dict) -> int:
+        self.nodes.append(entry)
+        return len(self.nodes) - 1
+
+    def floats(self, array: np.ndarray, kind: str, target: int | None = ARRAY_BUFFER,
+               with_bounds: bool = False) -> int:
+        """An accessor of `array` as float32 (`target` None for data that is not a vertex attribute, such as
+        instance transforms)."""
+        return self.buffer.accessor(np.ascontiguousarray(array, np.float32), kind, target, with_bounds)
+
+    def triangles(self, vertices: np.ndarray, normals: np.ndarray, uvs: np.ndarray, faces: np.ndarray,
+                  extra: dict[str, tuple[np.ndarray, str]] | None = None) -> tuple[dict[str, int], int]:
+        """The accessors of a triangle mesh: (attributes {name: accessor}, indices accessor).
+
+        vertices, normals : (V, 3) float, Z up (POSITION with bounds, NORMAL); uvs : (V, 2) float, OBJ
+        convention (TEXCOORD_0); faces : (F, 3) int (indices uint16 when they fit, else uint32); extra : more
+        per-vertex attributes, name -> (array (V, k), kind), written as float32 in that order after TEXCOORD_0.
+        """
+        uv = np.asarray(uvs, np.float32).copy()
+        uv[:, 1] = 1.0 - uv[:, 1]  # glTF puts v = 0 at the top of the image
+        index_type = np.uint16 if len(vertices) <= 0xFFFF else np.uint32
+        attributes = {"POSITION": self.floats(z_up_to_y_up(vertices), "VEC3", with_bounds=True),
+                      "NORMAL": self.floats(z_up_to_y_up(normals), "VEC3"), "TEXCOORD_0": self.floats(uv, "VEC2")}
+        for name, (array, kind) in (extra or {}).items():
+            attributes[name] = self.floats(array, kind)
+        indices = self.buffer.accessor(np.asarray(faces).reshape(-1).astype(index_type), "SCALAR",
+                                       ELEMENT_ARRAY_BUFFER)
+        return attributes, indices
+
+    def document(self, head: dict) -> dict:
+        """The JSON document: `head`, the nodes, every non-empty list, and the buffer when it holds bytes."""
+        document = {**head, "nodes": self.nodes}
+        lists = {"meshes": self.meshes, "materials": self.materials, "textures": self.textures,
+                 "images": self.images, "samplers": self.samplers, "accessors": self.buffer.accessors,
+                 "bufferViews": self.buffer.views}
+        document.update({key: value for key, value in lists.items() if value})
+        if self.buffer.size:
+            document["buffers"] = [{"byteLength": self.buffer.size}]
+        return document
+
+    def _json_chunk(self, head: dict) -> bytes:
+        json_bytes = json.dumps(self.document(head), separators=(",", ":"), ensure_ascii=True).encode("ascii")
+        return json_bytes + b" " * ((-len(json_bytes)) % 4)
+
+    def to_glb(self, head: dict) -> bytes:
+        """GLB bytes: header, JSON chunk (compact, ASCII, space-padded), BIN chunk when the buffer holds bytes.
+        No timestamps: the same entries give the same bytes."""
+        json_bytes = self._json_chunk(head)
+        chunks = struct.pack("<II", len(json_bytes), _CHUNK_JSON) + json_bytes
+        if self.buffer.size:
+            chunks += struct.pack("<II", self.buffer.size, _CHUNK_BIN) + self.buffer.tobytes()
+        return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+
+    def glb_length(self, head: dict) -> int:
+        """len(self.to_glb(head)), exactly, without packing the binary chunk (works with keep_bytes=False)."""
+        binary = 8 + self.buffer.size if self.buffer.size else 0
+        return 12 + 8 + len(self._json_chunk(head)) + binary
+
+
+def _part_primitive(writer: GlbWriter, part: MeshPart, material: int) -> dict:
+    attributes, indices = writer.triangles(part.vertices, part.normals, part.uvs, part.faces)
+    return {"attributes": attributes, "indices": indices, "material": material, "mode": TRIANGLES}
 
 
 def tree_mesh_to_glb(tree: TreeMesh) -> bytes:
@@ -100,44 +204,25 @@ def tree_mesh_to_glb(tree: TreeMesh) -> bytes:
     """
     if not isinstance(tree, TreeMesh):
         raise GlbError(f"tree_mesh_to_glb needs a TreeMesh; got {type(tree).__name__}")
-    buffer = _BinaryBuffer()
-    nodes: list[dict] = [{"name": tree.name, "children": []}]
-    meshes, materials, textures, images, samplers = [], [], [], [], []
-    parts = (("bark", tree.bark, bark_png(tree.bark_color), _REPEAT),
-             ("leaves", tree.leaves, leaf_png(tree.leaf_color), _CLAMP_TO_EDGE))
+    writer = GlbWriter()
+    root = writer.node({"name": tree.name, "children": []})
+    parts = (("bark", tree.bark, bark_png(tree.bark_color), REPEAT),
+             ("leaves", tree.leaves, leaf_png(tree.leaf_color), CLAMP_TO_EDGE))
     for name, part, png, wrap in parts:
         if part.n_faces == 0:
             continue
-        samplers.append({"magFilter": _LINEAR, "minFilter": _LINEAR_MIPMAP_LINEAR, "wrapS": wrap, "wrapT": wrap})
-        images.append({"name": f"{name}_texture", "bufferView": buffer.view(png), "mimeType": "image/png"})
-        textures.append({"sampler": len(samplers) - 1, "source": len(images) - 1})
         material = {"name": name, "pbrMetallicRoughness": {
-            "baseColorTexture": {"index": len(textures) - 1}, "metallicFactor": 0.0,
+            "baseColorTexture": {"index": writer.texture(f"{name}_texture", png, wrap)}, "metallicFactor": 0.0,
             "roughnessFactor": 0.9 if name == "bark" else 0.7}}
         if name == "leaves":
             material.update({"alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True})
-        materials.append(material)
-        meshes.append({"name": name, "primitives": [_primitive(buffer, part, len(materials) - 1)]})
-        nodes.append({"name": name, "mesh": len(meshes) - 1})
-        nodes[0]["children"].append(len(nodes) - 1)
-    if not nodes[0]["children"]:
-        del nodes[0]["children"]
-    binary = buffer.tobytes()
-    document = {"asset": {"version": "2.0", "generator": "treefarm species.gltf"},
-                "scene": 0, "scenes": [{"name": tree.name, "nodes": [0]}], "nodes": nodes}
-    for key, value in (("meshes", meshes), ("materials", materials), ("textures", textures),
-                       ("images", images), ("samplers", samplers), ("accessors", buffer.accessors),
-                       ("bufferViews", buffer.views)):
-        if value:
-            document[key] = value
-    if binary:
-        document["buffers"] = [{"byteLength": len(binary)}]
-    json_bytes = json.dumps(document, separators=(",", ":"), ensure_ascii=True).encode("ascii")
-    json_bytes += b" " * ((-len(json_bytes)) % 4)
-    chunks = struct.pack("<II", len(json_bytes), _CHUNK_JSON) + json_bytes
-    if binary:
-        chunks += struct.pack("<II", len(binary), _CHUNK_BIN) + binary
-    return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+        mesh = writer.mesh(name, _part_primitive(writer, part, writer.material(material)))
+        writer.nodes[root]["children"].append(writer.node({"name": name, "mesh": mesh}))
+    if not writer.nodes[root]["children"]:
+        del writer.nodes[root]["children"]
+    # The generator string predates the meshing subpackage; it is in every GLB's bytes, so it stays.
+    return writer.to_glb({"asset": {"version": "2.0", "generator": "treefarm species.gltf"},
+                          "scene": 0, "scenes": [{"name": tree.name, "nodes": [root]}]})
 
 
 def read_glb_chunks(data: bytes) -> tuple[dict, bytes]:

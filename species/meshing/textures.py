@@ -1,18 +1,20 @@
 """Small procedural textures for exported trees: tileable bark with vertical fissures, a leaf with alpha.
 
-In: a base colour (linear RGB). Out: uint8 sRGB images and their deterministic PNG encodings.
+In: a base colour (linear RGB). Out: uint8 sRGB images and their deterministic PNG encodings (`png.png_bytes`).
+The bark's noise fields and colour formula are public: the studio's PBR bark maps (`species.studio.pbr_textures`)
+draw their own fields per species and colour them with the same formula.
 """
 from __future__ import annotations
 
-import io
 from functools import lru_cache
 
 import numpy as np
 
 from ..errors import ParameterError
+from .png import png_bytes
 
-__all__ = ["bark_texture", "leaf_texture", "png_bytes", "bark_png", "leaf_png", "linear_to_srgb",
-           "BARK_TEXTURE_SEED"]
+__all__ = ["bark_texture", "leaf_texture", "bark_png", "leaf_png", "linear_to_srgb", "periodic_noise",
+           "fissure_depth", "bark_colour", "BARK_TEXTURE_SEED"]
 
 # Textures are assets, not samples: every tree shares one noise field, drawn from this fixed seed.
 BARK_TEXTURE_SEED = 20260101
@@ -35,8 +37,8 @@ def _check_colour(color) -> np.ndarray:
     return rgb
 
 
-def _periodic_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_rows: float,
-                    sigma_cols: float) -> np.ndarray:
+def periodic_noise(rng: np.random.Generator, shape: tuple[int, int], sigma_rows: float,
+                   sigma_cols: float) -> np.ndarray:
     """(H, W) float64 Gaussian-filtered white noise, unit variance, periodic in both axes (FFT filter).
 
     sigma_rows, sigma_cols : filter widths in pixels along rows (vertical) and columns (horizontal).
@@ -55,12 +57,25 @@ def bark_texture(color, rng: np.random.Generator, height: int = 256, width: int 
     color : (3,) float, linear RGB in [0, 1]. Tiles seamlessly in both directions (u around the branch,
     v along it), because the noise is filtered on a torus.
     """
-    rgb = _check_colour(color)
+    _check_colour(color)
     # Fissures: zero crossings of noise stretched along v, so cracks run along the branch.
-    streaks = _periodic_noise(rng, (height, width), sigma_rows=16.0, sigma_cols=3.0)
-    fissure = np.exp(-(streaks / 0.45) ** 2)
-    plates = _periodic_noise(rng, (height, width), sigma_rows=6.0, sigma_cols=4.0)
-    grain = _periodic_noise(rng, (height, width), sigma_rows=1.2, sigma_cols=0.6)
+    streaks = periodic_noise(rng, (height, width), sigma_rows=16.0, sigma_cols=3.0)
+    fissure = fissure_depth(streaks, 0.45)
+    plates = periodic_noise(rng, (height, width), sigma_rows=6.0, sigma_cols=4.0)
+    grain = periodic_noise(rng, (height, width), sigma_rows=1.2, sigma_cols=0.6)
+    return bark_colour(color, fissure, plates, grain)
+
+
+def fissure_depth(streaks: np.ndarray, width: float) -> np.ndarray:
+    """(H, W) float64 in (0, 1]: 1 on the zero crossings of `streaks` (H, W) unit-variance noise, where the bark
+    cracks, falling off within about `width` standard deviations of them."""
+    return np.exp(-(streaks / width) ** 2)
+
+
+def bark_colour(color, fissure: np.ndarray, plates: np.ndarray, grain: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 sRGB bark: `color` (3,) linear RGB in [0, 1] shaded by the relief, darkest in the
+    fissures (`fissure_depth`, (H, W)), lighter on raised plates and grain ((H, W) unit-variance noise)."""
+    rgb = _check_colour(color)
     shade = 1.05 - 0.75 * fissure + 0.15 * plates + 0.08 * grain
     return _to_uint8(linear_to_srgb(rgb[None, None, :] * np.clip(shade, 0.0, 1.6)[..., None]))
 
@@ -90,19 +105,6 @@ def leaf_texture(color, size: int = 128) -> np.ndarray:
     shade = np.where(stalk > inside_blade, 0.7, shade)
     colour = linear_to_srgb(rgb[None, None, :] * np.clip(shade, 0.0, 1.5)[..., None])
     return np.concatenate([_to_uint8(colour), _to_uint8(alpha)[..., None]], axis=-1)
-
-
-def png_bytes(image: np.ndarray) -> bytes:
-    """PNG encoding of an (H, W, 3) or (H, W, 4) uint8 image: no metadata, no timestamp, same bytes each call."""
-    from PIL import Image
-
-    image = np.asarray(image)
-    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (3, 4):
-        raise ParameterError("image", f"array {image.dtype} {image.shape}", "(H, W, 3) or (H, W, 4) uint8")
-    buffer = io.BytesIO()
-    Image.fromarray(image, mode="RGBA" if image.shape[2] == 4 else "RGB").save(
-        buffer, format="PNG", compress_level=9)
-    return buffer.getvalue()
 
 
 @lru_cache(maxsize=64)

@@ -12,7 +12,7 @@ from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh
 
 __all__ = ["build_mesh", "bark_part", "leaf_part", "radial_segments", "MeshBuildError",
-           "DEFAULT_RADIAL_SEGMENTS"]
+           "DEFAULT_RADIAL_SEGMENTS", "CARD_UVS", "CARD_FACES"]
 
 # Sides of a tube by branch order (digest 3.8): 8 on the trunk, 6 on orders 1-2, 4 beyond.
 DEFAULT_RADIAL_SEGMENTS = (8, 6, 6, 4)
@@ -35,11 +35,17 @@ class MeshBuildError(TreefarmError):
     """A skeleton that cannot be meshed (for example a leaf transform that squashes the card flat)."""
 
 
+# The keys of the `mesh_` family build_mesh reads; any other `mesh_` key is a typo, not a generator's key.
+_MESH_KEYS = ("mesh_radial_segments", "mesh_min_segments")
+
+
 def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
     """Mesh a skeleton: one generalized cylinder per branch and one two-triangle card per leaf.
 
     skeleton : the tree; its positions are used as they are (base at the origin, Z up, metres).
-    params   : optional parameter dictionary; these keys are read when present, all others ignored:
+    params   : optional parameter dictionary, usually the whole growth dictionary. These keys are read when
+               present; other keys belong to the generator and are ignored, except that a `mesh_` key not
+               listed here raises ParameterError (a mistyped mesh option would otherwise do nothing):
         mesh_radial_segments : list of ints >= 3, tube sides by branch order (the last entry serves all
                                higher orders). Default (8, 6, 6, 4), raised on thick branches so that no
                                side is wider than 0.12 m (at most 16 sides); an explicit list is used as is.
@@ -52,6 +58,7 @@ def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
     params = {} if params is None else params
     if not isinstance(params, dict):
         raise ParameterError("params", type(params).__name__, "a dict of parameters or None")
+    _reject_unknown_mesh_keys(params)
     explicit = "mesh_radial_segments" in params
     by_order = _segments_param(params.get("mesh_radial_segments", DEFAULT_RADIAL_SEGMENTS))
     min_segments = params.get("mesh_min_segments", 3)
@@ -66,6 +73,13 @@ def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
         raise ParameterError("name", name, "a non-empty string")
     bark = bark_part(skeleton, by_order, int(min_segments), thick_more=not explicit)
     return TreeMesh(bark=bark, leaves=leaf_part(skeleton), name=name, **colours)
+
+
+def _reject_unknown_mesh_keys(params: dict) -> None:
+    unknown = sorted(key for key in params if isinstance(key, str) and key.startswith("mesh_")
+                     and key not in _MESH_KEYS)
+    if unknown:
+        raise ParameterError(unknown[0], params[unknown[0]], f"a known mesh key: one of {list(_MESH_KEYS)}")
 
 
 def _segments_param(value) -> tuple[int, ...]:
@@ -278,9 +292,11 @@ def _empty_bark() -> MeshPart:
 
 
 # Card corners as in LEAF_CARD_CORNERS: u across the width, v along the length from the stem.
-_CARD_UVS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], np.float32)
+CARD_UVS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], np.float32)
 # Two triangles per card, wound so their normal is the card's +y (T x ... see leaf_part).
-_CARD_FACES = np.array([[0, 2, 1], [0, 3, 2]], np.int64)
+CARD_FACES = np.array([[0, 2, 1], [0, 3, 2]], np.int64)
+CARD_UVS.setflags(write=False)
+CARD_FACES.setflags(write=False)
 
 
 def leaf_part(skeleton: Skeleton) -> MeshPart:
@@ -304,6 +320,6 @@ def leaf_part(skeleton: Skeleton) -> MeshPart:
         raise MeshBuildError(f"leaf {i} (node {int(skeleton.leaf_node[i])}) has a transform that maps the "
                              f"card to zero area; leaf transforms need non-zero width and length")
     normal = np.repeat(normal / length[:, None], 4, axis=0)
-    faces = (_CARD_FACES[None, :, :] + 4 * np.arange(count)[:, None, None]).reshape(-1, 3)
-    return MeshPart(corners.reshape(-1, 3), faces, normal, np.tile(_CARD_UVS, (count, 1)),
+    faces = (CARD_FACES[None, :, :] + 4 * np.arange(count)[:, None, None]).reshape(-1, 3)
+    return MeshPart(corners.reshape(-1, 3), faces, normal, np.tile(CARD_UVS, (count, 1)),
                     attributes={"node": np.repeat(skeleton.leaf_node, 4).astype(np.int32)})

@@ -3,8 +3,8 @@ and PBR textures with season variants.
 """
 from __future__ import annotations
 
-from .lod import (build_lod, card_clumps, CARDS_PER_CLUSTER, CLUMP_ATTRIBUTE, LOD_NODE_STEPS, LOD_SIDES,
-    LOD_SWITCH_PX, LodBudgetError, LodLevel, metres_per_pixel, nearest_kept_ancestor, simplify_skeleton,
+from .lod import (build_lod, card_clumps, CLUMP_ATTRIBUTE, LOD_NODE_STEPS, LOD_SIDES, LOD_SWITCH_PX,
+    LodBudgetError, LodLevel, metres_per_pixel, nearest_kept_ancestor, simplify_skeleton, subtree_maximum,
     TOLERANCE_LADDER_PX, TreeLods)
 from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
 from .wind import branch_phases, branch_pivots, GOLDEN_RATIO_CONJUGATE, wind_attributes, WIND_LAYOUT
@@ -14,7 +14,7 @@ from .pbr_textures import bark_maps, BarkMaps, leaf_atlas, season_leaf_colour, S
 __all__ = [
     "LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
     "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
-    "CARDS_PER_CLUSTER", "CLUMP_ATTRIBUTE", "card_clumps", "LeafCards", "CLUSTER_AREA_GAIN", "WIND_LAYOUT",
+    "CLUMP_ATTRIBUTE", "card_clumps", "subtree_maximum", "LeafCards", "CLUSTER_AREA_GAIN", "WIND_LAYOUT",
     "branch_pivots", "branch_phases", "wind_attributes", "GOLDEN_RATIO_CONJUGATE", "collision_capsules",
     "capsule_mesh", "TRUNK_CAPSULES", "BRANCH_CAPSULES", "MAX_BRANCHES", "BarkMaps", "bark_maps", "leaf_atlas",
     "SEASON_LEAF_COLOURS", "SEASONS", "season_leaf_colour",

@@ -15,9 +15,8 @@ __all__ = ["LeafCards", "CLUSTER_AREA_GAIN"]
 # Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
 _SPREAD_SPAN = 2.0 * np.sqrt(3.0)
 # By default a cluster card covers this many times its leaves' estimated covered area (within their spread): from
-# afar the gaps between a cluster's leaves close, so its outline is more than its leaf area (measured: 1.5 raises
-# the LOD1/LOD2 min IoU of maple .899 -> .911 / .866 -> .880 and pine .885 -> .896 / .856 -> .882; as one value
-# for 12 presets it still beats 1.0, 1.25 and 2.0 once each level's bark share is fitted).
+# afar the gaps between a cluster's leaves close, so its outline is more than its leaf area. Chosen by the least
+# LOD silhouette IoU against other gains (docs/library.md, "Levels of detail").
 CLUSTER_AREA_GAIN = 1.5
 # Grid cell sizes tried: the finest (span / 4096) times this factor to an integer power.
 _CELL_STEP = 1.02

@@ -12,15 +12,16 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import TreefarmError
-from ..meshing.tubes_and_cards import DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
+from ..meshing.tubes_and_cards import CARD_FACES, DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
 from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
 from ..geometry.polyline_simplify import simplification_keys
+from ..geometry.topology import depth_levels, node_depths
 from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh
 
 __all__ = ["LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
            "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
-           "CARDS_PER_CLUSTER", "CLUMP_ATTRIBUTE", "card_clumps"]
+           "CLUMP_ATTRIBUTE", "card_clumps", "subtree_maximum"]
 
 # Tube sides by branch order at each level (index = level - 1): the trunk keeps the most.
 LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
@@ -37,8 +38,8 @@ THICK_TOLERANCE_PX = 1.0
 # Fallback only (budgets too small for the tolerance ladder): keep every n-th node along a branch by level.
 LOD_NODE_STEPS = (2, 3, 4)
 _MAX_NODE_STEP = 32
-# A cluster is drawn as one card (2 triangles).
-CARDS_PER_CLUSTER = 1
+# A cluster is drawn as one card: its triangles.
+_CARD_TRIANGLES = len(CARD_FACES)
 # Per-vertex leaf attribute of LOD meshes: 1 where a card merges several leaves (textured as a clump), 0 where it
 # is one leaf (textured as that leaf); LOD0's cards have none (every card is one leaf).
 CLUMP_ATTRIBUTE = "clump"
@@ -56,11 +57,11 @@ class LodLevel:
     """One level of detail.
 
     level         : 1, 2, 3, ...
-    skeleton      : the simplified skeleton; its leaves are the cluster cards (CARDS_PER_CLUSTER per cluster).
+    skeleton      : the simplified skeleton; its leaves are the cluster cards (one per cluster).
     mesh          : its TreeMesh (bark with `order`/`branch`, cards with `node` and `clump` attributes; `clump` is
                     1 on the vertices of cards that merge several leaves, 0 on cards that are one leaf).
     original_node : (N',) int32, the LOD0 node each kept node is.
-    n_clusters    : leaf clusters (cards / CARDS_PER_CLUSTER).
+    n_clusters    : leaf clusters (one card each).
     """
 
     level: int
@@ -262,19 +263,13 @@ def _branch_sides(skeleton: Skeleton, sides_by_order, metres_per_px: float) -> t
     return sides.astype(np.int64), thick
 
 
-def _subtree_maximum(value: np.ndarray, parent: np.ndarray) -> np.ndarray:
+def subtree_maximum(value: np.ndarray, parent: np.ndarray) -> np.ndarray:
     """(B,) float64: the largest value in each branch's subtree (itself and every branch growing from it, parent
     (B,) int, -1 at the root), so ranking by it puts a branch before everything on it: keeping the largest
     first never keeps a branch without the one it grows from, nor drops a stub that carries a long limb."""
     value = np.asarray(value, np.float64).copy()
     parent = np.asarray(parent, np.int64)
-    depth = np.zeros(len(parent), np.int64)
-    ancestor = parent.copy()
-    while (live := ancestor >= 0).any():
-        depth[live] += 1
-        ancestor[live] = parent[ancestor[live]]
-    for level in range(int(depth.max(initial=0)), 0, -1):  # deepest first: one pass per branching depth
-        at = np.flatnonzero(depth == level)
+    for at in depth_levels(node_depths(parent), tips_first=True):  # one pass per branching depth
         np.maximum.at(value, parent[at], value[at])
     return value
 
@@ -299,7 +294,7 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
     area = length_px * width_px
     parent = _branch_parent(skeleton)
     area[0] = np.inf  # the trunk always stays
-    rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -_subtree_maximum(area, parent)))
+    rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -subtree_maximum(area, parent)))
     area[0] = 0.0
     junction = skeleton.parent[starts]
     # A kept child needs its junction node in the parent: where a tolerance drops that node, it is charged to
@@ -378,9 +373,8 @@ class TreeLods:
         if key not in self.barks:  # the bark does not depend on the cards' gain: fitted once per share
             self.barks[key] = _fit_bark(self, level, budget, target, int(switch_px), bark_share)
         simplified, original, leaf_anchor, bark = self.barks[key]
-        leaf_tris_per_cluster = 2 * CARDS_PER_CLUSTER
         leaf_budget = target - bark.n_faces
-        n_clusters = leaf_budget // leaf_tris_per_cluster if skeleton.n_leaves else 0
+        n_clusters = leaf_budget // _CARD_TRIANGLES if skeleton.n_leaves else 0
         if skeleton.n_leaves and n_clusters < 1:
             raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
                                  f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
@@ -392,7 +386,7 @@ class TreeLods:
                           {**leaves.attributes, CLUMP_ATTRIBUTE: np.repeat(merged, 4).astype(np.uint8)})
         mesh = TreeMesh(bark=bark, leaves=leaves, bark_color=lod0.bark_color,
                         leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
-        return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards) // CARDS_PER_CLUSTER)
+        return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards))
 
 
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None,
@@ -403,7 +397,7 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, swi
     The bark gets `bark_share` of the budget (default: its share of LOD0's triangles) and draws it with the
     least estimated silhouette error (see `_fit_bark_by_tolerance`): Douglas-Peucker nodes within a screen
     tolerance, branches kept by the area they draw. The leaves get the rest of the budget as cluster cards,
-    each `card_area_gain` times the area its leaves cover (see `species.leaf_clusters`). Raises LodBudgetError
+    each `card_area_gain` times the area its leaves cover (see `species.studio.leaf_clusters`). Raises LodBudgetError
     when nothing fits.
     """
     return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share, card_area_gain)
@@ -414,7 +408,7 @@ def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px:
     `bark_share` of `target` triangles, leaving at least one card for the leaves; LodBudgetError if nothing fits."""
     skeleton, total0 = lods.skeleton, lods.lod0.n_faces
     sides = LOD_SIDES[level - 1]
-    min_leaf_tris = 2 * CARDS_PER_CLUSTER if skeleton.n_leaves else 0
+    min_leaf_tris = _CARD_TRIANGLES if skeleton.n_leaves else 0
     bark_target = max(int(target * bark_share), 0)
     if skeleton.n_leaves:
         bark_target = min(bark_target, target - min_leaf_tris)

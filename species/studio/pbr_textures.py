@@ -12,7 +12,8 @@ from functools import lru_cache
 import numpy as np
 
 from ..errors import ParameterError
-from ..meshing.textures import BARK_TEXTURE_SEED, _periodic_noise, leaf_texture, linear_to_srgb
+from ..meshing.textures import (BARK_TEXTURE_SEED, bark_colour, fissure_depth, leaf_texture, linear_to_srgb,
+                                periodic_noise)
 
 __all__ = ["BarkMaps", "bark_maps", "leaf_atlas", "SEASON_LEAF_COLOURS", "SEASONS", "season_leaf_colour"]
 
@@ -55,18 +56,17 @@ def _bark_maps(species_name: str, color: tuple[float, float, float], size: int) 
     """
     if not 16 <= size <= 4096 or size % 2:
         raise ParameterError("texture_size", size, "an even integer in [16, 4096]")
-    rgb = np.asarray(color, np.float64)
     rng = np.random.default_rng([BARK_TEXTURE_SEED, zlib.crc32(species_name.encode())])
     shape = (size, size // 2)
     scale = size / 256.0
+    # The look's numbers are drawn between the noise fields, in this order: the same name, the same bytes.
     fissure_spacing = rng.uniform(2.0, 5.0) * scale
-    streaks = _periodic_noise(rng, shape, sigma_rows=rng.uniform(10, 24) * scale, sigma_cols=fissure_spacing)
-    fissure = np.exp(-(streaks / rng.uniform(0.3, 0.6)) ** 2)
-    plates = _periodic_noise(rng, shape, sigma_rows=rng.uniform(4, 9) * scale, sigma_cols=rng.uniform(3, 6) * scale)
-    grain = _periodic_noise(rng, shape, sigma_rows=1.2 * scale, sigma_cols=0.6 * scale)
+    streaks = periodic_noise(rng, shape, sigma_rows=rng.uniform(10, 24) * scale, sigma_cols=fissure_spacing)
+    fissure = fissure_depth(streaks, rng.uniform(0.3, 0.6))
+    plates = periodic_noise(rng, shape, sigma_rows=rng.uniform(4, 9) * scale, sigma_cols=rng.uniform(3, 6) * scale)
+    grain = periodic_noise(rng, shape, sigma_rows=1.2 * scale, sigma_cols=0.6 * scale)
     height = 1.0 - fissure + 0.25 * plates + 0.05 * grain  # relative bark relief, 1 on the plates
-    shade = 1.05 - 0.75 * fissure + 0.15 * plates + 0.08 * grain
-    base = np.round(linear_to_srgb(rgb[None, None, :] * np.clip(shade, 0, 1.6)[..., None]) * 255).astype(np.uint8)
+    base = bark_colour(color, fissure, plates, grain)
     strength = rng.uniform(2.0, 4.0) / scale
     # Central differences with wrap-around, so the normal map tiles like the height field.
     du = 0.5 * (np.roll(height, -1, axis=1) - np.roll(height, 1, axis=1))

@@ -1,16 +1,28 @@
-"""Weber & Penn (1995) in the parameterisation of Blender's Sapling add-on: the dictionary schema, the
-stems and leaves of each level, the crown shapes, and the presets.
+"""Weber & Penn (1995) in the parameterisation of Blender's Sapling add-on: the dictionary schema and the
+parameter object read from it, the stems and leaves of each level, the crown shapes, assembly into a Skeleton,
+and the presets.
 """
 from __future__ import annotations
 
-from .generator import grow, grow_validated, WeberPennTree
+from .generator import grow, grow_tree, grow_validated
 from .schema import REALIZED_DRAWS, SAPLING_KEYS, SCHEMA, validate
-from .stems import grow_level, Level
+from .params import LeafParams, PruneParams, RealizedDraws, StemLevelParams, WeberPennParams
+from .stems import grow_level, Level, MAX_STEMS_PER_LEVEL
+from .stem_directions import (attract_up, bent_direction, branch_turn, crown_taper, segment_frames, split_angle,
+                              spread_angle, world_directions)
+from .child_points import child_points, ChildPoints
 from .leaves import leaf_transforms
+from .assembly import assemble, MIN_RADIUS, node_key, SkeletonAssemblyError, WeberPennTree
 from .shapes import auto_taper, SHAPE_NAMES, shape_ratio
 from .presets import make_preset
 
 __all__ = [
-    "grow", "grow_validated", "WeberPennTree", "validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS", "Level",
-    "grow_level", "leaf_transforms", "shape_ratio", "auto_taper", "SHAPE_NAMES", "make_preset",
+    "grow", "grow_tree", "grow_validated", "validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS",
+    "WeberPennParams", "StemLevelParams", "LeafParams", "PruneParams", "RealizedDraws",
+    "Level", "grow_level", "MAX_STEMS_PER_LEVEL",
+    "attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "branch_turn",
+    "segment_frames", "crown_taper",
+    "ChildPoints", "child_points", "leaf_transforms",
+    "WeberPennTree", "assemble", "node_key", "SkeletonAssemblyError", "MIN_RADIUS",
+    "shape_ratio", "auto_taper", "SHAPE_NAMES", "make_preset",
 ]

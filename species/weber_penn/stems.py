@@ -1,7 +1,7 @@
 """Growing one level of Weber-Penn stems in lockstep: curvature, splits, vertical attraction, envelope pruning.
 
-`grow_level(stems, ...)` takes the new stems of a level (`Level.new_stems`) and returns them grown, with the
-split-off stems appended; points live in dense (S, curveRes + 1) grids indexed by growth step.
+`grow_level(stems, params, order, ...)` takes the new stems of a level (`Level.new_stems`) and returns them grown,
+with the split-off stems appended; points live in dense (S, curveRes + 1) grids indexed by growth step.
 """
 from __future__ import annotations
 
@@ -9,67 +9,75 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from ..geometry import rotations as rot
 from ..errors import TreeTooLargeError
+from ..geometry import rotations as rot
+from ..geometry.vectors import unit_vectors
+from .params import StemLevelParams, WeberPennParams
 from .shapes import shape_ratio
+from .stem_directions import (bent_direction, branch_turn, crown_taper, segment_frames, split_angle, spread_angle,
+                              world_directions)
 
-__all__ = ["Level", "grow_level"]
+__all__ = ["Level", "grow_level", "MAX_STEMS_PER_LEVEL"]
 
 TAU = 2 * np.pi
-Z_AXIS = np.array([0.0, 0.0, 1.0])
 MAX_STEMS_PER_LEVEL = 100_000  # beyond this a tree no longer fits a farm worker's memory or a GLB reader
 
 
 @dataclass
 class Level:
-    """The stems (splines) of one level, arrays over S splines; a split appends a row."""
+    """The stems (splines) of one level, arrays over S splines; a split appends a row.
 
-    seg_max: int
-    seg_len: np.ndarray        # (S,) metres per segment
-    curv: np.ndarray           # (S,) radians of bend per segment
-    rad_s: np.ndarray          # (S,) radius at the stem start
-    rad_e: np.ndarray          # (S,) radius at the stem end
-    children: np.ndarray       # (S,) child stems (or leaves) this stem's family sprouts
-    family: np.ndarray         # (S,) int, the original stem a split descends from
-    k_start: np.ndarray        # (S,) int, growth step at which the spline starts
-    offset_len: np.ndarray     # (S,) metres of family stem below the spline start
-    collar: np.ndarray         # (S,) bool, stem sprouted from a parent (owns a collar node)
-    parent_spline: np.ndarray  # (S,) int, global id of the parent spline (-1: trunk or a split, see parent_row)
-    parent_row: np.ndarray     # (S,) int, row of the spline a split came from (-1 otherwise)
-    parent_u: np.ndarray       # (S,) position of the start on the parent spline, in steps
-    attach_points: np.ndarray  # (S, 3) where a sprouted stem leaves its parent's axis
-    attach_radii: np.ndarray   # (S,) parent radius there
-    collar_points: np.ndarray  # (S, 3) the sprouted stem's own first node, at the parent's surface
-    points: np.ndarray         # (S, K + 1, 3) positions by growth step
-    radii: np.ndarray          # (S, K + 1)
-    valid: np.ndarray          # (S, K + 1) bool
-    spline_id: np.ndarray      # (S,) int, global spline id (set after growth)
+    A spline's points are indexed by growth step, 0..n_segments; a split's own points start at `first_step`.
+    """
+
+    n_segments: int                # the level's curveRes: growth steps of every spline
+    segment_length: np.ndarray     # (S,) metres per segment
+    curvature: np.ndarray          # (S,) radians of bend per segment
+    start_radius: np.ndarray       # (S,) metres, radius at the stem start
+    end_radius: np.ndarray         # (S,) metres, radius at the stem end
+    children: np.ndarray           # (S,) child stems (or leaves) this stem's family sprouts
+    family: np.ndarray             # (S,) int, the original stem a split descends from
+    first_step: np.ndarray         # (S,) int, growth step at which the spline starts
+    offset_length: np.ndarray      # (S,) metres of family stem below the spline start
+    collar: np.ndarray             # (S,) bool, stem sprouted from a parent (owns a collar node)
+    parent_spline: np.ndarray      # (S,) int, global id of the parent spline (-1: trunk or a split, see parent_row)
+    parent_row: np.ndarray         # (S,) int, row of the spline a split came from (-1 otherwise)
+    parent_u: np.ndarray           # (S,) position of the start on the parent spline, in steps
+    attach_points: np.ndarray      # (S, 3) metres, where a sprouted stem leaves its parent's axis
+    attach_radii: np.ndarray       # (S,) metres, parent radius there
+    collar_points: np.ndarray      # (S, 3) metres, the sprouted stem's own first node, at the parent's surface
+    start_direction: np.ndarray    # (S, 3) unit direction the spline starts growing in
+    points: np.ndarray             # (S, K + 1, 3) metres, positions by growth step
+    radii: np.ndarray              # (S, K + 1) metres
+    valid: np.ndarray              # (S, K + 1) bool
+    spline_id: np.ndarray          # (S,) int, global spline id (set after growth)
 
     @classmethod
-    def new_stems(cls, co, direction, seg_len, curv, rad_s, rad_e, children, first_radius, parent_spline,
-                  parent_u, collar: bool, seg_max: int, parent_radius=None) -> "Level":
-        s = len(co)
-        k = seg_max
-        direction = direction / np.linalg.norm(direction, axis=1, keepdims=True)
-        points = np.zeros((s, k + 1, 3))
-        radii = np.zeros((s, k + 1))
-        valid = np.zeros((s, k + 1), bool)
-        points[:, 0], radii[:, 0], valid[:, 0] = co, first_radius, True
-        par_r = np.zeros(s) if parent_radius is None else np.asarray(parent_radius, np.float64)
-        collar_points = co + direction * np.minimum(par_r, 0.5 * seg_len)[:, None]
-        level = cls(seg_max=k, seg_len=seg_len.astype(np.float64), curv=curv.astype(np.float64),
-                    rad_s=rad_s.astype(np.float64), rad_e=rad_e.astype(np.float64),
-                    children=children.astype(np.float64), family=np.arange(s), k_start=np.zeros(s, np.int64),
-                    offset_len=np.zeros(s), collar=np.full(s, collar), parent_spline=np.asarray(parent_spline),
-                    parent_row=np.full(s, -1), parent_u=np.asarray(parent_u, np.float64),
-                    attach_points=np.asarray(co, np.float64), attach_radii=par_r, collar_points=collar_points,
-                    points=points, radii=radii, valid=valid, spline_id=np.arange(s))
-        level._start_dir = direction
-        return level
+    def new_stems(cls, *, start_points, directions, segment_length, curvature, start_radius, end_radius, children,
+                  first_radius, parent_spline, parent_u, collar: bool, n_segments: int,
+                  parent_radius=None) -> Level:
+        """S stems starting at `start_points` (S, 3) toward `directions` (S, 3), not grown yet."""
+        count = len(start_points)
+        directions = unit_vectors(directions)
+        points = np.zeros((count, n_segments + 1, 3))
+        radii = np.zeros((count, n_segments + 1))
+        valid = np.zeros((count, n_segments + 1), bool)
+        points[:, 0], radii[:, 0], valid[:, 0] = start_points, first_radius, True
+        parent_radius = np.zeros(count) if parent_radius is None else np.asarray(parent_radius, np.float64)
+        collar_points = start_points + directions * np.minimum(parent_radius, 0.5 * segment_length)[:, None]
+        return cls(
+            n_segments=n_segments, segment_length=segment_length.astype(np.float64),
+            curvature=curvature.astype(np.float64), start_radius=start_radius.astype(np.float64),
+            end_radius=end_radius.astype(np.float64), children=children.astype(np.float64),
+            family=np.arange(count), first_step=np.zeros(count, np.int64), offset_length=np.zeros(count),
+            collar=np.full(count, collar), parent_spline=np.asarray(parent_spline), parent_row=np.full(count, -1),
+            parent_u=np.asarray(parent_u, np.float64), attach_points=np.asarray(start_points, np.float64),
+            attach_radii=parent_radius, collar_points=collar_points, start_direction=directions, points=points,
+            radii=radii, valid=valid, spline_id=np.arange(count))
 
     @property
     def n_splines(self) -> int:
-        return len(self.seg_len)
+        return len(self.segment_length)
 
     @property
     def n_points(self) -> np.ndarray:
@@ -77,7 +85,8 @@ class Level:
 
     @property
     def rows(self) -> dict:
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "seg_max"}
+        """Every per-spline array by field name."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "n_segments"}
 
     @property
     def children_of_family(self) -> np.ndarray:
@@ -87,246 +96,336 @@ class Level:
         return out
 
 
-def _append(level: Level, new: dict) -> Level:
-    merged = {k: np.concatenate([v, new[k]]) for k, v in level.rows.items()}
-    out = Level(seg_max=level.seg_max, **merged)
-    out._start_dir = getattr(level, "_start_dir", None)
-    return out
+@dataclass
+class _GrowthFront:
+    """Where each spline of a growing level has got to, arrays over its S splines (the Level's rows)."""
+
+    positions: np.ndarray              # (S, 3) metres, the last grown point
+    directions: np.ndarray             # (S, 3) unit direction of the last segment
+    bend_sign: np.ndarray              # (S,) +1 or -1: the curvature variation alternates every segment
+    split_before: np.ndarray           # (S,) int 0 or 1, the spline split at the previous step
+    last_split_turn: np.ndarray        # (S,) radians, rotation of the latest split (NaN before the first)
+    family_segment_length: np.ndarray  # (S,) metres, the family's segment length before variation
+
+    @classmethod
+    def start(cls, level: Level, family_segment_length: np.ndarray) -> _GrowthFront:
+        count = level.n_splines
+        return cls(positions=level.points[:, 0].copy(), directions=level.start_direction.copy(),
+                   bend_sign=np.ones(count), split_before=np.zeros(count, np.int64),
+                   last_split_turn=np.full(count, np.nan), family_segment_length=family_segment_length.copy())
+
+    def advance(self, positions: np.ndarray, directions: np.ndarray, splitting: np.ndarray) -> None:
+        self.positions, self.directions = positions, directions
+        self.split_before = splitting.astype(np.int64)
+
+    def add(self, split_off: _SplitOff) -> None:
+        """Append the splines that split off this step, as having just split."""
+        count = len(split_off.directions)
+        self.positions = np.concatenate([self.positions, split_off.rows["points"][:, split_off.step + 1]])
+        self.directions = np.concatenate([self.directions, split_off.directions])
+        self.bend_sign = np.concatenate([self.bend_sign, np.ones(count)])
+        self.split_before = np.concatenate([self.split_before, np.ones(count, np.int64)])
+        self.last_split_turn = np.concatenate([self.last_split_turn, split_off.last_split_turn])
+        self.family_segment_length = np.concatenate([self.family_segment_length, split_off.family_segment_length])
 
 
-def _up_curve(v: np.ndarray, attract: float, seg_max: int) -> np.ndarray:
-    """Sapling's vertical attraction: turn each unit direction toward (or, if negative, away from) world up.
+@dataclass(frozen=True)
+class _SegmentTurns:
+    """One growth step's orientation of every spline, shared by its continuing stem and its split-offs."""
 
-    Sapling turns about the tracking frame's x axis, by attractUp * declination * |frame y . up| / curveRes;
-    that frame's y is world up projected off the direction, so the turn is in the vertical plane.
-    """
-    if attract == 0:
-        return v
-    dz = np.clip(v[:, 2], -1.0, 1.0)
-    sin_dec = np.sqrt(1.0 - dz * dz)
-    dec = np.arccos(dz)
-    angle = attract * dec * sin_dec / seg_max
-    angle = np.where(-dec + angle < -np.pi, -np.pi + dec, angle)
-    angle = np.where(dec - angle < 0, dec, angle)
-    up = -dz[:, None] * v
-    up[:, 2] += 1.0
-    up /= np.where(sin_dec > 1e-12, sin_dec, 1.0)[:, None]
-    return np.cos(angle)[:, None] * v + np.sin(angle)[:, None] * up
+    step: int
+    frames: np.ndarray         # (S, 3, 3) each spline's frame for the segment
+    bend: np.ndarray           # (S,) radians, bend in the stem's plane
+    bend_across: np.ndarray    # (S,) radians, bend across it
+    split_angle: np.ndarray    # (S,) radians between a split and its stem (0 where none splits)
+    turn: np.ndarray           # (S,) radians, rotation of a split around the stem (0 where none splits)
+    length_factor: np.ndarray  # (S,) factor on the segment length (the trunk's crown taper; 1 for branches)
 
 
-def _bent(bend: np.ndarray, across: np.ndarray) -> np.ndarray:
-    """(N, 3) = Ry(across) @ Rx(bend) @ z: a stem's next direction in its own frame."""
-    cb = np.cos(bend)
-    return np.stack([cb * np.sin(across), -np.sin(bend), cb * np.cos(across)], axis=1)
+@dataclass(frozen=True)
+class _SplitOff:
+    """The splines that split off at one step: their Level rows and their growth-front state."""
+
+    step: int
+    rows: dict                         # Level field name -> (C, ...) array
+    directions: np.ndarray             # (C, 3) unit direction of the first segment
+    last_split_turn: np.ndarray        # (C,) radians
+    family_segment_length: np.ndarray  # (C,) metres
 
 
-def _unit(v):
-    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+def _append(level: Level, new_rows: dict) -> Level:
+    merged = {name: np.concatenate([values, new_rows[name]]) for name, values in level.rows.items()}
+    return Level(n_segments=level.n_segments, **merged)
 
 
-def _grow_once(stems: Level, p, draws, n, scale_val, close_tip, scale, rng) -> Level:
-    """Grow every stem of the level through all its segments; `scale` (S,) scales segment lengths."""
-    k_max = stems.seg_max
-    lv = p["lengthV"][n]
-    level = replace(stems, **{k: v.copy() for k, v in stems.rows.items()})
-    level._start_dir = stems._start_dir
-    family_seg = stems.seg_len * scale  # Sapling's stemsegL: the family's length before variation
-    level.seg_len = family_seg * (rng.uniform(1 - lv, 1 + lv, len(family_seg)) if lv else 1.0)
-    s = level.n_splines
-    pos = level.points[:, 0].copy()
-    direction = level._start_dir.copy()
-    sign = np.ones(s)
-    split_last = np.zeros(s, np.int64)
-    r_last = np.full(s, np.nan)
-    seg_family = family_seg.copy()
-    cv1 = draws["curveV1"][n] / k_max
-    cv2 = draws["curveV2"][n] / k_max
-    split_angle = np.radians(p["splitAngle"][n])
-    angle_base = draws["sign1"] * (split_angle + draws["splitAngleV1"][n])
-    spread = draws["sign2"] * (split_angle + draws["splitAngleV2"][n])
-    branch_turn = np.radians(p["rotate"][0] + p["rotateV"][0])
-    length_prod = float(np.prod(p["length"][: n + 1]))
-    for k in range(k_max):
-        kp = k / (k_max - 1) if k_max > 1 else 1.0
-        split_value = p["segSplits"][n]
-        if n == 0:
-            split_value = max(((2 * p["splitBias"]) * (kp - 0.5) + 1) * split_value, 0.0)
-        split_val = np.where(split_last == 0, split_value * 1.33, split_value * split_value)
-        n_split = _split_counts(k, k_max, n, p, split_val, level.seg_len, scale_val, length_prod, draws, rng)
-        if k == int(k_max / 2 + 0.5) and p["curveBack"][n] != 0:
-            level.curv += 2 * np.radians(p["curveBack"][n]) / k_max
-        s_curv = level.curv if not (n == 0 and kp <= p["splitHeight"]) else np.zeros(s)
-        bend = s_curv + cv1 * kp * sign
-        bend_across = cv2 * kp * sign
-        sign = -sign
-        frames = rot.tilt_frames(direction) if n == 0 else rot.track_frames(direction)
-        if n == 0:
-            dec = np.degrees(rot.declination(direction)) / 180
-            tf = np.maximum(0.1, 1 - dec ** 2 * p["taperCrown"] * 30)
-        else:
-            tf = np.ones(s)
-        out_att = p["attractOut"][n]
-        if n > 0 and kp > 0 and out_att > 0:
-            azimuth = np.arctan2(pos[:, 0], -pos[:, 1]) + TAU
-            euler = rot.euler_xyz(frames, azimuth)
-            fac = kp * out_att
-            x = np.sin(euler[:, 2]) + (np.sin(azimuth) - np.sin(euler[:, 2])) * fac
-            y = np.cos(euler[:, 2]) + (np.cos(azimuth) - np.cos(euler[:, 2])) * fac
-            euler[:, 2] = np.arctan2(x, y)
-            frames = rot.from_euler_xyz(euler)
-        splitting = n_split > 0
-        turn = np.zeros(s)
-        angle = np.zeros(s)
-        if splitting.any():
-            angle[splitting] = angle_base
-            if n > 0:
-                dec_deg = np.degrees(rot.declination(frames[splitting][:, :, 2]))
-                angle[splitting] *= np.maximum(1 - dec_deg / 90, 0) * 0.67 + 0.33
-            fresh = splitting & np.isnan(r_last)
-            r_last[fresh] = draws["rLastAng"][n]
-            turn[splitting] = r_last[splitting] + branch_turn
-            r_last[splitting] = turn[splitting]
-        # The continuing stem of every spline (turn and spread are 0 where it does not split).
-        local = _bent(np.where(splitting, -angle, 0.0) + bend, np.broadcast_to(bend_across, (s,)))
-        if n == 0:
-            local = rot.premul("z", turn, local)
-        else:
-            local = rot.premul("y", -np.where(splitting, spread, 0.0), local)
-        grow_dir = _unit(_up_curve(rot.apply(frames, local), p["attractUp"][n], k_max))
-        new_pos = pos + grow_dir * (level.seg_len * tf)[:, None]
-        radius = level.rad_s * (1 - (k + 1) / k_max) + level.rad_e * ((k + 1) / k_max)
-        if close_tip and k == k_max - 1:
-            radius = np.zeros(s)
-        level.points[:, k + 1], level.radii[:, k + 1], level.valid[:, k + 1] = new_pos, radius, True
-        clones = None
-        if splitting.any():
-            clones = _clones(level, np.flatnonzero(splitting), n_split, k, n, frames, bend, bend_across, angle,
-                             spread, turn, tf, seg_family, pos, p, rng)
-        pos, direction = new_pos, grow_dir
-        split_last = splitting.astype(np.int64)
-        if clones is not None:
-            new_rows, clone_dir = clones
-            level = _append(level, new_rows)
-            pos = np.concatenate([pos, new_rows["points"][:, k + 1]])
-            direction = np.concatenate([direction, clone_dir])
-            sign = np.concatenate([sign, np.ones(len(clone_dir))])
-            split_last = np.concatenate([split_last, np.ones(len(clone_dir), np.int64)])
-            r_last = np.concatenate([r_last, new_rows.pop("_r_last")])
-            seg_family = np.concatenate([seg_family, new_rows.pop("_seg_family")])
-            s = level.n_splines
-            if s > MAX_STEMS_PER_LEVEL:
-                raise TreeTooLargeError(
-                    f"level {n} grew {s} stems (limit {MAX_STEMS_PER_LEVEL}): segSplits[{n}] = "
-                    f"{p['segSplits'][n]} and curveRes[{n}] = {k_max} split too often; lower them")
-    return level
+def _length_factors(stem_params: StemLevelParams, count: int, rng: np.random.Generator) -> np.ndarray:
+    """(count,) random factors on segment lengths, 1 +- lengthV."""
+    variation = stem_params.length_variation
+    return rng.uniform(1 - variation, 1 + variation, count) if variation else np.ones(count)
 
 
-def _split_counts(k, k_max, n, p, split_val, seg_len, scale_val, length_prod, draws, rng) -> np.ndarray:
-    s = len(split_val)
-    if k == 0:
-        return np.zeros(s, np.int64)
-    if n == 0 and k < (k_max - 1) * p["splitHeight"] and k != 1:
-        return np.zeros(s, np.int64)
-    if k == 1 and n == 0:
-        return np.full(s, p["baseSplits"], np.int64)
-    forced = n == 0 and k == int((k_max - 1) * p["splitHeight"]) + 1
-    prob = split_val
-    if n >= 1 and p["splitByLen"]:
-        prob = split_val * (seg_len * k_max / scale_val) / length_prod
-    draw = draws["rSplits2"] if draws["rSplits2"] is not None else rng.random(s)
-    count = (draw < prob).astype(np.int64)
-    if forced:
-        count = np.where(split_val > 0, 1, count)
-    return count
+def _radius_at(start_radius: np.ndarray, end_radius: np.ndarray, fraction: float) -> np.ndarray:
+    """Radii a `fraction` of the way from the stem start to its end (linear taper)."""
+    return start_radius * (1 - fraction) + end_radius * fraction
 
 
-def _clones(level, rows, n_split, k, n, frames, bend, bend_across, angle, spread, turn, tf, seg_family, pos,
-            p, rng):
-    """New splines split off at step k (Sapling's growSpline with numSplit > 0)."""
-    m = n_split[rows]
-    parent = np.repeat(rows, m)
-    i = np.arange(len(parent)) - np.repeat(np.cumsum(m) - m, m)
-    lv = p["lengthV"][n]
-    len_var = rng.uniform(1 - lv, 1 + lv, len(parent)) if lv else np.ones(len(parent))
-    b_scale = np.minimum(len_var * tf[parent], 1.0)
-    local = _bent(angle[parent] + bend[parent], np.broadcast_to(bend_across, bend.shape)[parent])
-    if n == 0:
-        around = np.pi - (TAU / (m[np.searchsorted(rows, parent)] + 1)) * (i + 1)
-        local = rot.premul("z", around + turn[parent], local)
-    else:
-        local = rot.premul("y", np.full(len(parent), spread), local)
-    v = _unit(_up_curve(rot.apply(frames[parent], local), p["attractUp"][n], level.seg_max))
-    seg_len = seg_family[parent] * len_var
-    end = pos[parent] + v * (seg_len * tf[parent])[:, None]
-    k_max = level.seg_max
-    r_now = (level.rad_s[parent] * (1 - k / k_max) + level.rad_e[parent] * (k / k_max)) * b_scale
-    r_next = (level.rad_s[parent] * (1 - (k + 1) / k_max) + level.rad_e[parent] * ((k + 1) / k_max)) * b_scale
-    c = len(parent)
-    points = np.zeros((c, k_max + 1, 3))
-    radii = np.zeros((c, k_max + 1))
-    valid = np.zeros((c, k_max + 1), bool)
-    points[:, k], points[:, k + 1] = pos[parent], end
-    radii[:, k], radii[:, k + 1] = r_now, r_next
-    valid[:, k], valid[:, k + 1] = True, True
-    n_points_before = level.valid[parent].sum(axis=1) - 1  # the step's new point is already in place
-    new = {
-        "seg_len": seg_len, "curv": level.curv[parent], "rad_s": level.rad_s[parent] * b_scale,
-        "rad_e": level.rad_e[parent] * b_scale, "children": level.children[parent],
-        "family": level.family[parent], "k_start": np.full(c, k, np.int64),
-        "offset_len": level.offset_len[parent] + level.seg_len[parent] * (n_points_before - 1),
-        "collar": np.zeros(c, bool), "parent_spline": np.full(c, -1), "parent_row": parent,
-        "parent_u": np.full(c, float(k)), "attach_points": pos[parent], "attach_radii": r_now,
-        "collar_points": pos[parent], "points": points, "radii": radii, "valid": valid,
-        "spline_id": np.arange(level.n_splines, level.n_splines + c),
-        "_r_last": turn[parent] + np.pi, "_seg_family": seg_family[parent],
-    }
-    return new, v
+# ---------------------------------------------------------------------------------------------- one level
+def grow_level(stems: Level, params: WeberPennParams, order: int, *, close_tip: bool, rng: np.random.Generator,
+               first_id: int = 0) -> Level:
+    """Grow the stems of branch order `order`; with pruning on, each family's length is scaled down first until
+    its tips fit the envelope. Spline ids are numbered from `first_id`."""
+    level_seed = int(rng.integers(0, 2**63 - 1))
+    length_scale = np.ones(stems.n_splines)
+    if params.prune.enabled:
+        length_scale = _pruned_length_scale(stems, params, order, close_tip=close_tip, level_seed=level_seed)
+    level = _grow_splines(stems, params, order, length_scale=length_scale, close_tip=close_tip,
+                          rng=np.random.default_rng(level_seed))
+    return _numbered(level, first_id)
 
 
-def _inside_envelope(level: Level, p, n, scale_val, prune_base) -> np.ndarray:
+def _pruned_length_scale(stems: Level, params: WeberPennParams, order: int, *, close_tip: bool,
+                         level_seed: int) -> np.ndarray:
+    """(F,) factor on each family's length that brings its tips inside the envelope, by bisection; every trial
+    grows from the same seed so only the length differs."""
+    n_families = stems.n_splines
+    prune_base = min(params.prune.base, params.base_size)
+    scale = np.ones(n_families)
+    low, high, previous_high = np.zeros(n_families), np.ones(n_families), np.ones(n_families)
+    active = np.ones(n_families, bool)
+    for _ in range(40):
+        if not active.any():
+            break
+        finishing = active & (high - low < 0.01)
+        scale = np.where(finishing, (scale - 1) * params.prune.ratio + 1, scale)
+        trial = _grow_splines(stems, params, order, length_scale=scale, close_tip=close_tip,
+                              rng=np.random.default_rng(level_seed))
+        inside = np.ones(n_families, bool)
+        np.logical_and.at(inside, trial.family, _inside_envelope(trial, params, order, prune_base))
+        search = active & ~finishing
+        shrink = search & ~inside
+        previous_high = np.where(shrink, high, previous_high)
+        high = np.where(shrink, scale, high)
+        grow_back = search & inside & (scale != 1)
+        low = np.where(grow_back, scale, low)
+        high = np.where(grow_back, previous_high, high)
+        low = np.where(search & inside & (high - low == 1), 1.0, low)
+        scale = np.where(shrink | grow_back, 0.5 * (high + low), scale)
+        active = search & (high - low > 0.005)
+    return scale
+
+
+def _inside_envelope(level: Level, params: WeberPennParams, order: int, prune_base: float) -> np.ndarray:
     """(S,) whether each spline's end lies inside Sapling's pruning envelope."""
-    ends = level.points[np.arange(level.n_splines), level.k_start + level.n_points - 1]
+    ends = level.points[np.arange(level.n_splines), level.first_step + level.n_points - 1]
     reach = np.hypot(ends[:, 0], ends[:, 1])
-    ratio = (scale_val - ends[:, 2]) / (scale_val * max(1 - prune_base, 1e-6))
-    width = p["pruneWidth"] * shape_ratio(9, ratio, None, p["pruneWidthPeak"], p["prunePowerHigh"],
-                                          p["prunePowerLow"])
-    inside = reach / scale_val < width
-    if n == 0:
-        inside |= ends[:, 2] < prune_base * scale_val
+    scale = params.tree_scale
+    ratio = (scale - ends[:, 2]) / (scale * max(1 - prune_base, 1e-6))
+    prune = params.prune
+    width = prune.width * shape_ratio(9, ratio, None, prune.width_peak, prune.power_high, prune.power_low)
+    inside = reach / scale < width
+    if order == 0:
+        inside |= ends[:, 2] < prune_base * scale
     return inside
 
 
-def grow_level(stems: Level, p, draws, n, scale_val, base_size, close_tip, rng, first_id: int = 0) -> Level:
-    """Grow a level; with `prune`, bisect each family's length scale until its tips fit the envelope."""
-    level_seed = int(rng.integers(0, 2**63 - 1))
-    n_fam = stems.n_splines
-    scale = np.ones(n_fam)
-    if p["prune"]:
-        prune_base = min(p["pruneBase"], p["baseSize"])
-        lo, hi, old_hi = np.zeros(n_fam), np.ones(n_fam), np.ones(n_fam)
-        active = np.ones(n_fam, bool)
-        for _ in range(40):
-            if not active.any():
-                break
-            finishing = active & (hi - lo < 0.01)
-            scale = np.where(finishing, (scale - 1) * p["pruneRatio"] + 1, scale)
-            trial = _grow_once(stems, p, draws, n, scale_val, close_tip, scale, np.random.default_rng(level_seed))
-            inside_spline = _inside_envelope(trial, p, n, scale_val, prune_base)
-            inside = np.ones(n_fam, bool)
-            np.logical_and.at(inside, trial.family, inside_spline)
-            search = active & ~finishing
-            shrink = search & ~inside
-            old_hi = np.where(shrink, hi, old_hi)
-            hi = np.where(shrink, scale, hi)
-            grow_back = search & inside & (scale != 1)
-            lo = np.where(grow_back, scale, lo)
-            hi = np.where(grow_back, old_hi, hi)
-            lo = np.where(search & inside & (hi - lo == 1), 1.0, lo)
-            scale = np.where(shrink | grow_back, 0.5 * (hi + lo), scale)
-            active = search & (hi - lo > 0.005)
-    level = _grow_once(stems, p, draws, n, scale_val, close_tip, scale, np.random.default_rng(level_seed))
-    rows = level.parent_row >= 0
+def _numbered(level: Level, first_id: int) -> Level:
+    """Give the splines global ids from `first_id` and point each split at its parent spline's id."""
+    is_split = level.parent_row >= 0
     level.spline_id = np.arange(level.n_splines) + first_id
-    level.parent_spline = np.where(rows, level.spline_id[np.maximum(level.parent_row, 0)], level.parent_spline)
+    level.parent_spline = np.where(is_split, level.spline_id[np.maximum(level.parent_row, 0)], level.parent_spline)
     level.collar_points = np.where(level.collar[:, None], level.collar_points, level.points[:, 0])
     return level
+
+
+def _grow_splines(stems: Level, params: WeberPennParams, order: int, *, length_scale: np.ndarray,
+                  close_tip: bool, rng: np.random.Generator) -> Level:
+    """Grow every stem of the level through all its segments; `length_scale` (S,) scales segment lengths."""
+    level = replace(stems, **{name: values.copy() for name, values in stems.rows.items()})
+    family_segment_length = stems.segment_length * length_scale  # Sapling's stemsegL: before the variation
+    level.segment_length = family_segment_length * _length_factors(params.stem_levels[order],
+                                                                   len(family_segment_length), rng)
+    front = _GrowthFront.start(level, family_segment_length)
+    for step in range(level.n_segments):
+        level = _grow_segment(level, front, params, order, step=step, close_tip=close_tip, rng=rng)
+    return level
+
+
+def _grow_segment(level: Level, front: _GrowthFront, params: WeberPennParams, order: int, *, step: int,
+                  close_tip: bool, rng: np.random.Generator) -> Level:
+    """Grow every spline by the segment from `step` to `step + 1`; returns the level with its split-offs added."""
+    n_segments = level.n_segments
+    progress = step / (n_segments - 1) if n_segments > 1 else 1.0
+    split_counts = _split_counts(level, front, params, order, step=step, progress=progress, rng=rng)
+    curve_back = params.stem_levels[order].curve_back
+    if step == int(n_segments / 2 + 0.5) and curve_back != 0:
+        level.curvature += 2 * np.radians(curve_back) / n_segments
+    splitting = split_counts > 0
+    turns = _segment_turns(level, front, params, order, step=step, progress=progress, splitting=splitting)
+    front.bend_sign = -front.bend_sign
+    directions = _continuing_directions(params, order, turns, splitting, n_segments)
+    positions = front.positions + directions * (level.segment_length * turns.length_factor)[:, None]
+    _set_segment_end(level, step, positions, close_tip)
+    split_off = None
+    if splitting.any():
+        split_off = _split_off(level, front, turns, params, order, split_counts=split_counts, rng=rng)
+    front.advance(positions, directions, splitting)
+    if split_off is None:
+        return level
+    level = _append(level, split_off.rows)
+    front.add(split_off)
+    if level.n_splines > MAX_STEMS_PER_LEVEL:
+        raise TreeTooLargeError(
+            f"level {order} grew {level.n_splines} stems (limit {MAX_STEMS_PER_LEVEL}): segSplits[{order}] = "
+            f"{params.stem_levels[order].seg_splits} and curveRes[{order}] = {n_segments} split too often; "
+            f"lower them")
+    return level
+
+
+def _split_counts(level: Level, front: _GrowthFront, params: WeberPennParams, order: int, *, step: int,
+                  progress: float, rng: np.random.Generator) -> np.ndarray:
+    """(S,) int, how many stems split off each spline at `step` (Sapling: at most one, baseSplits at the trunk's
+    first step)."""
+    count = level.n_splines
+    n_segments = level.n_segments
+    if step == 0:
+        return np.zeros(count, np.int64)
+    if order == 0 and step < (n_segments - 1) * params.split_height and step != 1:
+        return np.zeros(count, np.int64)
+    if step == 1 and order == 0:
+        return np.full(count, params.base_splits, np.int64)
+    split_value = _split_value(params, order, progress, front.split_before)
+    probability = split_value
+    if order >= 1 and params.split_by_length:
+        length_product = float(np.prod(params.stem_lengths()[: order + 1]))
+        probability = split_value * (level.segment_length * n_segments / params.tree_scale) / length_product
+    threshold = params.draws.split_threshold
+    draw = threshold if threshold is not None else rng.random(count)
+    splits = (draw < probability).astype(np.int64)
+    if order == 0 and step == int((n_segments - 1) * params.split_height) + 1:  # the trunk's first split is forced
+        splits = np.where(split_value > 0, 1, splits)
+    return splits
+
+
+def _split_value(params: WeberPennParams, order: int, progress: float, split_before: np.ndarray) -> np.ndarray:
+    """(S,) Sapling's split probability: segSplits (biased along the trunk by splitBias), times 1.33 after a
+    step without a split, squared after one."""
+    seg_splits = params.stem_levels[order].seg_splits
+    if order == 0:
+        seg_splits = max(((2 * params.split_bias) * (progress - 0.5) + 1) * seg_splits, 0.0)
+    return np.where(split_before == 0, seg_splits * 1.33, seg_splits * seg_splits)
+
+
+def _segment_turns(level: Level, front: _GrowthFront, params: WeberPennParams, order: int, *, step: int,
+                   progress: float, splitting: np.ndarray) -> _SegmentTurns:
+    """The step's frames, bends, split angles and length factors; records the splits' turns in `front`."""
+    bend, bend_across = _bend_angles(level, params, order, progress=progress, bend_sign=front.bend_sign)
+    frames = segment_frames(params, order, front.directions, front.positions, progress)
+    angle, turn = _split_turns(params, order, frames, splitting, front)
+    return _SegmentTurns(step=step, frames=frames, bend=bend, bend_across=bend_across, split_angle=angle,
+                         turn=turn, length_factor=crown_taper(params, order, front.directions))
+
+
+def _bend_angles(level: Level, params: WeberPennParams, order: int, *, progress: float,
+                 bend_sign: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(S,) bend in the stem's plane and (S,) across it, radians: curvature plus the alternating variation
+    (curveV1, curveV2). The trunk below its split height does not curve."""
+    n_segments = level.n_segments
+    in_plane = params.draws.curve_variation[order] / n_segments
+    across = params.draws.curve_variation_across[order] / n_segments
+    straight = order == 0 and progress <= params.split_height
+    curvature = np.zeros(level.n_splines) if straight else level.curvature
+    return curvature + in_plane * progress * bend_sign, across * progress * bend_sign
+
+
+def _split_turns(params: WeberPennParams, order: int, frames: np.ndarray, splitting: np.ndarray,
+                 front: _GrowthFront) -> tuple[np.ndarray, np.ndarray]:
+    """(S,) split angle and (S,) turn around the stem, radians, for the splines that split now (0 elsewhere);
+    each splitting spline's turn is kept in `front.last_split_turn` for its next split."""
+    count = len(splitting)
+    angle, turn = np.zeros(count), np.zeros(count)
+    if not splitting.any():
+        return angle, turn
+    angle[splitting] = split_angle(params, order)
+    if order > 0:  # branches split less the more they lean
+        lean = np.degrees(rot.declination(frames[splitting][:, :, 2]))
+        angle[splitting] *= np.maximum(1 - lean / 90, 0) * 0.67 + 0.33
+    last_turn = front.last_split_turn
+    first_split = splitting & np.isnan(last_turn)
+    last_turn[first_split] = params.draws.first_split_turn[order]
+    turn[splitting] = last_turn[splitting] + branch_turn(params)
+    last_turn[splitting] = turn[splitting]
+    return angle, turn
+
+
+def _continuing_directions(params: WeberPennParams, order: int, turns: _SegmentTurns, splitting: np.ndarray,
+                           n_segments: int) -> np.ndarray:
+    """(S, 3) unit direction of every spline's continuing stem (turned away from its split where it splits)."""
+    local = bent_direction(np.where(splitting, -turns.split_angle, 0.0) + turns.bend, turns.bend_across)
+    if order == 0:
+        local = rot.premul("z", turns.turn, local)
+    else:
+        local = rot.premul("y", -np.where(splitting, spread_angle(params, order), 0.0), local)
+    return world_directions(params, order, turns.frames, local, n_segments)
+
+
+def _set_segment_end(level: Level, step: int, positions: np.ndarray, close_tip: bool) -> None:
+    """Write every spline's point at `step + 1` with its tapered radius (0 at a closed tip)."""
+    radius = _radius_at(level.start_radius, level.end_radius, (step + 1) / level.n_segments)
+    if close_tip and step == level.n_segments - 1:
+        radius = np.zeros(level.n_splines)
+    level.points[:, step + 1], level.radii[:, step + 1], level.valid[:, step + 1] = positions, radius, True
+
+
+def _split_off(level: Level, front: _GrowthFront, turns: _SegmentTurns, params: WeberPennParams, order: int, *,
+               split_counts: np.ndarray, rng: np.random.Generator) -> _SplitOff:
+    """The splines that split off at this step (Sapling's growSpline with numSplit > 0), one per split."""
+    splitting_rows = np.flatnonzero(split_counts > 0)
+    per_row = split_counts[splitting_rows]
+    parent = np.repeat(splitting_rows, per_row)
+    index_in_row = np.arange(len(parent)) - np.repeat(np.cumsum(per_row) - per_row, per_row)
+    length_factor = _length_factors(params.stem_levels[order], len(parent), rng)
+    local = bent_direction(turns.split_angle[parent] + turns.bend[parent], turns.bend_across[parent])
+    if order == 0:  # trunk splits fan out evenly around the stem
+        around = np.pi - (TAU / (np.repeat(per_row, per_row) + 1)) * (index_in_row + 1)
+        local = rot.premul("z", around + turns.turn[parent], local)
+    else:
+        local = rot.premul("y", np.full(len(parent), spread_angle(params, order)), local)
+    directions = world_directions(params, order, turns.frames[parent], local, level.n_segments)
+    segment_length = front.family_segment_length[parent] * length_factor
+    start = front.positions[parent]
+    end = start + directions * (segment_length * turns.length_factor[parent])[:, None]
+    radius_factor = np.minimum(length_factor * turns.length_factor[parent], 1.0)
+    rows = _split_rows(level, parent, turns.step, segment_length=segment_length, radius_factor=radius_factor,
+                       start=start, end=end, start_direction=directions)
+    return _SplitOff(step=turns.step, rows=rows, directions=directions,
+                     last_split_turn=turns.turn[parent] + np.pi,
+                     family_segment_length=front.family_segment_length[parent])
+
+
+def _split_rows(level: Level, parent: np.ndarray, step: int, *, segment_length: np.ndarray,
+                radius_factor: np.ndarray, start: np.ndarray, end: np.ndarray, start_direction: np.ndarray) -> dict:
+    """Level rows of splines that leave the rows `parent` at `step`, with their first segment `start` -> `end`."""
+    n_segments = level.n_segments
+    start_radius = level.start_radius[parent]
+    end_radius = level.end_radius[parent]
+    radius_now = _radius_at(start_radius, end_radius, step / n_segments) * radius_factor
+    radius_next = _radius_at(start_radius, end_radius, (step + 1) / n_segments) * radius_factor
+    count = len(parent)
+    points = np.zeros((count, n_segments + 1, 3))
+    radii = np.zeros((count, n_segments + 1))
+    valid = np.zeros((count, n_segments + 1), bool)
+    points[:, step], points[:, step + 1] = start, end
+    radii[:, step], radii[:, step + 1] = radius_now, radius_next
+    valid[:, step], valid[:, step + 1] = True, True
+    n_points_before = level.valid[parent].sum(axis=1) - 1  # the step's new point is already in place
+    return {
+        "segment_length": segment_length, "curvature": level.curvature[parent],
+        "start_radius": start_radius * radius_factor, "end_radius": end_radius * radius_factor,
+        "children": level.children[parent], "family": level.family[parent],
+        "first_step": np.full(count, step, np.int64),
+        "offset_length": level.offset_length[parent] + level.segment_length[parent] * (n_points_before - 1),
+        "collar": np.zeros(count, bool), "parent_spline": np.full(count, -1), "parent_row": parent,
+        "parent_u": np.full(count, float(step)), "attach_points": start, "attach_radii": radius_now,
+        "collar_points": start, "start_direction": start_direction, "points": points, "radii": radii,
+        "valid": valid, "spline_id": np.arange(level.n_splines, level.n_splines + count),
+    }

@@ -1,6 +1,7 @@
 """Stand-in tree builders for the farm tests: numpy-only trees and views with the real builder's interface.
 
-They make the pipeline tests fast and independent of growth models and GL; `KillOnce` kills its worker process.
+They make the pipeline tests fast and independent of growth models and GL; `KillOnce` kills its worker process;
+`refusing_chain` and `broken_chain` fail in the worker with a user's error and with a bug.
 """
 from __future__ import annotations
 
@@ -13,11 +14,14 @@ import numpy as np
 
 from farm.jobs import parse_spec
 from farm.tree_chain import BuiltTree, stage_rngs, tree_seed
+from species.errors import ParameterError
 from species.skeleton import Skeleton
 
 SPECIES = ("standin_a", "standin_b", "broken")
 OUTPUTS = ("depth", "mask", "silhouette", "sketch_tsn")
 SIZE = 32
+# The user's error `refusing_chain` raises in its worker, as the CLI should print it.
+REFUSAL = ParameterError("standin.lens_mm", 0.0, "a number > 0")
 
 
 def standin_spec(**fields):
@@ -84,3 +88,13 @@ class KillOnce:
             self.flag.write_text(str(os.getpid()))
             os.kill(os.getpid(), signal.SIGKILL)
         return self.inner(species_name, seed, timer)
+
+
+def refusing_chain(spec):
+    """A builder factory that refuses the job in the worker with a user's error (a ParameterError)."""
+    raise ParameterError(REFUSAL.key, REFUSAL.value, REFUSAL.allowed)
+
+
+def broken_chain(spec):
+    """A builder factory that fails in the worker with a bug (a KeyError)."""
+    raise KeyError("standin_lookup_table")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from farm.image_codec import ImageCodecError, decode_map, encode_map
+from farm.image_codec import ImageCodecError, decode_map, encode_map, encode_pixels
 
 
 def test_uint8_rgb_map_round_trips_exactly_in_rgb_order():
@@ -48,3 +48,15 @@ def test_encoding_is_deterministic():
 def test_unstorable_map_is_rejected(name, image):
     with pytest.raises(ImageCodecError, match=name):
         encode_map(name, image)
+
+
+@pytest.mark.parametrize("pixels", [np.arange(12, dtype=np.uint16).reshape(3, 4) * 5000,
+                                    np.arange(36, dtype=np.uint8).reshape(3, 4, 3)])
+def test_quantized_pixels_are_written_as_they_are(pixels):
+    np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(encode_pixels(pixels)))), pixels)
+
+
+@pytest.mark.parametrize("pixels", [np.zeros((3, 4), np.float32), np.zeros((3, 4, 4), np.uint8)])
+def test_pixels_of_another_dtype_or_channel_count_are_rejected(pixels):
+    with pytest.raises(ImageCodecError, match="allowed"):
+        encode_pixels(pixels)

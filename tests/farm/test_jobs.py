@@ -4,7 +4,8 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from farm.jobs import JobSpecError, load_spec, parse_spec, species_of_trees, spec_to_yaml
+from farm.jobs import (DatasetTables, JobSpecError, check_int, check_resources, load_spec, parse_spec, species_of_trees,
+                       spec_to_yaml)
 from farm_standins import OUTPUTS, SPECIES, standin_spec
 
 KNOWN = dict(known_species=SPECIES, known_outputs=OUTPUTS)
@@ -106,3 +107,20 @@ def test_trees_option_overrides_the_total_in_the_printed_spec(capsys):
     assert main(["generate", "--trees", "5", "--print-spec"]) == 0
     printed = yaml.safe_load(capsys.readouterr().out)
     assert printed["trees"] == 5 and all(weight == 1.0 for weight in printed["species"].values())
+
+
+def test_the_tables_of_a_job_are_its_render_outputs_and_its_glb_choice():
+    assert standin_spec().tables == DatasetTables(view_outputs=OUTPUTS, store_glb=False)
+    assert standin_spec(store_glb=True, render={"outputs": ["mask"]}).tables == DatasetTables(("mask",), True)
+
+
+def test_resources_default_to_one_cpu_and_no_gpu():
+    assert check_resources({}) == {"num_cpus": 1.0, "num_gpus": 0.0}
+    assert standin_spec(resources={"num_gpus": 0.5}).resources == {"num_cpus": 1.0, "num_gpus": 0.5}
+
+
+@pytest.mark.parametrize("value", [True, 2.5, "3", -1, 11])
+def test_check_int_names_the_field_and_its_range(value):
+    with pytest.raises(JobSpecError) as info:
+        check_int("shard_size", value, 0, 10)
+    assert info.value.field == "shard_size" and info.value.value == value

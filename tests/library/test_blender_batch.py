@@ -7,9 +7,12 @@ import json
 import pytest
 
 from farm.library import job
+from farm.library.catalog import validate_library, write_catalog
+from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
 from farm.pipeline import plan_shards, run_shard
 from farm.storage import Location
+from renderers.blender import BlenderError
 from species.meshing.gltf import read_glb_chunks
 
 SPEC = {"species": {"sc_young_sapling": 3}, "formats": ["glb", "fbx"], "texture_size": 64, "impostor_tile": 32,
@@ -26,7 +29,7 @@ def shard_run(tmp_path_factory):
 
     patch = pytest.MonkeyPatch()
     patch.setattr(job, "blender_available", lambda: True)
-    patch.setattr("renderers.blender_assets.export_fbx_batch", record_batch)
+    patch.setattr(job, "export_fbx_batch", record_batch)
     try:
         spec = parse_library_spec(SPEC)
         out = tmp_path_factory.mktemp("library")
@@ -61,17 +64,14 @@ def test_every_asset_record_lists_its_fbx_files_with_their_sizes(shard_run):
 
 
 def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypatch):
-    from farm.library.catalog import validate_library, write_catalog
-    from renderers.blender import BlenderError
-
     def failing_batch(jobs, timeout=0.0):
         raise BlenderError("Blender job 'fbx' failed (exit status 1); last lines of its log:\nSegmentation fault")
 
     monkeypatch.setattr(job, "blender_available", lambda: True)
-    monkeypatch.setattr("renderers.blender_assets.export_fbx_batch", failing_batch)
+    monkeypatch.setattr(job, "export_fbx_batch", failing_batch)
     spec = parse_library_spec(SPEC)
     location = Location.resolve(str(tmp_path))
-    job._write_library_record(location, spec)  # what run_library writes before the shards
+    write_library_record(location, spec)  # what run_library writes before the shards
     chain = job.LibraryChain(spec, str(tmp_path))
     records = [run_shard(spec, plan, location, chain) for plan in plan_shards(spec)]
     assert all(not record["failures"] for record in records)  # the trees were built; only Blender failed
@@ -92,7 +92,7 @@ def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypa
         batches.append(list(jobs))
         return [{"bytes": 100 + i} for i in range(len(jobs))]
 
-    monkeypatch.setattr("renderers.blender_assets.export_fbx_batch", record_batch)
+    monkeypatch.setattr(job, "export_fbx_batch", record_batch)
     glb_before = {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")}
     assert job.retry_failed_fbx(location, spec) == 3
     assert [len(batch) for batch in batches] == [3 * 5]

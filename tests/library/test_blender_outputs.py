@@ -1,20 +1,23 @@
 """Blender outputs of the asset library: FBX files read back by Blender's importer, `.blend` libraries read back
-by the worker (assets, previews, tags, catalogs), the catalog file, and bad input.
+by the worker (assets, previews, tags, catalogs), the catalog file (`farm.library.blender_catalog`), and bad
+input.
 
 Blender runs for real (`.venv-blender`, built by `make env`); without it every Blender test fails with that hint.
 """
 from __future__ import annotations
 
-import json
 import struct
 
 import numpy as np
 import pytest
 
 import species
+from farm.library.blender_catalog import (CATALOG_FILE, catalog_uuid, inspect_blender_library, read_catalog_file,
+                                          write_blender_library, write_catalog_file)
 from renderers.blender import BlenderError
-from renderers.blender_assets import (CATALOG_FILE, catalog_uuid, export_fbx, export_fbx_batch, inspect_blend,
-                                      read_catalog_file, read_fbx, write_asset_library, write_catalog_file)
+from renderers.blender_assets import export_fbx, export_fbx_batch, inspect_blend, read_fbx, write_asset_library
+from renderers.blender_worker.blend_bytes import make_deterministic
+from species.meshing.gltf import ELEMENT_ARRAY_BUFFER, GlbWriter
 
 PRESET = "sc_young_sapling"  # a small real tree: about 2,000 triangles, grown in a tenth of a second
 PREVIEW_RGB = (200, 40, 90)
@@ -28,47 +31,32 @@ def _instanced_glb() -> bytes:
     """A GLB laid out like the library's asset GLBs: scene root X_LOD0 with X_LOD0_bark (a box, 12 triangles, with
     _WIND and _WIND_PIVOT attributes) and
     X_LOD0_leaves (one 2-triangle card drawn N_LEAVES times with EXT_mesh_gpu_instancing); X_LOD1 (one triangle)
-    outside the scene, as MSFT_lod keeps coarser levels."""
-    blobs, views, accessors = [], [], []
+    outside the scene, as MSFT_lod keeps coarser levels. Written Y up, as given (no normals, UVs or materials)."""
+    writer = GlbWriter()
 
-    def accessor(array: np.ndarray, kind: str, target: int | None = None) -> int:
-        data = array.tobytes()
-        views.append({"buffer": 0, "byteOffset": sum(len(b) for b in blobs), "byteLength": len(data),
-                      **({"target": target} if target else {})})
-        blobs.append(data + b"\0" * (-len(data) % 4))
-        entry = {"bufferView": len(views) - 1, "componentType": 5126 if array.dtype == np.float32 else 5125,
-                 "count": len(array), "type": kind}
-        if target == 34962:
-            entry.update(min=array.min(axis=0).tolist(), max=array.max(axis=0).tolist())
-        accessors.append(entry)
-        return len(accessors) - 1
-
-    def mesh(vertices, faces, wind: bool = False) -> dict:
+    def mesh(name: str, vertices, faces, wind: bool = False) -> int:
         vertices = np.array(vertices, np.float32)
-        attributes = {"POSITION": accessor(vertices, "VEC3", 34962)}
+        attributes = {"POSITION": writer.floats(vertices, "VEC3", with_bounds=True)}
         if wind:  # the library's wind layout: two custom attributes of different widths
-            attributes["_WIND"] = accessor(np.zeros((len(vertices), 4), np.float32), "VEC4", 34962)
-            attributes["_WIND_PIVOT"] = accessor(np.zeros((len(vertices), 3), np.float32), "VEC3", 34962)
-        return {"primitives": [{"attributes": attributes,
-                                "indices": accessor(np.array(faces, np.uint32).reshape(-1), "SCALAR", 34963)}]}
+            attributes["_WIND"] = writer.floats(np.zeros((len(vertices), 4)), "VEC4")
+            attributes["_WIND_PIVOT"] = writer.floats(np.zeros((len(vertices), 3)), "VEC3")
+        indices = writer.buffer.accessor(np.array(faces, np.uint32).reshape(-1), "SCALAR", ELEMENT_ARRAY_BUFFER)
+        return writer.mesh(name, {"attributes": attributes, "indices": indices})
 
     box = [[x, y, z] for x in (-0.2, 0.2) for y in (0.0, 2.0) for z in (-0.2, 0.2)]
     box_faces = [[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
                  [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]]
     card = [[-0.1, 0.0, 0.0], [0.1, 0.0, 0.0], [0.1, 0.2, 0.0], [-0.1, 0.2, 0.0]]
-    offsets = (np.random.default_rng(0).uniform(-1, 1, (N_LEAVES, 3)) + [0, 2, 0]).astype(np.float32)
-    meshes = [mesh(box, box_faces, wind=True), mesh(card, [[0, 1, 2], [0, 2, 3]]), mesh(card[:3], [[0, 1, 2]])]
-    instancing = {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": accessor(offsets, "VEC3")}}}
-    nodes = [{"name": "X_LOD0", "children": [1, 2]}, {"name": "X_LOD0_bark", "mesh": 0},
-             {"name": "X_LOD0_leaves", "mesh": 1, "extensions": instancing},
-             {"name": "X_LOD1", "children": [4]}, {"name": "X_LOD1_bark", "mesh": 2}]
-    binary = b"".join(blobs)
-    document = json.dumps({"asset": {"version": "2.0"}, "extensionsUsed": ["EXT_mesh_gpu_instancing"], "scene": 0,
-                           "scenes": [{"nodes": [0]}], "nodes": nodes, "meshes": meshes, "accessors": accessors,
-                           "bufferViews": views, "buffers": [{"byteLength": len(binary)}]}).encode()
-    document += b" " * (-len(document) % 4)
-    body = struct.pack("<II", len(document), 0x4E4F534A) + document + struct.pack("<II", len(binary), 0x004E4942)
-    return struct.pack("<III", 0x46546C67, 2, 12 + len(body) + len(binary)) + body + binary
+    offsets = np.random.default_rng(0).uniform(-1, 1, (N_LEAVES, 3)) + [0, 2, 0]
+    bark, leaf, lod1 = (mesh("box", box, box_faces, wind=True), mesh("card", card, [[0, 1, 2], [0, 2, 3]]),
+                        mesh("triangle", card[:3], [[0, 1, 2]]))
+    instancing = {"EXT_mesh_gpu_instancing": {"attributes": {"TRANSLATION": writer.floats(offsets, "VEC3", None)}}}
+    for entry in ({"name": "X_LOD0", "children": [1, 2]}, {"name": "X_LOD0_bark", "mesh": bark},
+                  {"name": "X_LOD0_leaves", "mesh": leaf, "extensions": instancing},
+                  {"name": "X_LOD1", "children": [4]}, {"name": "X_LOD1_bark", "mesh": lod1}):
+        writer.node(entry)
+    return writer.to_glb({"asset": {"version": "2.0"}, "extensionsUsed": ["EXT_mesh_gpu_instancing"], "scene": 0,
+                          "scenes": [{"nodes": [0]}]})
 
 
 # ------------------------------------------------------------------------------------------- fixtures
@@ -146,8 +134,8 @@ def library_assets(tree, lods_glb, instanced_glb, tmp_path_factory):
 @pytest.fixture(scope="module")
 def library(library_assets, tmp_path_factory):
     """The .blend of `library_assets` and its inspection."""
-    written = write_asset_library(library_assets, tmp_path_factory.mktemp("library") / "saplings.blend")
-    read = inspect_blend(written["blend"])
+    written = write_blender_library(library_assets, tmp_path_factory.mktemp("library") / "saplings.blend")
+    read = inspect_blender_library(written["blend"])
     return written, {row["name"]: row for row in read["assets"]}, read
 
 
@@ -299,6 +287,15 @@ def test_blend_assets_point_at_their_catalog_in_the_cats_file(library):
     assert assets["boxes_lod0"]["catalog_path"] == "Tests/Boxes"
     listed = read_catalog_file(written["blend"].rsplit("/", 1)[0])
     assert {"Trees", "Trees/Sapling", "Tests", "Tests/Boxes"} == set(listed)
+    assert written["catalogs"] == listed
+
+
+def test_the_adapter_stores_the_catalog_id_it_is_given(library):
+    written, _, _ = library
+    read = inspect_blend(written["blend"])  # the adapter alone: ids, no catalog paths
+    ids = {row["name"]: row["catalog_id"] for row in read["assets"]}
+    assert ids == {row["id"]: row["catalog_id"] for row in written["assets"]}
+    assert "catalog_path" not in read["assets"][0]
 
 
 def test_given_preview_is_stored_at_256_pixels_with_its_colours(library):
@@ -351,7 +348,7 @@ def test_blend_written_again_is_byte_identical(library_assets, library, tmp_path
     """Blender leaves random node ids, a clock-seeded colour seed and stale bytes after strings in a saved file;
     the worker rewrites them (renderers/blender_worker/blend_bytes.py), so the same assets give the same file."""
     written, assets, _ = library
-    again = write_asset_library(library_assets, tmp_path / "saplings.blend")
+    again = write_blender_library(library_assets, tmp_path / "saplings.blend")
     assert open(again["blend"], "rb").read() == open(written["blend"], "rb").read()
 
 
@@ -374,7 +371,7 @@ def test_bad_catalog_paths_are_rejected(path, tmp_path):
 def test_library_rejects_repeated_ids(tree, tmp_path):
     asset = {"id": "same", "glb_path": tree[1], "tags": []}
     with pytest.raises(BlenderError, match="unique.*same"):
-        write_asset_library([asset, asset], tmp_path / "lib.blend")
+        write_blender_library([asset, asset], tmp_path / "lib.blend")
 
 
 @pytest.mark.parametrize("change, message", [
@@ -386,15 +383,23 @@ def test_library_rejects_repeated_ids(tree, tmp_path):
 def test_library_rejects_bad_assets_before_starting_blender(tree, tmp_path, change, message):
     asset = {"id": "a", "glb_path": tree[1], "tags": ["t"], **change}
     with pytest.raises(BlenderError, match=message):
-        write_asset_library([asset], tmp_path / "lib.blend")
+        write_blender_library([asset], tmp_path / "lib.blend")
     assert not list(tmp_path.iterdir())  # nothing written
+
+
+@pytest.mark.parametrize("catalog_id", [None, "Trees/Sapling", "6f1d6a52-3c1e"])
+def test_adapter_rejects_an_asset_without_a_catalog_uuid(tree, tmp_path, catalog_id):
+    asset = {"id": "a", "glb_path": tree[1], "tags": [], "catalog_id": catalog_id}
+    with pytest.raises(BlenderError, match="catalog_id.*must be a UUID"):
+        write_asset_library([asset], tmp_path / "lib.blend")
+    assert not list(tmp_path.iterdir())
 
 
 def test_library_of_a_file_that_is_not_a_glb_fails_with_the_log_tail(tmp_path):
     fake = tmp_path / "fake.glb"
     fake.write_text("hello")
     with pytest.raises(BlenderError, match=r"(?s)last lines of its log.*is not a GLB file"):
-        write_asset_library([{"id": "a", "glb_path": fake, "tags": []}], tmp_path / "lib" / "lib.blend")
+        write_blender_library([{"id": "a", "glb_path": fake, "tags": []}], tmp_path / "lib" / "lib.blend")
     assert not (tmp_path / "lib").exists()  # neither the .blend nor the catalog file
 
 
@@ -404,8 +409,6 @@ def test_inspect_of_a_missing_blend_names_the_path(tmp_path):
 
 
 def test_deterministic_rewrite_changes_nothing_the_second_time(library, tmp_path):
-    from renderers.blender_worker.blend_bytes import make_deterministic
-
     written, _, _ = library
     copy = tmp_path / "copy.blend"
     copy.write_bytes(open(written["blend"], "rb").read())
@@ -419,8 +422,6 @@ def test_deterministic_rewrite_changes_nothing_the_second_time(library, tmp_path
     (b"BLENDER17-01v0500REND\0\0\0\0", "truncated"),
 ])
 def test_deterministic_rewrite_refuses_other_files_and_leaves_them(tmp_path, content, message):
-    from renderers.blender_worker.blend_bytes import make_deterministic
-
     path = tmp_path / "other.blend"
     path.write_bytes(content)
     with pytest.raises(ValueError, match=message):

@@ -137,16 +137,16 @@ def test_a_bark_share_outside_zero_to_one_is_rejected_with_its_value(share):
 
 
 def test_branches_rank_by_the_largest_value_in_their_subtree():
-    from species.studio.lod import _subtree_maximum
+    from species.studio.lod import subtree_maximum
 
     # 0 <- 1 <- 2 <- 3 and 0 <- 4: a stub (1) carrying a long limb (2) ranks with the limb
     parent = np.array([-1, 0, 1, 2, 0])
-    ranked = _subtree_maximum(np.array([9.0, 2.0, 5.0, 1.0, 7.0]), parent)
+    ranked = subtree_maximum(np.array([9.0, 2.0, 5.0, 1.0, 7.0]), parent)
     np.testing.assert_array_equal(ranked, [9.0, 5.0, 5.0, 1.0, 7.0])
     rng = np.random.default_rng(4)
     parent = np.concatenate([[-1], rng.integers(0, np.arange(1, 300))])
     value = rng.uniform(size=300)
-    ranked = _subtree_maximum(value, parent)
+    ranked = subtree_maximum(value, parent)
     assert np.all(ranked >= value) and np.all(ranked[1:] <= ranked[parent[1:]])
 
 

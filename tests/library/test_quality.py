@@ -8,13 +8,14 @@ import json
 import numpy as np
 import pytest
 
-from farm.library.asset import build_asset, framing_points, leaf_alphas
+from farm.library.asset import build_asset, leaf_alphas
 from farm.library.catalog import IOU_TARGET, quality_shortfalls
 from farm.library.gltf_asset import asset_to_glb, glb_size
 from farm.library.spec import parse_library_spec
 from farm.tree_chain import StageTimer, tree_seed
 from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
 from renderers.camera import orthographic_camera, perspective_camera
+from renderers.framing import framing_points
 from renderers.impostor import switch_camera
 from species.meshing.tubes_and_cards import leaf_part
 from species.studio.pbr_textures import leaf_atlas

@@ -18,27 +18,37 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
+from playwright import sync_api
 
-from farm.library.job import _write_library_record, add_asset
+from farm.library.job import add_asset
+from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
 from farm.library.wind_viewer import (THREE_FILES, VIEWER_THREE, WIND_PAGE, WindViewerError, three_source,
                                       three_version, wind_page_html, write_wind_viewer)
 from farm.storage import Location
+from required_tools import missing_tool
 
 PROJECT = Path(__file__).resolve().parents[2]
 SPEC = {"name": "wind", "seed": 1, "species": {"palm": 1}, "formats": ["glb"], "texture_size": 32,
         "impostor_tile": 16}
 BACKGROUND = np.array([221, 232, 240])  # the page's clear colour, 0xdde8f0
 
-needs_local_three = pytest.mark.skipif(not (PROJECT / "node_modules/three/package.json").is_file(),
-                                       reason="three.js is not in node_modules: run `make node-env`")
+
+def needs_local_three(test):
+    """The test reads three.js from node_modules: skipped without it (failed with CI=true)."""
+    @functools.wraps(test)
+    def checked(*args, **kwargs):
+        if not (PROJECT / "node_modules/three/package.json").is_file():
+            missing_tool("three.js is not in node_modules: run `make node-env`")
+        return test(*args, **kwargs)
+    return checked
 
 
 @pytest.fixture(scope="module")
 def library(tmp_path_factory) -> Path:
     """A library folder holding one palm (treat as read-only)."""
     out = tmp_path_factory.mktemp("wind") / "library"
-    _write_library_record(Location.resolve(str(out)), parse_library_spec(SPEC))
+    write_library_record(Location.resolve(str(out)), parse_library_spec(SPEC))
     add_asset(str(out), "palm", 3)
     return out
 
@@ -103,10 +113,9 @@ def served(library):
 def wind_page(served, glb):
     """The example page with the palm loaded and its animation loop paused: yields (page, problems, requests)."""
     if shutil.which("chromium") is None:
-        pytest.skip("chromium is not installed: run `make browser-env`")
-    sync_api = pytest.importorskip("playwright.sync_api")
+        missing_tool("chromium is not installed: run `make browser-env`")
     if three_source() is None:
-        pytest.skip("three.js is not in node_modules: run `make node-env`")
+        missing_tool("three.js is not in node_modules: run `make node-env`")
     from farm.review.browser import launch_chromium
 
     with sync_api.sync_playwright() as playwright:

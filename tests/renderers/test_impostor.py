@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from renderers.impostor import _SECTOR_OVERLAP, _sector_groups
+from renderers.impostor import SECTOR_OVERLAP, sector_groups
 from species.tree_mesh import MeshPart, TreeMesh
 
 
@@ -38,20 +38,20 @@ def test_faces_off_the_axis_lie_on_one_plane_or_two_neighbouring_ones():
     planes, count = 8, 720
     ring = _ring_of_triangles(count, 1.0)
     tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="ring")
-    groups = _sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1)
+    groups = sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1)
     member = _memberships(groups, planes, ring)
     on_planes = member[:, :planes]
     assert not member[:, planes].any()
     assert set(on_planes.sum(axis=1)) == {1, 2}
     pairs = np.array([np.flatnonzero(row) for row in on_planes if row.sum() == 2])
     assert (((pairs[:, 1] - pairs[:, 0]) % planes == 1) | ((pairs[:, 0] - pairs[:, 1]) % planes == 1)).all()
-    # Evenly spread azimuths: the shared margins take 2 x _SECTOR_OVERLAP of every sector.
-    assert abs((on_planes.sum(axis=1) == 2).mean() - 2 * _SECTOR_OVERLAP) < 0.02
+    # Evenly spread azimuths: the shared margins take 2 x SECTOR_OVERLAP of every sector.
+    assert abs((on_planes.sum(axis=1) == 2).mean() - 2 * SECTOR_OVERLAP) < 0.02
 
 
 def test_faces_near_the_axis_go_on_the_axis_group_alone():
     planes = 8
     ring = _ring_of_triangles(64, 0.05)
     tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="core")
-    member = _memberships(_sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, ring)
+    member = _memberships(sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, ring)
     assert member[:, planes].all() and not member[:, :planes].any()

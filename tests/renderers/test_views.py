@@ -68,12 +68,15 @@ def test_unknown_rig_is_rejected(view_renderer, tree):
 
 
 def test_contact_sheet_is_a_grid_of_rows_and_columns(tmp_path, all_outputs):
-    import cv2
+    from PIL import Image
+
+    from renderers.contact_sheet import contact_sheet
 
     rows = [(rig, [(name, views[0].images[name]) for name in DEFAULT_OUTPUTS]) for rig, views in all_outputs.items()]
     path = write_contact_sheet(tmp_path / "sheet.png", rows, cell=64)
-    sheet = cv2.imread(str(path))
+    sheet = np.asarray(Image.open(path))
     assert sheet.shape[0] > 2 * 64 and sheet.shape[1] >= len(DEFAULT_OUTPUTS) * 64
+    np.testing.assert_array_equal(sheet, contact_sheet(rows, cell=64))  # the file holds the grid's RGB pixels
 
 
 def test_jittered_rig_repeats_with_the_rng_and_moves_the_cameras(view_renderer, tree):

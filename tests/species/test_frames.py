@@ -1,4 +1,4 @@
-"""Specification of species.frames: parallel-transport (rotation-minimizing) frames along polylines."""
+"""Specification of species.geometry.frames: parallel-transport (rotation-minimizing) frames along polylines."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,5 @@
-"""Specification of species.gltf: GLB bytes of a TreeMesh, valid glTF 2.0, Y up, deterministic."""
+"""Specification of species.meshing.gltf: GLB bytes of a TreeMesh, valid glTF 2.0, Y up, deterministic; the
+GlbWriter every GLB is written with."""
 import io
 import struct
 
@@ -6,7 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from species.meshing.gltf import GlbError, read_accessor, read_glb_chunks, read_glb_json, tree_mesh_to_glb
+from species.meshing.gltf import (CLAMP_TO_EDGE, Z_UP_TO_Y_UP, GlbBuffer, GlbError, GlbWriter, read_accessor,
+                                  read_glb_chunks, read_glb_json, tree_mesh_to_glb, z_up_to_y_up)
 from species.meshing.tubes_and_cards import build_mesh
 from species.tree_mesh import MeshError, MeshPart, TreeMesh
 from tests.gltf_validator import assert_valid_glb
@@ -122,3 +124,58 @@ def test_reading_bytes_that_are_not_glb_is_rejected(fork_glb):
 def test_empty_tree_mesh_is_still_a_valid_file(tmp_path):
     empty = TreeMesh(MeshPart.empty(), MeshPart.empty(), name="nothing")
     assert_valid_glb(empty.to_glb(), tmp_path)
+
+
+def test_z_up_to_y_up_is_the_rotation_matrix_applied():
+    vectors = np.random.default_rng(3).normal(size=(50, 3)).astype(np.float32)
+    np.testing.assert_array_equal(z_up_to_y_up(vectors), (vectors.astype(np.float64) @ Z_UP_TO_Y_UP.T).astype(np.float32))
+    assert np.allclose(Z_UP_TO_Y_UP @ Z_UP_TO_Y_UP.T, np.eye(3)) and np.linalg.det(Z_UP_TO_Y_UP) == 1.0
+    np.testing.assert_array_equal(Z_UP_TO_Y_UP @ [0.0, 0.0, 1.0], [0.0, 1.0, 0.0])  # world up is glTF's +y
+
+
+def _written(keep_bytes: bool) -> GlbWriter:
+    """A writer holding one textured triangle mesh with an extra attribute and instance-like data."""
+    writer = GlbWriter(keep_bytes)
+    vertices = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    attributes, indices = writer.triangles(vertices, np.tile([0.0, -1.0, 0.0], (3, 1)),
+                                           [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], [[0, 1, 2]],
+                                           {"_WIND": (np.ones((3, 4)), "VEC4")})
+    material = writer.material({"name": "m", "pbrMetallicRoughness": {
+        "baseColorTexture": {"index": writer.texture("t", b"\x89PNG not really", CLAMP_TO_EDGE)}}})
+    mesh = writer.mesh("tri", {"attributes": attributes, "indices": indices, "material": material, "mode": 4})
+    writer.node({"name": "tri", "mesh": mesh, "extras": {"scale": writer.floats(np.ones((5, 3)), "VEC3", None)}})
+    return writer
+
+
+HEAD = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}]}
+
+
+def test_a_written_document_reads_back_attribute_for_attribute():
+    data = _written(True).to_glb(HEAD)
+    document, binary = read_glb_chunks(data)
+    attributes = document["meshes"][0]["primitives"][0]["attributes"]
+    assert list(attributes) == ["POSITION", "NORMAL", "TEXCOORD_0", "_WIND"]
+    np.testing.assert_array_equal(read_accessor(document, binary, attributes["POSITION"]),
+                                  [[0, 0, 0], [1, 0, 0], [0, 1, 0]])  # world z is glTF y
+    np.testing.assert_array_equal(read_accessor(document, binary, attributes["TEXCOORD_0"])[:, 1], [1, 1, 0])
+    assert document["accessors"][attributes["POSITION"]]["max"] == [1.0, 1.0, 0.0]
+    assert document["accessors"][document["meshes"][0]["primitives"][0]["indices"]]["componentType"] == 5123
+    image = document["images"][0]
+    view = document["bufferViews"][image["bufferView"]]
+    assert binary[view["byteOffset"]:view["byteOffset"] + view["byteLength"]] == b"\x89PNG not really"
+    assert "target" not in document["bufferViews"][document["accessors"][-1]["bufferView"]]
+
+
+def test_a_writer_that_keeps_no_bytes_counts_the_exact_file_length():
+    counted = _written(False)
+    assert counted.glb_length(HEAD) == len(_written(True).to_glb(HEAD)) == _written(True).glb_length(HEAD)
+    with pytest.raises(TypeError, match="keep_bytes"):
+        counted.buffer.tobytes()
+
+
+def test_buffer_views_are_padded_to_four_bytes():
+    buffer = GlbBuffer()
+    buffer.view(b"abc")
+    buffer.view(b"defgh", target=34963)
+    assert buffer.tobytes() == b"abc\0defgh\0\0\0" and buffer.size == 12
+    assert [(v["byteOffset"], v["byteLength"]) for v in buffer.views] == [(0, 3), (4, 5)]

@@ -1,4 +1,4 @@
-"""Specification of species.mesh: bark tubes along branches and leaf cards, from a Skeleton."""
+"""Specification of species.meshing.tubes_and_cards: bark tubes along branches and leaf cards, from a Skeleton."""
 import numpy as np
 import pytest
 
@@ -190,6 +190,19 @@ def test_colours_come_from_params():
 def test_bad_mesh_parameters_are_rejected(params, key):
     with pytest.raises(ParameterError, match=key):
         build_mesh(straight_trunk(), params)
+
+
+def test_a_mistyped_mesh_key_is_rejected_naming_the_known_mesh_keys():
+    with pytest.raises(ParameterError) as info:
+        build_mesh(straight_trunk(), {"mesh_radial_segment": [5]})
+    assert info.value.key == "mesh_radial_segment"
+    assert "mesh_radial_segments" in str(info.value) and "mesh_min_segments" in str(info.value)
+
+
+def test_generator_keys_beside_the_mesh_keys_are_ignored():
+    growth = {"generator": "weber_penn", "levels": 3, "branches": [0, 50, 30, 10], "meshy": True}
+    mesh = build_mesh(straight_trunk(n_nodes=5), {**growth, "mesh_radial_segments": [5]})
+    assert mesh.bark.n_vertices == 5 * (5 + 1) + 2
 
 
 def test_a_flat_leaf_transform_is_rejected():

@@ -1,6 +1,6 @@
-"""Specification of species.obj: OBJ + MTL + PNG files of a TreeMesh, Y up, deterministic, readable by trimesh.
+"""Specification of species.meshing.obj: OBJ + MTL + PNG files of a TreeMesh, Y up, deterministic, readable by trimesh.
 
-Also of species.ascii_numbers, its vectorized number text: byte-identical to Python's "%.6f" and "%d".
+Also of species.meshing.ascii_numbers, its vectorized number text: byte-identical to Python's "%.6f" and "%d".
 """
 import dataclasses
 

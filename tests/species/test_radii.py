@@ -1,4 +1,4 @@
-"""Specification of species.radii: pipe-model radii from the tips to the root."""
+"""Specification of species.geometry.radii: pipe-model radii from the tips to the root."""
 import numpy as np
 import pytest
 
@@ -41,3 +41,10 @@ def test_parent_after_child_is_rejected():
 def test_non_positive_tip_radius_is_rejected():
     with pytest.raises(ParameterError, match="tip_radius"):
         pipe_model_radii(np.array([-1, 0]), 0.0)
+
+
+def test_depth_levels_sweep_root_to_tips_or_tips_to_root_in_index_order():
+    depth = node_depths(np.array([-1, 0, 1, 0, 3, 4, 0]))
+    assert [list(level) for level in depth_levels(depth)] == [[1, 3, 6], [2, 4], [5]]
+    assert [list(level) for level in depth_levels(depth, first=2, tips_first=True)] == [[5], [2, 4]]
+    assert [list(level) for level in depth_levels(node_depths(np.array([-1])))] == []

@@ -1,4 +1,4 @@
-"""Specification of species.textures: tileable bark, a leaf with alpha, deterministic PNGs."""
+"""Specification of species.meshing.textures and .png: tileable bark, a leaf with alpha, deterministic PNGs."""
 import io
 
 import numpy as np
@@ -6,7 +6,9 @@ import pytest
 from PIL import Image
 
 from species.errors import ParameterError
-from species.meshing.textures import BARK_TEXTURE_SEED, bark_png, bark_texture, leaf_png, leaf_texture, png_bytes
+from species.meshing.png import png_bytes
+from species.meshing.textures import (BARK_TEXTURE_SEED, bark_colour, bark_png, bark_texture, fissure_depth, leaf_png,
+                                      leaf_texture)
 
 BARK = (0.36, 0.27, 0.19)
 LEAF = (0.24, 0.45, 0.14)
@@ -60,3 +62,29 @@ def test_pngs_decode_to_the_arrays_and_are_identical_each_call():
 def test_out_of_range_colour_is_rejected():
     with pytest.raises(ParameterError, match="color"):
         leaf_texture((1.5, 0, 0))
+
+
+def test_png_levels_trade_size_for_nothing_else():
+    bark = bark_texture(BARK, np.random.default_rng(BARK_TEXTURE_SEED))
+    fast, small = png_bytes(bark, compress_level=1), png_bytes(bark)
+    assert fast != small and len(small) <= len(fast)
+    for data in (fast, small):
+        np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(data))), bark)
+
+
+@pytest.mark.parametrize("image, level, key", [(np.zeros((4, 4), np.uint8), 9, "image"),
+                                               (np.zeros((4, 4, 3), np.float32), 9, "image"),
+                                               (np.zeros((4, 4, 3), np.uint8), 10, "compress_level"),
+                                               (np.zeros((4, 4, 3), np.uint8), 2.0, "compress_level")])
+def test_png_of_an_image_or_level_it_cannot_write_is_rejected(image, level, key):
+    with pytest.raises(ParameterError, match=key):
+        png_bytes(image, compress_level=level)
+
+
+def test_bark_colour_is_darkest_in_the_fissures_and_the_base_colour_on_flat_bark():
+    flat = np.zeros((4, 4))
+    plain = bark_colour(BARK, fissure_depth(np.full((4, 4), 10.0), 0.45), flat, flat)
+    cracked = bark_colour(BARK, fissure_depth(flat, 0.45), flat, flat)
+    assert plain.shape == (4, 4, 3) and plain.dtype == np.uint8
+    assert (cracked < plain).all()
+

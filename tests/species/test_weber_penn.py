@@ -1,4 +1,5 @@
 """Weber-Penn generator: Sapling dictionaries, invariants from the parameters, known answers, determinism."""
+import dataclasses
 import json
 from pathlib import Path
 
@@ -6,13 +7,15 @@ import numpy as np
 import pytest
 
 import species
-from species.weber_penn.generator import grow
+from species.weber_penn.assembly import SkeletonAssemblyError, WeberPennTree, assemble
+from species.weber_penn.generator import grow, grow_tree
+from species.weber_penn.params import WeberPennParams
 from species.weber_penn.schema import SAPLING_KEYS
 
 SAPLING = Path(__file__).resolve().parents[3] / "shared" / "data" / "sapling"
-# Measured with Sapling 0.3.4 in Blender on the same dictionaries: (height m, crown radius m).
-SAPLING_REFERENCE = {"0_acer_2": (5.34, 2.58), "3_palm_3": (9.85, 2.91), "6_pine": (4.29, 1.57),
-                     "9_cherry_blossom_3": (12.75, 7.00), "12_bonsai": (0.94, 0.57)}
+# Sapling 0.3.4's own height and crown radius for the same dictionaries (the figures the benchmark prints beside).
+SAPLING_REFERENCE = json.loads((Path(__file__).resolve().parents[2] / "benchmarks" / "references"
+                                / "sapling.json").read_text())["trees"]
 
 
 def sapling_dict(name: str) -> dict:
@@ -36,9 +39,9 @@ def test_sapling_dictionary_grows_to_saplings_height_and_crown(name):
     params = sapling_dict(name)
     assert set(params) <= set(SAPLING_KEYS) and len(params) == 70
     skeleton = grow(params, np.random.default_rng(0))
-    height, crown = SAPLING_REFERENCE[name]
-    assert skeleton.height == pytest.approx(height, rel=0.15)
-    assert skeleton.crown_radius == pytest.approx(crown, rel=0.15)
+    reference = SAPLING_REFERENCE[name]
+    assert skeleton.height == pytest.approx(reference["height_m"], rel=0.15)
+    assert skeleton.crown_radius == pytest.approx(reference["crown_radius_m"], rel=0.15)
     assert int(skeleton.order.max()) == params["levels"] - 1
     assert np.all(skeleton.order_counts() > 0), "every level has branches"
     assert skeleton.n_leaves > 0
@@ -153,3 +156,45 @@ def test_runaway_splitting_raises_a_clear_error_instead_of_exhausting_memory():
     params = simple_params(curveRes=[8, 30, 3, 1], segSplits=[0, 2.0, 0, 0], rSplits2=0.0, branches=[0, 10, 0, 0])
     with pytest.raises(species.TreefarmError, match=r"level 1 grew \d+ stems .*segSplits\[1\]"):
         grow(params, np.random.default_rng(0))
+
+
+def test_the_parameter_object_names_each_levels_keys_and_is_frozen():
+    source = sapling_dict("0_acer_2")
+    params = WeberPennParams.from_dict(source, np.random.default_rng(0))
+    for order, level in enumerate(params.stem_levels):
+        assert level.curve_res == source["curveRes"][order]
+        assert level.down_angle == source["downAngle"][order]
+        assert level.branches == source["branches"][order]
+    assert params.leaves.count == source["leaves"] and params.prune.enabled == source["prune"]
+    assert params.tree_scale == pytest.approx(source["scale"] + source["scaleV"])
+    np.testing.assert_allclose(params.draws.curve_variation, np.radians(source["curveV1"]))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        params.levels = 1
+    with pytest.raises(ValueError):
+        params.draws.curve_variation[0] = 0.0
+
+
+def test_the_parameter_object_rejects_what_the_schema_rejects():
+    with pytest.raises(species.ParameterError, match="'levels'"):
+        WeberPennParams.from_dict({**sapling_dict("6_pine"), "levels": 9}, np.random.default_rng(0))
+
+
+def test_growing_in_steps_gives_the_same_skeleton_as_grow():
+    source = sapling_dict("6_pine")
+    whole = grow(source, np.random.default_rng(3))
+    rng = np.random.default_rng(3)
+    stepped = assemble(grow_tree(WeberPennParams.from_dict(source, rng), rng))
+    for name, array in whole.to_arrays().items():
+        assert np.array_equal(array, getattr(stepped, name)), name
+
+
+@pytest.mark.parametrize("spline, u", [(10_000, 0.0), (0, 200.0)], ids=["no such spline", "past its last node"])
+def test_a_leaf_that_matches_no_node_is_an_error_naming_the_leaf_and_spline(spline, u):
+    rng = np.random.default_rng(0)
+    tree = grow_tree(WeberPennParams.from_dict(simple_params(leaves=6), rng), rng)
+    assert len(tree.leaves) > 3
+    leaf_spline, leaf_u = tree.leaf_spline.copy(), tree.leaf_u.copy()
+    leaf_spline[3], leaf_u[3] = spline, u
+    with pytest.raises(SkeletonAssemblyError, match=rf"leaf 3 .*spline {spline} .*no node at step {u:g}"):
+        assemble(WeberPennTree(tree.levels, tree.leaves, leaf_spline, leaf_u))
+    assert issubclass(SkeletonAssemblyError, species.TreefarmError)

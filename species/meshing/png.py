@@ -1,0 +1,32 @@
+"""PNG encoding of 8-bit pictures: the one encoder of every texture, thumbnail and contact sheet file (Pillow).
+
+In: an (H, W, 3) or (H, W, 4) uint8 image and a zlib level. Out: PNG bytes with no metadata and no timestamp,
+the same bytes for the same pixels and level. (Rendered maps of the dataset, 16-bit included, have their own
+codec, `farm.image_codec`; the Blender worker writes its own PNGs inside Blender's Python.)
+"""
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from ..errors import ParameterError
+
+__all__ = ["png_bytes"]
+
+
+def png_bytes(image: np.ndarray, compress_level: int = 9) -> bytes:
+    """PNG encoding of an (H, W, 3) RGB or (H, W, 4) RGBA uint8 image at zlib level `compress_level` (0-9: 9 the
+    smallest files, lower levels faster); no metadata, no timestamp, same bytes each call."""
+    from PIL import Image
+
+    image = np.asarray(image)
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (3, 4):
+        raise ParameterError("image", f"array {image.dtype} {image.shape}", "(H, W, 3) or (H, W, 4) uint8")
+    if isinstance(compress_level, bool) or not isinstance(compress_level, (int, np.integer)) \
+            or not 0 <= compress_level <= 9:
+        raise ParameterError("compress_level", compress_level, "an integer in [0, 9]")
+    buffer = io.BytesIO()
+    Image.fromarray(image, mode="RGBA" if image.shape[2] == 4 else "RGB").save(
+        buffer, format="PNG", compress_level=compress_level)
+    return buffer.getvalue()

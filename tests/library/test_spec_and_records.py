@@ -1,0 +1,72 @@
+"""The library spec as a pipeline spec (its tables, its job record) and the records a library folder keeps about
+itself (library.json, added assets): round trips and rejections, no trees grown."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from farm.jobs import DatasetTables, PipelineSpec
+from farm.library.records import (LIBRARY_RECORD, LibraryError, library_asset_ids, read_library_spec,
+                                  write_added_record, write_library_record)
+from farm.library.spec import (FORMATS, LIBRARY_TABLES, LibrarySpecError, library_spec_from_record,
+                               parse_library_spec)
+from farm.storage import Location
+from farm.tree_chain import tree_seed
+
+SPEC = {"name": "records", "seed": 3, "species": {"maple": 2, "palm": 1}, "shard_size": 2}
+
+
+def test_a_library_spec_is_a_pipeline_spec_with_no_views_and_no_glb_column():
+    spec = parse_library_spec(SPEC)
+    assert isinstance(spec, PipelineSpec)
+    assert spec.tables == LIBRARY_TABLES == DatasetTables(view_outputs=(), store_glb=False)
+    assert (spec.n_trees, spec.n_shards) == (3, 2)
+
+
+def test_the_job_record_states_the_views_tables_outputs_as_a_job_specs_does():
+    record = parse_library_spec(SPEC).to_dict()
+    assert record["kind"] == "library"
+    assert record["render"]["outputs"] == [] and record["store_glb"] is False
+
+
+def test_a_spec_read_back_from_its_record_is_the_same_spec():
+    spec = parse_library_spec(SPEC)
+    assert library_spec_from_record(json.loads(json.dumps(spec.to_dict()))) == spec
+    assert library_spec_from_record(spec.to_dict()).digest() == spec.digest()
+
+
+def test_every_format_is_the_default():
+    assert parse_library_spec({}).formats == FORMATS
+
+
+@pytest.mark.parametrize("resources, named", [({"num_cpus": -1}, "resources.num_cpus"),
+                                              ({"num_gpus": "one"}, "resources.num_gpus"),
+                                              ({"memory": 2}, "resources.memory")])
+def test_bad_resources_are_a_library_spec_error_naming_the_field(resources, named):
+    with pytest.raises(LibrarySpecError) as info:
+        parse_library_spec({**SPEC, "resources": resources})
+    assert info.value.field == named and str(info.value).startswith("library spec field")
+
+
+def test_library_record_round_trips_the_spec(tmp_path):
+    location = Location.resolve(str(tmp_path))
+    spec = parse_library_spec(SPEC)
+    write_library_record(location, spec)
+    assert read_library_spec(location) == spec
+    assert json.loads((tmp_path / LIBRARY_RECORD).read_text())["spec_digest"] == spec.digest()
+
+
+def test_a_folder_without_a_library_record_is_not_a_library(tmp_path):
+    with pytest.raises(LibraryError, match="is not an asset library"):
+        read_library_spec(Location.resolve(str(tmp_path)))
+
+
+def test_asset_ids_are_the_specs_trees_and_the_added_ones_sorted(tmp_path):
+    location = Location.resolve(str(tmp_path))
+    spec = parse_library_spec(SPEC)
+    planned = library_asset_ids(location, spec)
+    assert len(planned) == 3 and planned == sorted(planned)
+    assert f"palm-{tree_seed(3, 1):016x}" in planned  # species interleaved: the palm is tree 1
+    write_added_record(location, "palm", 7)
+    assert library_asset_ids(location, spec) == sorted([*planned, "palm-0000000000000007"])
