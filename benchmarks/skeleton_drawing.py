@@ -5,6 +5,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 import species
+from species.meshing.png import png_bytes
 
 
 def front_view(skeleton: species.Skeleton, title: str, size: int = 320, leaves: bool = True) -> Image.Image:
@@ -33,4 +34,4 @@ def save_sheet(tiles: list[Image.Image], columns: int, path) -> None:
     for k, tile in enumerate(tiles):
         sheet.paste(tile, ((k % columns) * width, (k // columns) * height))
     path.parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(path)
+    path.write_bytes(png_bytes(np.asarray(sheet)))
