@@ -13,7 +13,8 @@ from species.errors import TreefarmError
 from .storage import Location
 
 __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_schema", "part_name",
-           "serialize_table", "open", "to_pandas", "duckdb_connect", "to_ray", "part_files", "read_manifest",
+           "serialize_table", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface", "part_files",
+           "read_manifest",
            "DatasetError"]
 
 SCHEMA_VERSION = 1
@@ -130,3 +131,25 @@ def to_ray(path: str, table: str = "views"):
 
     location, files = part_files(path, table)
     return ray.data.read_parquet(files, filesystem=location.filesystem)
+
+
+def to_huggingface(path: str, table: str = "views", cache_dir: str | None = None, decode_images: bool = True):
+    """One table of a local dataset as a Hugging Face `datasets.Dataset` (`load_dataset("parquet")` on the manifest's
+    part files, split "train"). With `decode_images`, the 8-bit PNG columns of the views table (`sketch_*`, `mask`,
+    `order`, `normals`, `trunk_strokes`) read as `datasets.Image` (PIL images on access); the 16-bit float maps stay
+    PNG bytes, decoded with `farm.image_codec.decode_map` and their `_scale`/`_offset` columns."""
+    try:
+        import datasets
+    except ImportError:
+        raise DatasetError("reading a dataset with Hugging Face needs the `datasets` package: "
+                           "pip install datasets") from None
+    location, files = part_files(path, table)
+    if location.filesystem.type_name != "local":
+        raise DatasetError(f"to_huggingface reads local datasets; {path!r} is on {location.filesystem.type_name}")
+    loaded = datasets.load_dataset("parquet", data_files=files, split="train", cache_dir=cache_dir)
+    if decode_images and table == "views":
+        non_image = {"tree_id", "index", "shard", "view", "view_name", "camera_json"}
+        for column, feature in loaded.features.items():
+            if column not in non_image and column not in FLOAT_OUTPUTS and getattr(feature, "dtype", "") == "binary":
+                loaded = loaded.cast_column(column, datasets.Image())
+    return loaded

@@ -67,6 +67,23 @@ def test_torch_dataset_decodes_images_lazily_to_channel_first_tensors(standin_da
     assert next(iter(loader))["sketch_tsn"].shape == (4, 1, SIZE, SIZE)
 
 
+def test_hugging_face_datasets_reads_the_views_with_8_bit_maps_as_images(standin_dataset, tmp_path):
+    from PIL import Image
+
+    from farm.image_codec import decode_map
+
+    _, path = standin_dataset
+    views = dataset.to_huggingface(path, "views", cache_dir=str(tmp_path / "hf"))
+    assert views.num_rows == 10
+    row = views[0]
+    assert isinstance(row["sketch_tsn"], Image.Image) and row["sketch_tsn"].size == (SIZE, SIZE)
+    assert isinstance(row["mask"], Image.Image) and int(np.asarray(row["mask"]).max()) <= 2
+    depth = decode_map(row["depth"], row["depth_scale"], row["depth_offset"], metric=True)
+    assert depth.shape == (SIZE, SIZE) and depth.max() > 0
+    trees = dataset.to_huggingface(path, "trees", cache_dir=str(tmp_path / "hf"))
+    assert sorted(trees["index"]) == list(range(6))
+
+
 def test_manifest_counts_failures_and_checksums_every_part(standin_dataset):
     spec, path = standin_dataset
     manifest = dataset.read_manifest(path)
