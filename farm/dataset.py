@@ -6,6 +6,7 @@ serialized with fixed writer options, so the same rows give the same bytes on ev
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from typing import Iterable, Sequence
 
 from species.errors import TreefarmError
@@ -14,7 +15,7 @@ from .storage import Location
 
 __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_schema", "part_name",
            "serialize_table", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface", "part_files",
-           "read_manifest",
+           "read_manifest", "reading_part",
            "DatasetError"]
 
 SCHEMA_VERSION = 1
@@ -28,6 +29,20 @@ _PARQUET_OPTIONS = dict(compression="zstd", compression_level=3, row_group_size=
 
 class DatasetError(TreefarmError):
     """A dataset folder is missing, incomplete or damaged; the message names the file."""
+
+
+@contextmanager
+def reading_part(file: str):
+    """Raise Parquet's refusal of a part file read inside the block (truncated, corrupted) as a DatasetError
+    naming the file; Arrow's own message does not name it."""
+    import pyarrow
+
+    try:
+        yield
+    except (pyarrow.ArrowInvalid, OSError) as exc:
+        reason = " ".join(str(exc).split())
+        raise DatasetError(f"part file {file} cannot be read ({reason}): `farm validate` names the damaged "
+                           f"files, `farm generate` with the same spec regenerates them") from None
 
 
 def _pa():

@@ -119,8 +119,7 @@ class JobSpec(PipelineSpec):
             return {n: int(w) for n, w in zip(names, weights)}
         quota = self.trees * weights / weights.sum()
         counts = np.floor(quota).astype(int)
-        # Ties broken by spec order, so the split is the same on every machine.
-        for i in np.argsort(-(quota - counts), kind="stable")[: self.trees - counts.sum()]:
+        for i in _largest_remainders(quota - counts, self.trees - int(counts.sum())):
             counts[i] += 1
         return {n: int(c) for n, c in zip(names, counts)}
 
@@ -138,11 +137,24 @@ class JobSpec(PipelineSpec):
 
     def with_trees(self, total: int) -> "JobSpec":
         """The same job with `total` trees split over the species (`farm generate --trees N`)."""
-        check_int("trees", total, 0)
+        check_int("trees", total, 1)
         weights = self.species if self.trees is not None else {n: 1.0 for n in self.species}
-        if total > 0 and sum(weights.values()) <= 0:
+        if sum(weights.values()) <= 0:
             raise JobSpecError("species", weights, "at least one positive weight")
         return replace(self, species=dict(weights), trees=total)
+
+
+def _largest_remainders(remainders: np.ndarray, extra: int) -> list[int]:
+    """Indices of the `extra` largest remainders; among equal ones (equal weights), indices spread evenly over
+    spec order, so a small job of many species samples every generator rather than the first presets."""
+    if extra <= 0:
+        return []
+    order = np.argsort(-remainders, kind="stable")
+    cutoff = remainders[order[extra - 1]]
+    above = [int(i) for i in order if remainders[i] > cutoff + 1e-9]
+    tied = [int(i) for i in order if abs(remainders[i] - cutoff) <= 1e-9]
+    wanted = extra - len(above)
+    return above + [tied[int((k + 0.5) * len(tied) / wanted)] for k in range(wanted)]
 
 
 def species_of_trees(spec: PipelineSpec) -> list[str]:
@@ -249,7 +261,7 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
 
     trees = raw.get("trees")
     if trees is not None:
-        trees = check_int("trees", trees, 0)
+        trees = check_int("trees", trees, 1)
     mix = raw.get("species")
     if not isinstance(mix, dict) or not mix:
         raise JobSpecError("species", mix, "a non-empty mapping of preset name -> count (or weight with `trees`)")
@@ -262,8 +274,9 @@ def parse_spec(raw: dict, known_species: Sequence[str] | None = None,
             species_mix[preset] = float(check_int(f"species.{preset}", amount, 0))
         else:
             species_mix[preset] = check_number(f"species.{preset}", amount, 0.0)
-    if trees is not None and trees > 0 and sum(species_mix.values()) <= 0:
-        raise JobSpecError("species", mix, "at least one positive weight")
+    if sum(species_mix.values()) <= 0:
+        raise JobSpecError("species", mix, "at least one positive weight" if trees is not None
+                           else "at least one tree (a job of zero trees writes nothing)")
 
     render_raw = check_keys("render", raw.get("render", {}), _RENDER_KEYS)
     rig = render_raw.get("rig", "tsn4")

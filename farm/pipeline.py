@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import subprocess
 import time
 from dataclasses import dataclass
 
@@ -17,7 +19,8 @@ from .dataset import part_name, serialize_table, trees_schema, views_schema
 from .jobs import PipelineSpec, species_of_trees
 from .manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
-from .storage import Location
+from .ray_reaper import start_reaper
+from .storage import Location, TransientWriteError
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 
@@ -26,7 +29,8 @@ __all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORK
 
 # Worker processes render offscreen through EGL (no display on farm machines).
 WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
-# A worker that dies is restarted and its in-flight shard re-run this many times (Ray's own retries).
+# A worker that dies is restarted and its in-flight shard re-run this many times (Ray's own retries); so is a shard
+# whose write failed for a reason that may pass. A permanent file error fails the job at once.
 ACTOR_RETRIES = 3
 
 
@@ -153,12 +157,42 @@ def _check_output_belongs_to(spec: PipelineSpec, location: Location) -> None:
                        f"write this job to another --out")
 
 
-def _connect_ray(address: str | None, workers: int | None) -> bool:
-    """Start or join Ray unless this process already has; True if we started it (and must shut it down)."""
+def _free_bytes(location: Location) -> int | None:
+    """Free bytes of a local output's file system (of its nearest existing folder); None for object stores."""
+    if not location.is_local:
+        return None
+    folder = location.root
+    while not os.path.isdir(folder):
+        folder = os.path.dirname(folder)
+    return shutil.disk_usage(folder).free
+
+
+def _check_free_space(location: Location, records: dict[int, dict], trees_left: int) -> None:
+    """Refuse to go on when the output's free space cannot hold the trees left, at the bytes per tree of the
+    shards this job has written so far (nothing is known before the first one)."""
+    trees_done = sum(record["n_trees"] for record in records.values())
+    free = _free_bytes(location) if trees_done and trees_left else None
+    if free is None:
+        return
+    written = sum(record[table]["bytes"] for record in records.values() for table in ("trees", "views"))
+    needed = written * trees_left // trees_done
+    if needed > free:
+        raise JobError(f"{location.uri} has {_mebibytes(free)} free; the {trees_left} trees left need about "
+                       f"{_mebibytes(needed)} (at the size of the {trees_done} written): free space there or "
+                       f"resume into a larger --out")
+
+
+def _mebibytes(n_bytes: int) -> str:
+    return f"{n_bytes / 2**20:,.1f} MiB"
+
+
+def _connect_ray(address: str | None, workers: int | None) -> tuple[bool, subprocess.Popen | None]:
+    """Start or join Ray unless this process already has: (whether we started it and must shut it down, the
+    watchdog that ends a local Ray's processes with this one)."""
     import ray
 
     if ray.is_initialized():
-        return False
+        return False, None
     options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
     address = address or os.environ.get("RAY_ADDRESS")  # set inside a RayJob or by `ray job submit`
     if address is None:
@@ -166,7 +200,7 @@ def _connect_ray(address: str | None, workers: int | None) -> bool:
         address = "local"
         options["num_cpus"] = max(os.cpu_count() or 1, workers or 1)
     ray.init(address=address, **options)
-    return True
+    return True, start_reaper() if address == "local" else None
 
 
 def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan], records: dict[int, dict],
@@ -188,7 +222,7 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
     def submit(actor) -> None:
         if queue:
             plan = queue.pop()
-            in_flight[actor.run.remote(plan)] = (actor, plan)
+            in_flight[actor.run.options(retry_exceptions=[TransientWriteError]).remote(plan)] = (actor, plan)
 
     try:
         for actor in actors:
@@ -201,11 +235,16 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
             except ray.exceptions.RayTaskError as exc:  # the task raised: a user's error as itself, a bug as is
                 if isinstance(exc.cause, TreefarmError):
                     raise exc.cause from exc  # its one line; Ray's text (the worker's traceback) is its cause
+                if isinstance(exc.cause, TransientWriteError):
+                    raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
+                                   f"{exc.cause.strerror}") from exc
                 raise
             except ray.exceptions.RayError as exc:  # the worker died and Ray's restarts and retries are exhausted
                 raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
                                f"{' '.join(str(exc).split())[:300]}") from exc
             records[plan.shard] = record
+            trees_left = sum(p.n_trees for p in queue) + sum(p.n_trees for _, p in in_flight.values())
+            _check_free_space(location, records, trees_left)
             views_done += record["views"]["rows"]
             bar.update(record["n_trees"])
             bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
@@ -236,13 +275,14 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
     records = finished_shards(location, spec.digest(), len(plans))
     write_job_record(location, spec)
     pending = [plan for plan in plans if plan.shard not in records]
-    started_ray = False
+    started_ray, reaper = False, None
     start = time.perf_counter()
     bar = tqdm(total=spec.n_trees, initial=sum(records[k]["n_trees"] for k in records), unit="tree",
                desc=f"farm {spec.name}", disable=not progress, dynamic_ncols=True, smoothing=0.1)
     try:
         if pending:
-            started_ray = _connect_ray(address, workers)
+            _check_free_space(location, records, sum(plan.n_trees for plan in pending))
+            started_ray, reaper = _connect_ray(address, workers)
             _run_pending(spec, location, pending, records, workers, builder_factory, bar)
         manifest_exists = location.exists("manifest.json")
         if pending or not manifest_exists:
@@ -256,4 +296,7 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
         bar.close()
         if started_ray:
             ray.shutdown()
+        if reaper is not None:  # end of its pipe: it ends what ray.shutdown left running
+            reaper.stdin.close()
+            reaper.wait()
     return manifest

@@ -2,10 +2,13 @@
 
 `Location` resolves a path once and reads, lists and writes files under it; `write_atomic` writes a whole
 file under a hidden temporary name and renames it, so a crash never leaves a half file that looks finished.
-A location is a path the user named: its file errors are raised as `PathError`s naming the file.
+A location is a path the user named: its file errors are raised as `PathError`s naming the file, except a write
+that failed for a reason that may pass (`TransientWriteError`), which the pipeline runs again.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
 import os
 import uuid
@@ -13,10 +16,19 @@ from dataclasses import dataclass
 
 from species.errors import PathError, user_path
 
-__all__ = ["Location", "sha256_hex", "TEMP_PREFIX"]
+__all__ = ["Location", "sha256_hex", "TEMP_PREFIX", "TRANSIENT_ERRNOS", "TransientWriteError"]
 
 # Readers (pyarrow dataset discovery, our manifest) ignore names starting with '.' or '_'.
 TEMP_PREFIX = ".tmp-"
+# Write errors that a second try can get past (a network file system timing out, a busy device). Every other one
+# (no space, no permission, a read-only file system, a path that is not a folder...) fails the same way again.
+TRANSIENT_ERRNOS = frozenset({errno.EIO, errno.EAGAIN, errno.EINTR, errno.EBUSY, errno.ETIMEDOUT, errno.ESTALE,
+                              errno.ECONNRESET, errno.ECONNREFUSED, errno.ECONNABORTED, errno.ENETUNREACH,
+                              errno.EHOSTUNREACH})
+
+
+class TransientWriteError(OSError):
+    """A write that failed for a reason that may pass (errno in TRANSIENT_ERRNOS); its message names the file."""
 
 
 def sha256_hex(data: bytes) -> str:
@@ -75,11 +87,20 @@ class Location:
         final = self.path(relative)
         folder, name = final.rsplit("/", 1)
         temporary = f"{folder}/{TEMP_PREFIX}{uuid.uuid4().hex}-{name}"
-        with user_path(final, "write"):
+        try:
             fs.create_dir(folder, recursive=True)
             with fs.open_output_stream(temporary) as stream:
                 stream.write(data)
             fs.move(temporary, final)
+        except OSError as exc:
+            # A half-written temporary would hold the space a full disk lacks; the next run's
+            # remove_temporaries deletes one this cannot.
+            with contextlib.suppress(OSError):
+                fs.delete_file(temporary)
+            if exc.errno in TRANSIENT_ERRNOS:
+                raise TransientWriteError(exc.errno, f"cannot write {final}: {exc.strerror or exc}") from exc
+            with user_path(final, "write"):
+                raise
 
     def delete(self, relative: str) -> None:
         with user_path(self.path(relative), "delete"):

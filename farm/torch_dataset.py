@@ -9,7 +9,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .dataset import FLOAT_OUTPUTS, DatasetError, part_files, read_manifest
+from .dataset import FLOAT_OUTPUTS, DatasetError, part_files, read_manifest, reading_part
 from .image_codec import METRIC_MAPS, decode_map
 
 __all__ = ["ViewsDataset"]
@@ -49,14 +49,21 @@ class ViewsDataset(_torch().utils.data.Dataset):
         columns = ["tree_id", "index", "view", "view_name", "camera_json"]
         for name in self.outputs:
             columns += [name] + ([f"{name}_scale", f"{name}_offset"] if name in FLOAT_OUTPUTS else [])
-        tables = [pq.read_table(f, columns=columns, filesystem=location.filesystem, memory_map=location.is_local)
-                  for f in files]
+        tables = []
+        for file in files:
+            with reading_part(file):
+                tables.append(pq.read_table(file, columns=columns, filesystem=location.filesystem,
+                                            memory_map=location.is_local))
         self.table = pa.concat_tables(tables) if tables else None
         self.params: dict[str, dict] | None = None
         if with_params:
             _, tree_files = part_files(path, "trees")
-            trees = pa.concat_tables([pq.read_table(f, columns=["tree_id", "params_json"],
-                                                    filesystem=location.filesystem) for f in tree_files])
+            tree_tables = []
+            for file in tree_files:
+                with reading_part(file):
+                    tree_tables.append(pq.read_table(file, columns=["tree_id", "params_json"],
+                                                     filesystem=location.filesystem))
+            trees = pa.concat_tables(tree_tables)
             self.params = {row["tree_id"]: json.loads(row["params_json"]) for row in trees.to_pylist()
                            if row["params_json"] is not None}
         self.transform = transform

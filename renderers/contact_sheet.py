@@ -54,15 +54,23 @@ def views_sheet_rows(views, prefix: str = "") -> list:
             for view in views]
 
 
-def _label(text: str, width: int) -> np.ndarray:
-    bar = np.full((LABEL_PX, width, 3), 255, np.uint8)
-    cv2.putText(bar, text[: max(1, width // 7)], (3, LABEL_PX - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1,
-                cv2.LINE_AA)
+_FONT, _FONT_SCALE = cv2.FONT_HERSHEY_SIMPLEX, 0.4
+
+
+def _label(lines: Sequence[str], width: int) -> np.ndarray:
+    """(LABEL_PX * len(lines), width, 3) white bar, one line of text each, each shrunk to fit whole: a cut label
+    ("trunk_s") hides which output a column is."""
+    bar = np.full((LABEL_PX * len(lines), width, 3), 255, np.uint8)
+    for k, text in enumerate(lines):
+        text_width = cv2.getTextSize(text, _FONT, _FONT_SCALE, 1)[0][0]
+        scale = _FONT_SCALE * min(1.0, (width - 6) / max(text_width, 1))
+        cv2.putText(bar, text, (3, LABEL_PX * (k + 1) - 5), _FONT, scale, (0, 0, 0), 1, cv2.LINE_AA)
     return bar
 
 
 def contact_sheet(rows: Sequence[tuple[str, Sequence[tuple[str, np.ndarray]]]], cell: int = 160) -> np.ndarray:
-    """(H, W, 3) uint8 grid: each row is (row label, [(column label, image), ...]); cells resized to `cell` px."""
+    """(H, W, 3) uint8 grid: each row is (row label, [(column label, image), ...]); cells resized to `cell` px,
+    each under two label lines (row, column)."""
     if not rows:
         raise ValueError("a contact sheet needs at least one row")
     n_cols = max(len(cells) for _, cells in rows)
@@ -72,8 +80,8 @@ def contact_sheet(rows: Sequence[tuple[str, Sequence[tuple[str, np.ndarray]]]], 
         tiles = []
         for col_label, image in cells:
             tile = cv2.resize(to_rgb8(image), (cell, cell), interpolation=cv2.INTER_AREA)
-            tiles.append(np.concatenate([_label(f"{row_label} | {col_label}", cell), tile]))
-        tiles += [np.full((cell + LABEL_PX, cell, 3), 255, np.uint8)] * (n_cols - len(tiles))
+            tiles.append(np.concatenate([_label([str(row_label), str(col_label)], cell), tile]))
+        tiles += [np.full((cell + 2 * LABEL_PX, cell, 3), 255, np.uint8)] * (n_cols - len(tiles))
         spaced = []
         for tile in tiles:
             spaced += [tile, np.full((tile.shape[0], pad, 3), 200, np.uint8)]

@@ -1,8 +1,17 @@
 """Subcommands of the `farm` command line, one module each, and the error of a command-line argument."""
 from species.errors import TreefarmError
 
-__all__ = ["CommandLineError"]
+__all__ = ["CommandLineError", "check_flag_int"]
 
 
 class CommandLineError(TreefarmError):
     """A command-line argument is missing, unknown or out of range; the message names it and what is allowed."""
+
+
+def check_flag_int(flag: str, value: int, low: int, high: int | None = None) -> int:
+    """`value` of the integer option `flag` when in [low, high] (no upper bound when high is None); else a
+    CommandLineError naming the flag, the value and the range. Checked before anything is written."""
+    if value < low or (high is not None and value > high):
+        allowed = f"an integer from {low} to {high}" if high is not None else f"an integer >= {low}"
+        raise CommandLineError(f"{flag} {value} is out of range: allowed {allowed}")
+    return value

@@ -11,6 +11,8 @@ import numpy as np
 
 from species.errors import user_path
 
+from farm.commands import check_flag_int
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("inspect", help="summary table and contact sheet PNG of a dataset",
@@ -23,13 +25,21 @@ def register(subparsers) -> None:
 
 def summary_table(path: str) -> str:
     """Per species: trees, failures, mean height and crown radius (m), nodes, leaves, triangles, views."""
-    from farm.dataset import duckdb_connect
+    import duckdb
 
-    rows = duckdb_connect(path).execute("""
-        SELECT species, count(*) AS trees, count(error) AS failed,
-               avg(height) AS height, avg(crown_radius) AS crown, avg(n_nodes) AS nodes,
-               avg(n_leaves) AS leaves, avg(bark_triangles + leaf_triangles) AS triangles, sum(n_views) AS views
-        FROM trees GROUP BY species ORDER BY species""").fetchall()
+    from farm.dataset import DatasetError, duckdb_connect
+
+    connection = duckdb_connect(path)
+    try:
+        rows = connection.execute("""
+            SELECT species, count(*) AS trees, count(error) AS failed,
+                   avg(height) AS height, avg(crown_radius) AS crown, avg(n_nodes) AS nodes,
+                   avg(n_leaves) AS leaves, avg(bark_triangles + leaf_triangles) AS triangles, sum(n_views) AS views
+            FROM trees GROUP BY species ORDER BY species""").fetchall()
+    except (duckdb.InvalidInputException, duckdb.IOException) as exc:  # DuckDB's message names the part file
+        reason = " ".join(str(exc).split())
+        raise DatasetError(f"{path}: a part file cannot be read ({reason}): `farm validate {path}` names the "
+                           f"damaged files") from None
     lines = [f"{'species':<24}{'trees':>6}{'failed':>7}{'height m':>10}{'crown m':>9}{'nodes':>8}{'leaves':>8}"
              f"{'triangles':>11}{'views':>7}"]
     for name, trees, failed, height, crown, nodes, leaves, triangles, views in rows:
@@ -80,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
 
     from farm.storage import Location
 
+    check_flag_int("--rows", args.rows, 1)
     print(summary_table(args.dir))
     rows = contact_rows(args.dir, args.rows)
     if not rows:

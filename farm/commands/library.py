@@ -1,7 +1,7 @@
 """`farm library`: build a studio asset library (LODs, impostor, wind, seasons; GLB, USD, OBJ, FBX) on the farm.
 
-`farm library [SPEC.yaml] --out DIR` (no spec: every preset, 4 variants each; resumable), `farm library validate
-DIR`, `farm library add DIR --species NAME --seed N`.
+`farm library [SPEC.yaml] --out DIR [--species NAME[,NAME]] [--per-species N]` (no spec: every preset, 4 variants
+each; resumable), `farm library validate DIR`, `farm library add DIR --species NAME --seed N`.
 """
 from __future__ import annotations
 
@@ -20,7 +20,8 @@ def register(subparsers) -> None:
     parser.add_argument("--per-species", type=int, help="variants per species (overrides the spec)")
     parser.add_argument("--workers", type=int, help="worker actors (default: one per CPU)")
     parser.add_argument("--address", help="join this Ray cluster instead of starting a local one")
-    parser.add_argument("--species", help="(add) the species preset of the new asset")
+    parser.add_argument("--species", help="(add) the species preset of the new asset; (build) the species to "
+                        "build, NAME[,NAME], from the spec's (default: all)")
     parser.add_argument("--seed", type=int, help="(add) the tree seed of the new asset")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
@@ -33,11 +34,20 @@ def _load(args):
         spec = load_library_spec(args.spec)
     else:
         spec = parse_library_spec({})
+    counts = spec.species_counts
+    if args.species is not None:
+        chosen = [name.strip() for name in args.species.split(",")]
+        for name in chosen:
+            if name not in counts:
+                raise LibrarySpecError("--species", name, f"species of the spec, comma-separated: "
+                                       f"{', '.join(counts)}")
+        counts = {name: counts[name] for name in dict.fromkeys(chosen)}
     if args.per_species is not None:
         if args.per_species < 1:
             raise LibrarySpecError("--per-species", args.per_species, "an integer >= 1")
-        raw = {**spec.to_dict(), "species": {name: args.per_species for name in spec.species}}
-        spec = library_spec_from_record(raw)
+        counts = {name: args.per_species for name in counts}
+    if counts != spec.species_counts:
+        spec = library_spec_from_record({**spec.to_dict(), "species": counts})
     return spec
 
 
@@ -67,6 +77,10 @@ def run(args: argparse.Namespace) -> int:
         record = add_asset(args.folder, args.species, args.seed)
         print(f"{args.folder}: added {record['id']}")
         return 0
+    if args.seed is not None:
+        # A build's seeds come from the spec's `seed`; a --seed meant for `add` must not start another job.
+        raise CommandLineError("--seed is for `farm library add DIR --species NAME --seed N`; a library build "
+                               "takes its seed from the spec's `seed` field")
     spec = _load(args)
     if not args.out:
         raise CommandLineError("no output location: pass --out DIR")

@@ -15,11 +15,13 @@ import numpy as np
 
 from species.errors import user_path
 
-from farm.commands import CommandLineError
+from farm.commands import CommandLineError, check_flag_int
 
 BACKENDS = ("pyrender", "blender")
 # Float maps in [0, 1] are written as 16-bit PNGs: value = round(x * 65535).
 UNIT_SCALE = 1.0 / 65535.0
+# The largest image side, as a job spec's render.size allows: beyond it the GL context refuses the framebuffer.
+MAX_SIZE = 4096
 
 
 def register(subparsers) -> None:
@@ -102,14 +104,33 @@ def _render_blender(args, mesh, out: Path) -> list[dict]:
     if not hasattr(blender, "render_photos"):
         raise CommandLineError("--backend blender is not installed in this tree (renderers.blender has no "
                                "render_photos()): use --backend pyrender")
-    from renderers import make_rig
+    from renderers import make_rig, write_contact_sheet
 
     points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
     cameras = make_rig(args.rig, points, args.size, np.random.default_rng(args.seed))
     photos = blender.render_photos(mesh.to_glb(), cameras, out, samples=args.samples)
     for camera, seconds in zip(cameras, photos.render_seconds):
         print(f"view {camera.name:>12}: {seconds * 1000:.0f} ms (blender cycles, {args.samples} samples)")
+    with user_path(out / "contact_sheet.png", "write"):
+        write_contact_sheet(out / "contact_sheet.png", _photo_sheet_rows(photos), cell=min(args.size, 256))
     return json.loads(photos.cameras_json.read_text())["views"]
+
+
+def _photo_sheet_rows(photos) -> list:
+    """Contact sheet rows of a Blender photos job: one row per camera, its photo, depth and part mask."""
+    import cv2
+
+    from renderers import viewable
+
+    rows = []
+    for camera, photo, depth, mask, scale in zip(photos.cameras, photos.images, photos.depths, photos.masks,
+                                                 photos.depth_scales):
+        rgb = cv2.cvtColor(cv2.imread(str(photo), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
+        metres = cv2.imread(str(depth), cv2.IMREAD_UNCHANGED).astype(np.float32) * scale
+        labels = cv2.imread(str(mask), cv2.IMREAD_GRAYSCALE)
+        rows.append((camera.name, [("photo", rgb), ("depth", viewable("depth", metres)),
+                                   ("mask", viewable("mask", labels))]))
+    return rows
 
 
 def run(args: argparse.Namespace) -> int:
@@ -119,8 +140,9 @@ def run(args: argparse.Namespace) -> int:
     outputs = check_outputs(DEFAULT_OUTPUTS if args.styles is None
                             else [s.strip() for s in args.styles.split(",") if s.strip()])
     parse_rig(args.rig)
-    if args.size < 8:
-        raise CommandLineError(f"--size {args.size} is too small: allowed 8 pixels or more")
+    check_flag_int("--size", args.size, 8, MAX_SIZE)
+    check_flag_int("--seed", args.seed, 0)
+    check_flag_int("--samples", args.samples, 1)
     params = _tree_params(args)
     start = time.perf_counter()
     skeleton, mesh = species.rebuild(params)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from farm.commands import check_flag_int
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("review", help="review a dataset in a browser or VR headset; `review export DIR`",
@@ -24,6 +26,7 @@ def run(args: argparse.Namespace) -> int:
     from farm.review.service import default_db_path
     from farm.review.store import ReviewError, ReviewStore
 
+    check_flag_int("--port", args.port, 0, 65535)  # before a database is created
     if args.export_dir is not None:
         if args.target != "export":
             raise ReviewError(f"unexpected argument {args.export_dir!r}: use `farm review DIR` or "

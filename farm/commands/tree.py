@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
 from species.errors import TreefarmError, user_path
+
+from farm.commands import CommandLineError, check_flag_int
 
 FORMATS = ("glb", "obj")
 
@@ -68,28 +71,71 @@ def load_params(path: str) -> dict:
     return params
 
 
+def _species_output(args: argparse.Namespace) -> tuple[Path, str]:
+    """The file and format of `--species ... --out FILE`: FILE names a file, and its suffix agrees with --format."""
+    if args.out.endswith(("/", os.sep)) or Path(args.out).is_dir():
+        raise CommandLineError(f"--out {args.out} is a folder: with --species, --out names the file to write "
+                               f"(e.g. {Path(args.out) / args.species}.glb)")
+    out = Path(args.out)
+    suffix = out.suffix.lstrip(".").lower()
+    if args.format is None:
+        return out, suffix if suffix in FORMATS else "glb"
+    if suffix in FORMATS and suffix != args.format:
+        raise CommandLineError(f"--format {args.format} does not match --out {args.out}: allowed a .{args.format} "
+                               f"file name, or --format {suffix}")
+    return out, args.format
+
+
+def _params_output(args: argparse.Namespace) -> Path:
+    """The folder of `--params ... --out DIR`: a folder, not a file name ending in a mesh format."""
+    folder = Path(args.out)
+    if folder.suffix.lstrip(".").lower() in FORMATS or folder.is_file():
+        raise CommandLineError(f"--out {args.out} names a file: with --params, --out is the folder that gets one "
+                               f"file per dictionary")
+    return folder
+
+
+def _grown_dictionaries(paths: list[str]) -> list[tuple[str, dict, tuple]]:
+    """(file stem, dictionary, (skeleton, mesh, seconds)) of every --params file, all read and grown before any
+    is written; an error names its file, and two files of the same stem (one output name) are refused."""
+    stems: dict[str, str] = {}
+    for path in paths:
+        stem = Path(path).stem
+        if stem in stems:
+            raise CommandLineError(f"--params {stems[stem]} and {path} would both write {stem}: allowed files "
+                                   f"of different names")
+        stems[stem] = path
+    loaded = [(Path(p).stem, p, load_params(p)) for p in paths]
+    grown = []
+    for stem, path, params in loaded:
+        try:
+            grown.append((stem, params, grow_tree(params)))
+        except TreefarmError as exc:
+            raise ParamsFileError(f"{path}: {str(exc).strip()}") from exc
+    return grown
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
     import species
     from farm.table import format_table
 
+    check_flag_int("--seed", args.seed, 0)
     rows = []
     if args.species:
-        out = Path(args.out)
-        fmt = args.format or (out.suffix.lstrip(".").lower() if out.suffix.lower() in (".glb", ".obj") else "glb")
+        out, fmt = _species_output(args)
         params = species.sample(args.species, np.random.default_rng(args.seed))
         skeleton, mesh, seconds = grow_tree(params)
         mesh = _named(mesh, out.stem)
         files = write_tree(mesh, out, fmt)
         if args.save_params:
-            out.with_suffix(".json").write_text(json.dumps(params, indent=1, sort_keys=True))
+            with user_path(out.with_suffix(".json"), "write"):
+                out.with_suffix(".json").write_text(json.dumps(params, indent=1, sort_keys=True))
         rows.append(_row(out.stem, params, skeleton, mesh, seconds, files[0]))
     else:
-        folder = Path(args.out)
+        folder = _params_output(args)
         fmt = args.format or "glb"
-        loaded = [(Path(p).stem, load_params(p)) for p in args.params]  # read all first: fail before writing
-        for stem, params in loaded:
-            skeleton, mesh, seconds = grow_tree(params)
+        for stem, params, (skeleton, mesh, seconds) in _grown_dictionaries(args.params):
             mesh = _named(mesh, stem)
             files = write_tree(mesh, folder / f"{stem}.{fmt}", fmt)
             rows.append(_row(stem, params, skeleton, mesh, seconds, files[0]))

@@ -1,6 +1,7 @@
 """`farm validate DIR`: check a dataset's part files against the manifest (presence, size, sha256, schema, rows).
 
-Prints each damaged file with what is wrong and exits 1; prints a one-line summary and exits 0 when all is well.
+Prints each damaged file with what is wrong and exits 1; prints a one-line summary and exits 0 when all is well;
+a folder with no manifest is not a dataset: one line, exit 2.
 """
 from __future__ import annotations
 
@@ -18,7 +19,11 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from farm.dataset import read_manifest
     from farm.manifest import validate_dataset
+    from farm.storage import Location
 
+    location = Location.resolve(args.dir)
+    if not location.exists("manifest.json"):  # not a dataset at all (status 2), rather than a damaged one (1)
+        read_manifest(location)
     problems = validate_dataset(args.dir)
     for problem in problems:
         print(f"damaged: {problem}", file=sys.stderr)

@@ -19,6 +19,7 @@ from species.meshing.gltf import z_up_to_y_up
 from species.studio.collision import capsule_mesh
 
 from ..jobs import preset_names
+from ..manifest import JOB_RECORD
 from ..pipeline import run_job
 from ..storage import Location, sha256_hex
 from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
@@ -224,6 +225,9 @@ def run_library(spec: LibrarySpec, out: str, workers: int | None = None, address
         existing = json.loads(location.read_bytes(LIBRARY_RECORD))
         if existing.get("spec_digest") != spec.digest():
             raise LibraryError(f"{location.uri} holds a library of another spec; write this one to another --out")
+    elif location.exists(JOB_RECORD):
+        # Checked before library.json is written: a refused run must leave the folder as it was.
+        raise LibraryError(f"{location.uri} holds a farm job, not a library; write the library to another --out")
     write_library_record(location, spec)
     manifest = run_job(spec, out, workers=workers, address=address,
                        builder_factory=partial(LibraryChain, out=location.uri), progress=progress)

@@ -21,6 +21,7 @@ __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_librar
            "species_of_trees"]
 
 FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
+_MADE_FROM_GLB = ("fbx", "blend")
 DEFAULT_BUDGETS = (0.40, 0.12, 0.04)
 DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
@@ -159,6 +160,11 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     for item in formats:
         if item not in FORMATS:
             raise LibrarySpecError("formats", item, f"formats from: {', '.join(FORMATS)}")
+    for item in formats:
+        # Blender makes the FBX files and the .blend from the asset's GLB: without it there is nothing to import.
+        if item in _MADE_FROM_GLB and "glb" not in formats:
+            raise LibrarySpecError("formats", list(formats), f"{item!r} together with 'glb' (Blender makes {item} "
+                                   f"from the asset's GLB)")
     texture_size = check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
     if texture_size % 4:
         raise LibrarySpecError("texture_size", texture_size, "a multiple of 4 in [32, 4096]")

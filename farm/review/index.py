@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from farm.dataset import FLOAT_OUTPUTS, read_manifest
+from farm.dataset import FLOAT_OUTPUTS, read_manifest, reading_part
 from farm.storage import Location
 from species.errors import TreefarmError
 
@@ -61,7 +61,8 @@ class _RowGroupCache:
             if key in self._tables:
                 self._tables.move_to_end(key)
                 return self._tables[key]
-        with self.location.filesystem.open_input_file(self.location.path(ref.part)) as handle:
+        file = self.location.path(ref.part)
+        with reading_part(file), self.location.filesystem.open_input_file(file) as handle:
             table = pq.ParquetFile(handle).read_row_group(ref.row_group, columns=list(columns))
         with self._lock:
             self._tables[key] = table
@@ -75,7 +76,7 @@ def _row_refs(location: Location, part: str, columns: list[str]):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    with location.filesystem.open_input_file(location.path(part)) as handle:
+    with reading_part(location.path(part)), location.filesystem.open_input_file(location.path(part)) as handle:
         parquet = pq.ParquetFile(handle)
         groups = [parquet.read_row_group(g, columns=columns) for g in range(parquet.num_row_groups)]
     refs = [TreeRef(part, g, r) for g, table in enumerate(groups) for r in range(table.num_rows)]
@@ -173,10 +174,11 @@ class DatasetIndex:
         import pyarrow.parquet as pq
 
         shard = next(s for s in self.manifest["shards"] if f"part-{s['shard']:05d}" == batch["id"])
-        with self.location.filesystem.open_input_file(self.location.path(shard["trees"]["path"])) as handle:
+        trees_file, views_file = (self.location.path(shard[table]["path"]) for table in ("trees", "views"))
+        with reading_part(trees_file), self.location.filesystem.open_input_file(trees_file) as handle:
             flags = tree_flags(pq.read_table(handle, columns=TREE_COLUMNS))
         if self.sketch_output is not None:
-            with self.location.filesystem.open_input_file(self.location.path(shard["views"]["path"])) as handle:
+            with reading_part(views_file), self.location.filesystem.open_input_file(views_file) as handle:
                 views = pq.read_table(handle, columns=["tree_id", self.sketch_output])
             flags = flags + ink_flags(views["tree_id"].to_pylist(), views[self.sketch_output].to_pylist())
         return flags

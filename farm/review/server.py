@@ -5,6 +5,7 @@ Every request needs the token: header `X-Review-Token`, query `?token=`, or the 
 """
 from __future__ import annotations
 
+import errno
 import hmac
 import json
 import mimetypes
@@ -200,7 +201,9 @@ class ReviewServer:
             self.socket.bind((host, port))
         except OSError as exc:
             self.socket.close()
-            raise ReviewError(f"cannot listen on {host}:{port} ({exc.strerror}): choose another --port") from None
+            advice = ("choose another --port" if exc.errno in (errno.EADDRINUSE, errno.EACCES)
+                      else "--host must be a name or address of this machine")
+            raise ReviewError(f"cannot listen on {host}:{port} ({exc.strerror}): {advice}") from None
         self.host, self.port = host, self.socket.getsockname()[1]
         self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off",
                                                     timeout_graceful_shutdown=2))

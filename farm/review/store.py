@@ -72,9 +72,13 @@ class ReviewStore:
         self.path = Path(path)
         if not self.path.parent.is_dir():
             raise ReviewError(f"review database folder {self.path.parent} does not exist")
-        with self._connect() as connection:
-            connection.execute("PRAGMA journal_mode=WAL")
-            connection.executescript(_SCHEMA)
+        try:
+            with self._connect() as connection:
+                connection.execute("PRAGMA journal_mode=WAL")
+                connection.executescript(_SCHEMA)
+        except sqlite3.OperationalError as exc:  # a read-only dataset folder, or a file that is not SQLite
+            raise ReviewError(f"cannot open the review database {self.path} ({exc}): pass --db PATH to keep the "
+                              f"reviews in a writable place") from None
 
     @contextmanager
     def _connect(self):

@@ -14,6 +14,8 @@ from .child_points import child_points, ChildPoints
 from .leaves import leaf_transforms
 from .assembly import assemble, MIN_RADIUS, node_key, SkeletonAssemblyError, WeberPennTree
 from .shapes import auto_taper, SHAPE_NAMES, shape_ratio
+from .size_estimate import (check_tree_size, estimate_size, MAX_ESTIMATED_LEAVES, MAX_ESTIMATED_NODES,
+                            MAX_ESTIMATED_STEMS_PER_LEVEL, SizeEstimate)
 from .presets import make_preset
 
 __all__ = [
@@ -25,4 +27,6 @@ __all__ = [
     "ChildPoints", "child_points", "leaf_transforms",
     "WeberPennTree", "assemble", "node_key", "SkeletonAssemblyError", "MIN_RADIUS",
     "shape_ratio", "auto_taper", "SHAPE_NAMES", "make_preset",
+    "SizeEstimate", "estimate_size", "check_tree_size", "MAX_ESTIMATED_STEMS_PER_LEVEL", "MAX_ESTIMATED_NODES",
+    "MAX_ESTIMATED_LEAVES",
 ]

@@ -22,6 +22,7 @@ from .leaves import leaf_transforms
 from .params import StemLevelParams, WeberPennParams
 from .schema import validate
 from .shapes import shape_ratio
+from .size_estimate import check_tree_size
 from .stems import Level, grow_level
 
 __all__ = ["grow", "grow_validated", "grow_tree"]
@@ -40,7 +41,9 @@ def grow_validated(validated: dict, rng: np.random.Generator) -> Skeleton:
 
 
 def grow_tree(params: WeberPennParams, rng: np.random.Generator) -> WeberPennTree:
-    """Every stem level in turn, then the leaves on the last level's child points."""
+    """Every stem level in turn, then the leaves on the last level's child points; a tree whose estimated size
+    exceeds the limits is refused (TreeTooLargeError) before anything grows."""
+    check_tree_size(params)
     levels, last_points = _grow_levels(params, rng)
     if params.leaves.count and last_points is not None and len(last_points):
         transforms, pick = leaf_transforms(last_points, params, rng)

@@ -22,12 +22,12 @@ def stderr_lines(capsys) -> list[str]:
 @pytest.mark.parametrize("argv, named", [
     (["species", "--generator", "fractal"], "unknown generator 'fractal'"),
     (["tree", "--params", "{tmp}/absent.json", "--out", "{tmp}/out"], "absent.json is missing"),
-    (["tree", "--species", "maple", "--out", "{tmp}"], "Is a directory"),
+    (["tree", "--species", "maple", "--out", "{tmp}"], "is a folder"),
     (["status", "{tmp}"], "holds no treefarm job"),
     (["status", "nosuchfs://bucket/data"], "not a path or a file system URI"),
     (["inspect", "{tmp}"], "no manifest.json"),
     (["export", "{tmp}", "--format", "stl", "--to", "{tmp}/out"], "allowed glb, obj"),
-    (["render", "--species", "maple", "--size", "4", "--out", "{tmp}/views"], "--size 4 is too small"),
+    (["render", "--species", "maple", "--size", "4", "--out", "{tmp}/views"], "--size 4 is out of range"),
     (["library", "validate"], "needs the library folder"),
     (["generate", "{tmp}/absent.yaml", "--out", "{tmp}/out"], "absent.yaml"),
 ])

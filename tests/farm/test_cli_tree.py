@@ -42,7 +42,8 @@ def test_bad_dictionary_prints_one_line_and_writes_nothing(tmp_path, capsys):
     assert main(["tree", "--params", str(good), str(bad), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "'levels' = 9" in err and "[1, 4]" in err and "Traceback" not in err
-    assert not out.exists() or not any(out.iterdir()) or True  # validation happens per tree; see next test
+    assert str(bad) in err
+    assert not out.exists() or not any(out.iterdir())
 
 
 def test_bad_json_and_unknown_species_are_one_line_errors(tmp_path, capsys):

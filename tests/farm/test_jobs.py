@@ -4,8 +4,8 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from farm.jobs import (DatasetTables, JobSpecError, check_int, check_resources, load_spec, parse_spec, species_of_trees,
-                       spec_to_yaml)
+from farm.jobs import (DatasetTables, JobSpecError, check_int, check_resources, default_spec, load_spec, parse_spec,
+                       species_of_trees, spec_to_yaml)
 from farm_standins import OUTPUTS, SPECIES, standin_spec
 
 KNOWN = dict(known_species=SPECIES, known_outputs=OUTPUTS)
@@ -124,3 +124,30 @@ def test_check_int_names_the_field_and_its_range(value):
     with pytest.raises(JobSpecError) as info:
         check_int("shard_size", value, 0, 10)
     assert info.value.field == "shard_size" and info.value.value == value
+
+
+def test_a_small_job_of_the_default_spec_samples_every_generator():
+    import species
+
+    generators = {p.name: p.generator for p in species.list_presets()}
+    counts = default_spec().with_trees(12).species_counts
+    assert sum(counts.values()) == 12 and max(counts.values()) == 1
+    assert {generators[name] for name, count in counts.items() if count} == set(generators.values())
+
+
+def test_with_trees_leaves_the_full_default_job_as_it_was():
+    spec = default_spec()
+    assert spec.with_trees(spec.n_trees).species_counts == spec.species_counts
+
+
+@pytest.mark.parametrize("fields, named", [({"trees": 0}, "trees"),
+                                           ({"species": {name: 0 for name in SPECIES}}, "species")])
+def test_a_job_of_zero_trees_is_refused(fields, named):
+    with pytest.raises(JobSpecError) as info:
+        standin_spec(**fields)
+    assert info.value.field == named
+
+
+def test_with_trees_refuses_zero():
+    with pytest.raises(JobSpecError, match="trees"):
+        standin_spec().with_trees(0)

@@ -32,3 +32,25 @@ def test_render_rejects_an_unknown_style_in_one_line(tmp_path, capsys):
     status = main(["render", "--species", "maple", "--styles", "depth,watercolour", "--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert status == 2 and "watercolour" in err and "sketch_tsn" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_blender_backend_writes_a_contact_sheet_too(tmp_path, monkeypatch):
+    from renderers import blender
+
+    def photos_standin(glb, cameras, out_dir, samples=16):
+        images, depths, masks = [], [], []
+        for k, camera in enumerate(cameras):
+            for kind, pixels, files in (("", np.full((32, 32, 3), 90, np.uint8), images),
+                                        ("_depth", np.full((32, 32), 900, np.uint16), depths),
+                                        ("_mask", np.ones((32, 32), np.uint8), masks)):
+                files.append(out_dir / f"view_{k:03d}{kind}.png")
+                cv2.imwrite(str(files[-1]), pixels)
+        (out_dir / "cameras.json").write_text(json.dumps({"views": [{"name": c.name} for c in cameras]}))
+        return blender.BlenderPhotos(images, depths, masks, [0.01] * len(cameras), list(cameras),
+                                     out_dir / "cameras.json", [0.0] * len(cameras), 0.0)
+
+    monkeypatch.setattr(blender, "render_photos", photos_standin)
+    out = tmp_path / "photos"
+    assert main(["render", "--species", "maple", "--rig", "two-view", "--size", "32", "--backend", "blender",
+                 "--out", str(out)]) == 0
+    assert (out / "contact_sheet.png").is_file()

@@ -152,8 +152,12 @@ def test_a_dictionary_without_generator_is_weber_penn():
     assert isinstance(species.grow(params, np.random.default_rng(0)), species.Skeleton)
 
 
-def test_runaway_splitting_raises_a_clear_error_instead_of_exhausting_memory():
+def test_runaway_splitting_raises_a_clear_error_instead_of_exhausting_memory(monkeypatch):
     params = simple_params(curveRes=[8, 30, 3, 1], segSplits=[0, 2.0, 0, 0], rSplits2=0.0, branches=[0, 10, 0, 0])
+    with pytest.raises(species.TreeTooLargeError, match=r"level 1 would grow about [\d,]+ stems .*segSplits\[1\]"):
+        grow(params, np.random.default_rng(0))
+    # the in-growth check stays as a backstop behind the estimate
+    monkeypatch.setattr("species.weber_penn.generator.check_tree_size", lambda params: None)
     with pytest.raises(species.TreefarmError, match=r"level 1 grew \d+ stems .*segSplits\[1\]"):
         grow(params, np.random.default_rng(0))
 

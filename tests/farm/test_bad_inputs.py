@@ -1,0 +1,128 @@
+"""Every command's bad inputs: one line on stderr naming the value, exit status 2, and nothing written.
+
+The table runs in-process through `farm.cli.main` (fast); a few rows run end to end as `python -m farm.cli`.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from farm.cli import main
+from farm.pipeline import run_job
+from farm_standins import StandinChain, standin_spec
+from renderers.contact_sheet import contact_sheet
+
+REPO = Path(__file__).resolve().parents[2]
+SAPLING = REPO.parent / "shared" / "data" / "sapling"
+
+
+@pytest.fixture(scope="module")
+def finished_dataset(tmp_path_factory, ray_session) -> Path:
+    path = tmp_path_factory.mktemp("bad_inputs_dataset")
+    run_job(standin_spec(species={"standin_a": 2, "standin_b": 1}), str(path), workers=1,
+            builder_factory=StandinChain, progress=False)
+    return path
+
+
+BAD_INPUTS = [
+    # (argv, words of the one line); {tmp} is a folder of inputs, {good} a valid dictionary, {data} a dataset copy,
+    # {damaged} the copy with a truncated trees part file
+    (["tree", "--params", "{good}", "{tmp}/in/bad.json", "--out", "{tmp}/out"], "bad.json"),
+    (["tree", "--params", "{good}", "{tmp}/in/other/{good_name}", "--out", "{tmp}/out"], "would both write"),
+    (["tree", "--params", "{good}", "--out", "{tmp}/t.glb"], "--out"),
+    (["tree", "--species", "maple", "--seed", "-3", "--out", "{tmp}/m.glb"], "--seed -3"),
+    (["tree", "--species", "maple", "--format", "glb", "--out", "{tmp}/x.obj"], "--format glb"),
+    (["tree", "--species", "maple", "--out", "{tmp}/dir/"], "is a folder"),
+    (["render", "--species", "maple", "--size", "100000", "--out", "{tmp}/views"], "--size 100000"),
+    (["render", "--species", "maple", "--seed", "-1", "--out", "{tmp}/views"], "--seed -1"),
+    (["inspect", "{data}", "--rows", "-3"], "--rows -3"),
+    (["inspect", "{damaged}"], "part-"),
+    (["review", "{damaged}", "--port", "0", "--db", "{tmp}/reviews.sqlite"], "part-"),
+    (["validate", "{tmp}"], "no manifest.json"),
+    (["review", "{data}", "--port", "99999"], "--port 99999"),
+    (["review", "export", "{data}", "--db", "{tmp}/in"], "--db"),
+    (["generate", "--trees", "0", "--out", "{tmp}/job", "--quiet"], "trees"),
+]
+
+
+def _truncate_a_part(data: Path) -> Path:
+    part = sorted((data / "trees").glob("part-*.parquet"))[0]
+    part.write_bytes(part.read_bytes()[:200])
+    return part
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+def _prepare(tmp: Path, data: Path, argv: list[str]) -> list[str]:
+    inputs = tmp / "in"
+    (inputs / "other").mkdir(parents=True)
+    good = next(iter(sorted(SAPLING.glob("*.json"))))
+    (inputs / "bad.json").write_text(json.dumps({**json.loads(good.read_text()), "levels": 9}))
+    shutil.copy(good, inputs / "other" / good.name)
+    if "{damaged}" in argv:
+        _truncate_a_part(data)
+    return [w.format(tmp=tmp, good=good, good_name=good.name, data=data, damaged=data) for w in argv]
+
+
+@pytest.mark.parametrize("argv, named", BAD_INPUTS, ids=[" ".join(a[:1] + a[-2:]) for a, _ in BAD_INPUTS])
+def test_a_bad_input_is_one_line_status_2_and_writes_nothing(tmp_path, finished_dataset, capsys, argv, named):
+    data = tmp_path / "data"
+    shutil.copytree(finished_dataset, data)
+    argv = _prepare(tmp_path / "work", data, argv)
+    before_work, before_data = _files(tmp_path / "work"), _files(data)
+    status = main(argv)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(lines) == 1, lines
+    assert lines[0].startswith("farm: error: ") and named in lines[0], lines
+    assert _files(tmp_path / "work") == before_work and _files(data) == before_data
+
+
+END_TO_END = [row for row in BAD_INPUTS if row[1] in ("bad.json", "--size 100000", "part-")][:3]
+
+
+@pytest.mark.parametrize("argv, named", END_TO_END, ids=[a[0] for a, _ in END_TO_END])
+def test_a_bad_input_end_to_end_is_one_line_and_status_2(tmp_path, finished_dataset, argv, named):
+    data = tmp_path / "data"
+    shutil.copytree(finished_dataset, data)
+    argv = _prepare(tmp_path / "work", data, argv)
+    before = _files(tmp_path)
+    result = subprocess.run([sys.executable, "-m", "farm.cli", *argv], cwd=REPO, capture_output=True, text=True)
+    lines = result.stderr.strip().splitlines()
+    assert result.returncode == 2 and len(lines) == 1 and named in lines[0], result.stderr
+    assert _files(tmp_path) == before
+
+
+def test_a_bad_host_is_not_blamed_on_the_port(tmp_path, finished_dataset, capsys):
+    data = tmp_path / "data"
+    shutil.copytree(finished_dataset, data)
+    assert main(["review", str(data), "--host", "no-such-host.invalid", "--port", "0",
+                 "--db", str(tmp_path / "r.sqlite")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "--host" in line and "choose another --port" not in line
+
+
+def test_contact_sheet_labels_are_whole():
+    image = np.zeros((8, 8), np.uint8)
+    a, b = (contact_sheet([("0 sc_self_pruning_forest_tree", [(name, image)])], cell=64)
+            for name in ("sketch_tsn_contour_a", "sketch_tsn_contour_b"))
+    assert not np.array_equal(a, b)  # the last letter of a long output name is drawn, not cut off
+
+
+def test_the_torch_dataset_names_a_damaged_part_file(tmp_path, finished_dataset):
+    from farm.dataset import DatasetError
+    from farm.torch_dataset import ViewsDataset
+
+    data = tmp_path / "data"
+    shutil.copytree(finished_dataset, data)
+    part = sorted((data / "views").glob("part-*.parquet"))[0]
+    part.write_bytes(part.read_bytes()[:200])
+    with pytest.raises(DatasetError, match=str(part)):
+        ViewsDataset(str(data))
