@@ -90,7 +90,7 @@ class JobSpec(PipelineSpec):
     max_nodes     : a tree whose skeleton has more nodes is recorded as failed before meshing (keeps one
                     runaway parameter draw from stalling a worker for minutes and gigabytes).
     output        : default output location (local path or pyarrow filesystem URI), or None.
-    resources     : Ray resources per worker actor (`num_cpus`, `num_gpus`).
+    resources     : Ray resources per worker actor (`num_cpus`, `num_gpus`, optional `memory_gb`).
     """
 
     name: str = "default"
@@ -170,7 +170,9 @@ def species_of_trees(spec: PipelineSpec) -> list[str]:
 # ---------------------------------------------------------------------- field checks of every spec
 # Each raises JobSpecError naming the field, its value and what is allowed; the library spec re-raises them as
 # its own error class.
-_RESOURCE_KEYS = {"num_cpus", "num_gpus"}
+_RESOURCE_KEYS = {"num_cpus", "num_gpus", "memory_gb"}
+# A worker with its renderer and one small tree needs about this much (measured: VmData 0.6 GiB after a maple).
+MIN_WORKER_MEMORY_GB = 1.0
 
 
 def check_keys(where: str, mapping: Any, allowed: set[str]) -> dict:
@@ -189,7 +191,8 @@ def check_int(name: str, value: Any, low: int, high: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise JobSpecError(name, value, f"an integer >= {low}")
     if value < low or (high is not None and value > high):
-        raise JobSpecError(name, value, f"an integer in [{low}, {high}]" if high else f"an integer >= {low}")
+        allowed = f"an integer in [{low}, {high}]" if high is not None else f"an integer >= {low}"
+        raise JobSpecError(name, value, allowed)
     return int(value)
 
 
@@ -207,10 +210,14 @@ def check_seed(value: Any) -> int:
 
 def check_resources(raw: Any) -> dict[str, float]:
     """Ray resources per worker actor from a spec's `resources` mapping: num_cpus (default 1) and num_gpus
-    (default 0), each a number >= 0."""
+    (default 0), each a number >= 0, and memory_gb when given (GiB, > 0: Ray's `memory` per actor and the
+    worker's own memory limit; without it a worker limits itself to a share of its node's memory)."""
     resources = check_keys("resources", raw, _RESOURCE_KEYS)
-    return {"num_cpus": check_number("resources.num_cpus", resources.get("num_cpus", 1), 0.0),
-            "num_gpus": check_number("resources.num_gpus", resources.get("num_gpus", 0), 0.0)}
+    checked = {"num_cpus": check_number("resources.num_cpus", resources.get("num_cpus", 1), 0.0),
+               "num_gpus": check_number("resources.num_gpus", resources.get("num_gpus", 0), 0.0)}
+    if "memory_gb" in resources:
+        checked["memory_gb"] = check_number("resources.memory_gb", resources["memory_gb"], MIN_WORKER_MEMORY_GB)
+    return checked
 
 
 def preset_names() -> list[str]:

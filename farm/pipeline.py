@@ -7,11 +7,14 @@ Same spec and seed, same part-file bytes, whatever the number of workers or thei
 from __future__ import annotations
 
 import json
+import logging
 import os
+import resource
 import shutil
 import subprocess
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 from species.errors import TreefarmError
 
@@ -25,13 +28,46 @@ from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_r
                          view_rows)
 
 __all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORKER_ENV", "ACTOR_RETRIES",
-           "worker_env", "ShardWorker"]
+           "worker_env", "ShardWorker", "DEFAULT_MEMORY_SHARE", "worker_memory_bytes", "limit_memory"]
 
 # Worker processes render offscreen through EGL (no display on farm machines).
 WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
 # A worker that dies is restarted and its in-flight shard re-run this many times (Ray's own retries); so is a shard
 # whose write failed for a reason that may pass. A permanent file error fails the job at once.
 ACTOR_RETRIES = 3
+# How often the driver reads the workers' per-tree progress while it waits for shards.
+PROGRESS_SECONDS = 0.25
+
+
+# Without `resources.memory_gb`, a worker limits itself to this share of its node's physical memory: one runaway
+# tree then fails alone (MemoryError, a failed row) instead of taking the node down.
+DEFAULT_MEMORY_SHARE = 0.5
+
+
+def worker_memory_bytes(spec: PipelineSpec) -> int:
+    """The memory limit of one worker: `resources.memory_gb`, or DEFAULT_MEMORY_SHARE of this node's memory."""
+    if "memory_gb" in spec.resources:
+        return int(spec.resources["memory_gb"] * 2**30)
+    return int(DEFAULT_MEMORY_SHARE * os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+
+
+def limit_memory(n_bytes: int) -> None:
+    """Cap this process's data segment (heap and private writable mappings: what numpy and Python allocate) so
+    that an allocation past it raises MemoryError. RLIMIT_DATA rather than RLIMIT_AS: the renderer's and
+    Ray's threads reserve gigabytes of address space they never touch."""
+    _, hard = resource.getrlimit(resource.RLIMIT_DATA)
+    soft = n_bytes if hard == resource.RLIM_INFINITY else min(n_bytes, hard)
+    resource.setrlimit(resource.RLIMIT_DATA, (soft, hard))
+
+
+def _memory_note(exc: Exception) -> str:
+    """What a MemoryError in a worker means, for the failed tree's row."""
+    if not isinstance(exc, MemoryError):
+        return ""
+    soft, _ = resource.getrlimit(resource.RLIMIT_DATA)
+    if soft == resource.RLIM_INFINITY:
+        return ""
+    return f" (over this worker's memory limit of {soft / 2**30:.1f} GiB: resources.memory_gb)"
 
 
 def worker_env(spec: PipelineSpec) -> dict[str, str]:
@@ -68,10 +104,12 @@ def plan_shards(spec: PipelineSpec) -> list[ShardPlan]:
     return [ShardPlan(k, k * size, tuple(species[k * size:(k + 1) * size])) for k in range(spec.n_shards)]
 
 
-def run_shard(spec: PipelineSpec, plan: ShardPlan, location: Location, builder, worker: dict | None = None) -> dict:
+def run_shard(spec: PipelineSpec, plan: ShardPlan, location: Location, builder, worker: dict | None = None,
+              on_tree: Callable[[int], None] | None = None) -> dict:
     """Build every tree of a shard, write its two part files atomically, then its record; returns the record.
 
     worker : facts about the process to note in the record (the Ray node id).
+    on_tree : called with the number of trees built so far in this shard, after each one (progress).
     A tree whose build raises becomes a row with its error (and a failure entry); the shard goes on.
     """
     shard_start, shard_cpu_start = time.perf_counter(), time.process_time()
@@ -88,12 +126,14 @@ def run_shard(spec: PipelineSpec, plan: ShardPlan, location: Location, builder, 
             tree_rows.append(row)
             all_view_rows.extend(rows)
         except Exception as exc:  # one bad tree is recorded (row + manifest failure) and the shard goes on
-            message = f"{type(exc).__name__}: {exc}"
+            message = f"{type(exc).__name__}: {exc}{_memory_note(exc)}"
             params = getattr(built, "params", None)
             tree_rows.append(failed_tree_row(spec, index, plan.shard, species_name, seed, params, message))
             failures.append({"tree_id": tree_rows[-1]["tree_id"], "index": index, "species": species_name,
                              "seed": seed, "stage": timer.current, "error": message})
         tree_timings.append({"index": index, **timer.seconds})
+        if on_tree is not None:
+            on_tree(len(tree_rows))
     start = time.perf_counter()
     trees_bytes = serialize_table(tree_rows, trees_schema())
     views_bytes = serialize_table(all_view_rows, views_schema(spec.tables.view_outputs))
@@ -124,18 +164,21 @@ class ShardWorker:
         import cv2
 
         cv2.setNumThreads(max(1, int(spec.resources["num_cpus"])))  # as LP_NUM_THREADS: one actor, its CPUs
+        limit_memory(worker_memory_bytes(spec))
         self.spec, self.location = spec, Location.resolve(uri)
         # Made by the first task: Ray gives the driver an error raised in a task as itself, one raised in
         # __init__ only as the text of a dead actor.
         self.builder_factory, self.builder = builder_factory, None
 
-    def run(self, plan: ShardPlan) -> dict:
+    def run(self, plan: ShardPlan, progress=None) -> dict:
+        """progress : a `ray.util.queue.Queue` that gets (shard, trees built so far) after each tree."""
         import ray
 
         if self.builder is None:
             self.builder = self.builder_factory(self.spec)
+        on_tree = None if progress is None else (lambda built: progress.put_nowait((plan.shard, built)))
         return run_shard(self.spec, plan, self.location, self.builder,
-                         worker={"node": ray.get_runtime_context().get_node_id()})
+                         worker={"node": ray.get_runtime_context().get_node_id()}, on_tree=on_tree)
 
     def pid(self) -> int:
         return os.getpid()
@@ -186,6 +229,14 @@ def _mebibytes(n_bytes: int) -> str:
     return f"{n_bytes / 2**20:,.1f} MiB"
 
 
+_RAY_TOKEN_LOGGER = "ray._private.authentication.authentication_token_setup"
+
+
+def _quiet_local_token_warning(record: logging.LogRecord) -> bool:
+    """Drop Ray's start-up line "Token authentication is enabled for this Ray cluster" (a logging filter)."""
+    return not record.getMessage().startswith("Token authentication is enabled for this Ray cluster")
+
+
 def _connect_ray(address: str | None, workers: int | None) -> tuple[bool, subprocess.Popen | None]:
     """Start or join Ray unless this process already has: (whether we started it and must shut it down, the
     watchdog that ends a local Ray's processes with this one)."""
@@ -199,6 +250,9 @@ def _connect_ray(address: str | None, workers: int | None) -> tuple[bool, subpro
         # "local": always a fresh Ray of our own, never a cluster some other process left running here.
         address = "local"
         options["num_cpus"] = max(os.cpu_count() or 1, workers or 1)
+        # Its token guards a Ray only this process talks to; the README's cluster notes say what it means
+        # where it matters (a cluster joined with --address, which keeps the warning).
+        logging.getLogger(_RAY_TOKEN_LOGGER).addFilter(_quiet_local_token_warning)
     ray.init(address=address, **options)
     return True, start_reaper() if address == "local" else None
 
@@ -207,28 +261,51 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
                  workers: int | None, builder_factory: BuilderFactory, bar) -> None:
     """Start the actors, keep each one busy with one shard at a time, collect the records as they land."""
     import ray
+    from ray.util.queue import Queue
 
+    memory = {"memory": worker_memory_bytes(spec)} if "memory_gb" in spec.resources else {}
     if workers is None:
-        cpus_per_actor = max(spec.resources["num_cpus"], 1e-3)
-        workers = max(1, int(ray.cluster_resources().get("CPU", 1) // cpus_per_actor))
+        cluster = ray.cluster_resources()
+        workers = int(cluster.get("CPU", 1) // max(spec.resources["num_cpus"], 1e-3))
+        if memory:  # an actor Ray cannot place would hold its shard until the job ends
+            workers = min(workers, int(cluster.get("memory", 0) // memory["memory"]))
+        workers = max(1, workers)
     worker_class = ray.remote(ShardWorker).options(
-        num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"],
+        num_cpus=spec.resources["num_cpus"], num_gpus=spec.resources["num_gpus"], **memory,
         max_restarts=ACTOR_RETRIES, max_task_retries=ACTOR_RETRIES, runtime_env={"env_vars": worker_env(spec)})
     actors = [worker_class.remote(spec, location.uri, builder_factory) for _ in range(min(workers, len(pending)))]
     views_done = sum(record["views"]["rows"] for record in records.values())
     queue = list(reversed(pending))
     in_flight = {}
+    # Trees built so far in each running shard, as the workers report them (only to a bar that is shown);
+    # a re-run shard reports from 1 again.
+    progress = None if bar.disable else Queue(actor_options={"num_cpus": 0})
+    building: dict[int, int] = {}
+    trees_finished = bar.n
 
     def submit(actor) -> None:
         if queue:
             plan = queue.pop()
-            in_flight[actor.run.options(retry_exceptions=[TransientWriteError]).remote(plan)] = (actor, plan)
+            task = actor.run.options(retry_exceptions=[TransientWriteError]).remote(plan, progress)
+            in_flight[task] = (actor, plan)
+
+    def show_progress(redraw: bool = False) -> None:
+        for shard, built in progress.get_nowait_batch(progress.qsize()) if progress is not None else ():
+            if shard not in records:
+                building[shard] = built
+        shown = trees_finished + sum(building.values())
+        if redraw or shown != bar.n:
+            bar.n = shown
+            bar.refresh()
 
     try:
         for actor in actors:
             submit(actor)
         while in_flight:
-            ready, _ = ray.wait(list(in_flight), num_returns=1)
+            ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=PROGRESS_SECONDS)
+            show_progress()
+            if not ready:
+                continue
             actor, plan = in_flight.pop(ready[0])
             try:
                 record = ray.get(ready[0])
@@ -243,15 +320,20 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
                 raise JobError(f"shard {plan.shard} failed after {ACTOR_RETRIES} retries: "
                                f"{' '.join(str(exc).split())[:300]}") from exc
             records[plan.shard] = record
+            building.pop(plan.shard, None)
+            trees_finished += record["n_trees"]
             trees_left = sum(p.n_trees for p in queue) + sum(p.n_trees for _, p in in_flight.values())
             _check_free_space(location, records, trees_left)
             views_done += record["views"]["rows"]
-            bar.update(record["n_trees"])
-            bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()))
+            bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()),
+                            refresh=False)
+            show_progress(redraw=True)
             submit(actor)
     finally:  # a failed shard ends the job: its actors must not go on holding their CPUs
         for actor in actors:
             ray.kill(actor)
+        if progress is not None:
+            progress.shutdown()
 
 
 def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: str | None = None,
@@ -275,14 +357,16 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
     records = finished_shards(location, spec.digest(), len(plans))
     write_job_record(location, spec)
     pending = [plan for plan in plans if plan.shard not in records]
-    started_ray, reaper = False, None
+    started_ray, reaper, bar = False, None, None
     start = time.perf_counter()
-    bar = tqdm(total=spec.n_trees, initial=sum(records[k]["n_trees"] for k in records), unit="tree",
-               desc=f"farm {spec.name}", disable=not progress, dynamic_ncols=True, smoothing=0.1)
     try:
         if pending:
             _check_free_space(location, records, sum(plan.n_trees for plan in pending))
             started_ray, reaper = _connect_ray(address, workers)
+        # After Ray's start-up lines, so that none lands inside the bar.
+        bar = tqdm(total=spec.n_trees, initial=sum(records[k]["n_trees"] for k in records), unit="tree",
+                   desc=f"farm {spec.name}", disable=not progress, dynamic_ncols=True, smoothing=0.1)
+        if pending:
             _run_pending(spec, location, pending, records, workers, builder_factory, bar)
         manifest_exists = location.exists("manifest.json")
         if pending or not manifest_exists:
@@ -293,7 +377,8 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
 
             manifest = read_manifest(location)
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if started_ray:
             ray.shutdown()
         if reaper is not None:  # end of its pipe: it ends what ray.shutdown left running

@@ -10,8 +10,11 @@ class CommandLineError(TreefarmError):
 
 def check_flag_int(flag: str, value: int, low: int, high: int | None = None) -> int:
     """`value` of the integer option `flag` when in [low, high] (no upper bound when high is None); else a
-    CommandLineError naming the flag, the value and the range. Checked before anything is written."""
-    if value < low or (high is not None and value > high):
-        allowed = f"an integer from {low} to {high}" if high is not None else f"an integer >= {low}"
-        raise CommandLineError(f"{flag} {value} is out of range: allowed {allowed}")
-    return value
+    CommandLineError naming the flag, the value and the range. Checked before anything is written.
+    The range check is the job spec's (`farm.jobs.check_int`); only the wording is a command line's."""
+    from farm.jobs import JobSpecError, check_int
+
+    try:
+        return check_int(flag, value, low, high)
+    except JobSpecError as exc:
+        raise CommandLineError(f"{flag} {value} is out of range: allowed {exc.allowed}") from None

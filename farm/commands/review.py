@@ -42,12 +42,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def serve(args: argparse.Namespace) -> int:
-    from farm.review.server import ReviewServer, check_token, create_app, new_token
+    from farm.review.server import ReviewServer, check_token, create_app, listen_socket, new_token
     from farm.review.service import ReviewService
 
     token = check_token(args.token) if args.token else new_token()
-    service = ReviewService(args.target, args.db, progress=True)
-    server = ReviewServer(create_app(service, token), args.host, args.port)
+    sock = listen_socket(args.host, args.port)  # a taken port is refused before the database is created
+    try:
+        service = ReviewService(args.target, args.db, progress=True)
+    except BaseException:
+        sock.close()
+        raise
+    server = ReviewServer(create_app(service, token), args.host, sock=sock)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(f"warning: listening on {args.host}: anyone who can reach it and has the token can review",
               file=sys.stderr)

@@ -3,15 +3,17 @@ levels of detail, an impostor, wind data, collision capsules and textures, in GL
 
 Modules, from the bottom up: `spec` (LibrarySpec), `lod_fit` and `asset` (one asset in memory), `gltf_asset`,
 `usd_asset`, `png_cache`, `previews`, `wind_viewer` (its files), `records` (what a library folder records),
-`blender_catalog` (the Blender catalogs), `catalog` (catalog, sheets, gallery, validation) and `job` (the job).
+`blender_catalog` (the Blender catalogs), `catalog` (catalog, sheets, gallery, validation) and `job` (the job);
+`glb_scene` reads a library GLB back into trimesh with its instanced leaves drawn.
 """
 from __future__ import annotations
 
 from .catalog import quality_shortfalls, validate_library, write_catalog
+from .glb_scene import load_glb_scene
 from .job import add_asset, run_library
 from .records import LibraryError, read_library_spec
 from .spec import LibrarySpec, LibrarySpecError, default_library_spec, load_library_spec, parse_library_spec
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "run_library", "add_asset", "write_catalog", "validate_library", "quality_shortfalls", "LibraryError",
-           "read_library_spec"]
+           "read_library_spec", "load_glb_scene"]

@@ -8,14 +8,11 @@ from __future__ import annotations
 import io
 import json
 
-import cv2
-import numpy as np
-
 from renderers.blender import blender_available
 from renderers.contact_sheet import contact_sheet
 from species.meshing.gltf import GlbError, read_glb_chunks
 
-from ..image_codec import encode_pixels
+from ..image_codec import decode_map, encode_pixels
 from ..manifest import Problem
 from ..storage import Location, sha256_hex
 from ..tree_chain import to_json
@@ -94,9 +91,8 @@ def write_catalog(location: Location, spec: LibrarySpec) -> dict:
     for name, group in by_species.items():
         cells = []
         for row in group:
-            data = np.frombuffer(location.read_bytes(row["thumbnail"]), np.uint8)
-            image = cv2.cvtColor(cv2.imdecode(data, cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-            cells.append((row["id"].split("-")[-1][-6:], image))
+            image = decode_map(location.read_bytes(row["thumbnail"]))
+            cells.append((row["id"].split("-")[-1][-6:], image[..., :3]))  # the sheet is opaque: alpha dropped
         sheet = contact_sheet([(name, cells)], cell=192)
         location.write_atomic(f"previews/{name}.png", encode_pixels(sheet, compression=None))
     write_wind_viewer(location)

@@ -1,7 +1,8 @@
 """The asset GLB: every level of detail and the impostor as named nodes (MSFT_lod on the root, screen coverages
 in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for
-clumps), seasons as KHR_materials_variants, wind attributes `_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas
-with alpha.
+clumps: meshes `<level>_leaf_card`, `<level>_clump_card`), seasons as KHR_materials_variants, wind attributes
+`_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha; the normal-mapped primitives (bark, impostor) carry
+TANGENT.
 
 In: a LibraryAsset and the worker's PngCache. Out: GLB bytes (Y up, metres); same asset, same bytes.
 `instanced=False` bakes the leaves into plain triangles (to measure what instancing saves). The GLB itself is
@@ -11,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from species.geometry import vertex_tangents
 from species.meshing.gltf import CLAMP_TO_EDGE, REPEAT, TRIANGLES, Z_UP_TO_Y_UP, GlbWriter, z_up_to_y_up
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
 from species.studio.pbr_textures import SEASONS
@@ -20,11 +22,13 @@ from species.skeleton import LEAF_CARD_CORNERS
 from .asset import LibraryAsset, leaf_instances
 from .png_cache import PngCache
 
-__all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS"]
+__all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
 
 # MSFT_screencoverage values are switch sizes over this screen height (renderers.impostor's reference screen).
 SCREEN_HEIGHT_PX = 1080
 EXTENSIONS = ["EXT_mesh_gpu_instancing", "KHR_materials_variants", "MSFT_lod"]
+# Instanced card meshes, `<level>_<kind>_card`, named as the USD's PointInstancer prototypes (`leaf`, `clump`).
+CARD_MESH_KINDS = {"leaves": "leaf", "clumps": "clump"}
 
 
 def _quaternions(rotation: np.ndarray) -> np.ndarray:
@@ -39,7 +43,14 @@ def _quaternions(rotation: np.ndarray) -> np.ndarray:
 def _primitive(writer: GlbWriter, vertices, normals, uvs, faces, material: int, extra: dict | None = None,
                variants: list[dict] | None = None) -> dict:
     """A triangle primitive (see `GlbWriter.triangles`), its season variants' material mappings in
-    KHR_materials_variants."""
+    KHR_materials_variants. A primitive drawn with a normal map (in `material` or a variant's) gets TANGENT."""
+    mapped = [material] + [mapping["material"] for mapping in variants or []]
+    if any("normalTexture" in writer.materials[m] for m in mapped):
+        # Left to the viewer, tangents differ between implementations (the validator's
+        # MESH_PRIMITIVE_GENERATED_TANGENT_SPACE); the writer turns only POSITION and NORMAL to Y up.
+        tangents = vertex_tangents(vertices, normals, uvs, faces)
+        extra = {"TANGENT": (np.concatenate([z_up_to_y_up(tangents[:, :3]), tangents[:, 3:]], axis=1), "VEC4"),
+                 **(extra or {})}
     attributes, indices = writer.triangles(vertices, normals, uvs, faces, extra)
     entry = {"attributes": attributes, "material": material, "mode": TRIANGLES, "indices": indices}
     if variants:
@@ -171,7 +182,7 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
             "_WIND_PIVOT": writer.floats(z_up_to_y_up(level.leaf_pivot[chosen]), "VEC3", None),
         }
         nodes.append(writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
-                                  "mesh": writer.mesh(f"{level.name}_{kind[:-1]}_card", card),
+                                  "mesh": writer.mesh(f"{level.name}_{CARD_MESH_KINDS[kind]}_card", card),
                                   "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}}))
     return nodes
 

@@ -109,6 +109,16 @@ def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = N
     return mesh
 
 
+# The PointInstancer's prototype of single-leaf cards and of clump cards (`card_clumps` False / True).
+PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
+
+
+def _prototype_kinds(level) -> list[str]:
+    """The prototype names `_leaf_instancer` makes for a level: one per card kind present."""
+    clumps = card_clumps(level.mesh.leaves)
+    return [PROTOTYPE_NAMES[kind] for kind in (False, True) if (clumps == kind).any()]
+
+
 def _leaf_instancer(stage, path: str, level, card_material):
     from pxr import Sdf, UsdGeom, UsdShade, Vt
     from scipy.spatial.transform import Rotation
@@ -122,7 +132,7 @@ def _leaf_instancer(stage, path: str, level, card_material):
     kinds = [kind for kind in (False, True) if (clumps == kind).any()]
     prototypes = []
     for kind in kinds:
-        prototype = _mesh(stage, f"{path}/prototypes/{'clump' if kind else 'leaf'}", card, uv_tile=int(kind))
+        prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", card, uv_tile=int(kind))
         UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
@@ -184,6 +194,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
     lod_set.SetVariantSelection("LOD0")
     season_set = root.GetVariantSets().AddVariantSet("season")
+    prototype_kinds = sorted({kind for level in asset.levels if level.name != "IMPOSTOR" and level.skeleton.n_leaves
+                              for kind in _prototype_kinds(level)})
     for season in SEASONS:
         season_set.AddVariant(season)
         season_set.SetVariantSelection(season)
@@ -191,10 +203,13 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             over = stage.OverridePrim(f"{geom}/leaves")
             if season == "bare":
                 over.SetActive(False)
-            else:
-                card = stage.OverridePrim(f"{geom}/leaves/prototypes/card")
-                UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
+            else:  # the prototypes `_leaf_instancer` made in any level
+                for kind in prototype_kinds:
+                    card = stage.OverridePrim(f"{geom}/leaves/prototypes/{kind}")
+                    UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
     season_set.SetVariantSelection("summer")
+    # `season` first among the prim's variant sets: its leaf bindings are then stronger than the `lod` variants'.
+    layer.GetPrimAtPath(root_path).variantSetNameList.prependedItems = ["season", "lod"]
     handle, path = tempfile.mkstemp(suffix=".usdc")
     os.close(handle)
     try:

@@ -186,24 +186,33 @@ def create_app(service: ReviewService, token: str, roots: dict[str, Path] | None
     return TokenGuard(app, token)
 
 
-class ReviewServer:
-    """uvicorn serving an app on a socket bound at construction (port 0 picks a free one), in a thread or not."""
+def listen_socket(host: str, port: int) -> socket.socket:
+    """A TCP socket bound to host:port (0 picks a free port), or a ReviewError naming the address and the cause."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    # Accepted connections inherit this; without it small responses wait ~40 ms for a delayed ACK (Nagle).
+    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    try:
+        sock.bind((host, port))
+    except OSError as exc:
+        sock.close()
+        advice = ("choose another --port" if exc.errno in (errno.EADDRINUSE, errno.EACCES)
+                  else "--host must be a name or address of this machine")
+        raise ReviewError(f"cannot listen on {host}:{port} ({exc.strerror}): {advice}") from None
+    return sock
 
-    def __init__(self, app, host: str = "127.0.0.1", port: int = 0):
+
+class ReviewServer:
+    """uvicorn serving an app on a socket bound at construction (port 0 picks a free one), in a thread or not.
+
+    sock : a socket from `listen_socket(host, ...)` (bound before anything else is made); port is then its own.
+    """
+
+    def __init__(self, app, host: str = "127.0.0.1", port: int = 0, sock: socket.socket | None = None):
         import uvicorn
 
-        family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        self.socket = socket.socket(family, socket.SOCK_STREAM)
-        self.socket.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        # Accepted connections inherit this; without it small responses wait ~40 ms for a delayed ACK (Nagle).
-        self.socket.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        try:
-            self.socket.bind((host, port))
-        except OSError as exc:
-            self.socket.close()
-            advice = ("choose another --port" if exc.errno in (errno.EADDRINUSE, errno.EACCES)
-                      else "--host must be a name or address of this machine")
-            raise ReviewError(f"cannot listen on {host}:{port} ({exc.strerror}): {advice}") from None
+        self.socket = sock if sock is not None else listen_socket(host, port)
         self.host, self.port = host, self.socket.getsockname()[1]
         self.server = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off",
                                                     timeout_graceful_shutdown=2))

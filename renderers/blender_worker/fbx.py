@@ -262,7 +262,8 @@ def run(job: dict, out_dir: str) -> dict:
 
 
 def info(job: dict, out_dir: str) -> dict:
-    """Job kind `fbx_info`: import an FBX with Blender's default settings; the `scene.mesh_stats` dictionary."""
+    """Job kind `fbx_info`: import an FBX with Blender's default settings; the `scene.mesh_stats` dictionary
+    with the scene's images (`_image_row`) and, per material, the images bound to its inputs (`_bindings`)."""
     path = require(job, "fbx")
     if not os.path.isfile(path):
         raise JobError(f"fbx {path!r} does not exist")
@@ -274,5 +275,33 @@ def info(job: dict, out_dir: str) -> dict:
     objects = [obj for obj in bpy.data.objects if obj not in before]
     stats = mesh_stats(objects)
     stats["textures"] = sorted(image.name for image in bpy.data.images if image.has_data or image.packed_file)
+    stats["images"] = [_image_row(image) for image in bpy.data.images]
+    stats["bindings"] = {material.name: _bindings(material) for material in bpy.data.materials}
     stats["unit_scale"] = bpy.context.scene.unit_settings.scale_length
     return stats
+
+
+def _image_row(image) -> dict:
+    """An imported image: name, colour space, and the sha256 of its embedded file (None when not packed)."""
+    packed = image.packed_file
+    return {"name": image.name, "colorspace": image.colorspace_settings.name,
+            "sha256": hashlib.sha256(packed.data).hexdigest() if packed is not None else None}
+
+
+def _bindings(material) -> dict:
+    """{Principled BSDF input: [image names]}: the images each linked input reads, through any nodes between
+    (the importer puts a Normal Map node before Normal)."""
+    if material.node_tree is None:
+        return {}
+    out = {}
+    for bsdf in (n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"):
+        for socket in (s for s in bsdf.inputs if s.is_linked):
+            upstream, images = [link.from_node for link in socket.links], set()
+            while upstream:  # node graphs are acyclic: this walk ends
+                node = upstream.pop()
+                if node.type == "TEX_IMAGE" and node.image is not None:
+                    images.add(node.image.name)
+                upstream += [link.from_node for s in node.inputs for link in s.links]
+            if images:
+                out[socket.name] = sorted(images)
+    return out

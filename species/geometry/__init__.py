@@ -1,5 +1,6 @@
 """Geometry over plain arrays shared by every generator: rotations, curve frames, polyline simplification,
-pipe-model radii, tree topology (depths, depth-by-depth sweeps) and unit vectors.
+pipe-model radii, tree topology (depths, depth-by-depth sweeps), unit vectors and a mesh's tangent frames for
+normal maps.
 """
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from .rotations import (apply, declination, euler_xyz, from_euler_xyz, premul, r
 from .frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
 from .polyline_simplify import simplification_keys
 from .radii import pipe_model_radii
+from .tangents import DEGENERATE_UV_SINE, vertex_tangents
 from .topology import depth_levels, node_depths
 from .vectors import MIN_LENGTH, unit_vectors, unit_vectors_and_lengths
 
@@ -15,5 +17,6 @@ __all__ = [
     "rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
     "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
     "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths",
-    "depth_levels", "unit_vectors", "unit_vectors_and_lengths", "MIN_LENGTH",
+    "depth_levels", "unit_vectors", "unit_vectors_and_lengths", "MIN_LENGTH", "vertex_tangents",
+    "DEGENERATE_UV_SINE",
 ]

@@ -1,12 +1,13 @@
 """Stand-in tree builders for the farm tests: numpy-only trees and views with the real builder's interface.
 
 They make the pipeline tests fast and independent of growth models and GL; `KillOnce` kills its worker process;
-`refusing_chain` and `broken_chain` fail in the worker with a user's error and with a bug.
+a `memory_hog` tree allocates 3 GiB; `refusing_chain` and `broken_chain` fail in the worker with a user's error and with a bug.
 """
 from __future__ import annotations
 
 import os
 import signal
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -17,7 +18,9 @@ from farm.tree_chain import BuiltTree, stage_rngs, tree_seed
 from species.errors import ParameterError
 from species.skeleton import Skeleton
 
-SPECIES = ("standin_a", "standin_b", "broken")
+SPECIES = ("standin_a", "standin_b", "broken", "memory_hog")
+# What a `memory_hog` tree allocates (and touches) as it grows: more than a 1 GiB worker limit allows.
+HOG_BYTES = 3 * 2**30
 OUTPUTS = ("depth", "mask", "silhouette", "sketch_tsn")
 SIZE = 32
 # The user's error `refusing_chain` raises in its worker, as the CLI should print it.
@@ -54,6 +57,8 @@ class StandinChain:
         with timer.stage("grow"):
             if species_name == "broken":
                 raise ValueError(f"stand-in growth refuses species {species_name!r}")
+            if species_name == "memory_hog":
+                np.ones(HOG_BYTES // 8).sum()
             rng = np.random.default_rng(params["seed"])
             n = 6
             positions = np.zeros((n, 3))
@@ -71,6 +76,14 @@ class StandinChain:
                 views.append(SimpleNamespace(index=index, name=("front", "side")[index], camera=_Camera(index),
                                              images={k: images[k] for k in self.spec.render.outputs}))
         return BuiltTree(params=params, skeleton=skeleton, mesh=None, views=views)
+
+
+class SlowChain(StandinChain):
+    """Stand-in trees that take 0.6 s each: long enough for a driver to see each one land."""
+
+    def __call__(self, species_name: str, seed: int, timer) -> BuiltTree:
+        time.sleep(0.6)
+        return super().__call__(species_name, seed, timer)
 
 
 class KillOnce:

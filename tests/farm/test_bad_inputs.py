@@ -109,6 +109,21 @@ def test_a_bad_host_is_not_blamed_on_the_port(tmp_path, finished_dataset, capsys
     assert "--host" in line and "choose another --port" not in line
 
 
+def test_a_port_in_use_is_refused_before_the_reviews_database_is_made(tmp_path, finished_dataset, capsys):
+    import socket
+
+    data = tmp_path / "data"
+    shutil.copytree(finished_dataset, data)
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        assert main(["review", str(data), "--port", str(port)]) == 2
+    line = capsys.readouterr().err.strip()
+    assert f"127.0.0.1:{port}" in line and "choose another --port" in line
+    assert not (data / "reviews.sqlite").exists()
+
+
 def test_contact_sheet_labels_are_whole():
     image = np.zeros((8, 8), np.uint8)
     a, b = (contact_sheet([("0 sc_self_pruning_forest_tree", [(name, image)])], cell=64)

@@ -119,6 +119,14 @@ def test_resources_default_to_one_cpu_and_no_gpu():
     assert standin_spec(resources={"num_gpus": 0.5}).resources == {"num_cpus": 1.0, "num_gpus": 0.5}
 
 
+def test_worker_memory_is_given_in_gib_and_a_too_small_one_is_refused():
+    assert check_resources({"memory_gb": 4})["memory_gb"] == 4.0
+    for value in (0.2, -1, "4G", True):
+        with pytest.raises(JobSpecError) as info:
+            check_resources({"memory_gb": value})
+        assert info.value.field == "resources.memory_gb" and ">= 1.0" in str(info.value)
+
+
 @pytest.mark.parametrize("value", [True, 2.5, "3", -1, 11])
 def test_check_int_names_the_field_and_its_range(value):
     with pytest.raises(JobSpecError) as info:

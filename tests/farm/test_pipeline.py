@@ -14,7 +14,7 @@ from farm.manifest import validate_dataset
 from farm.pipeline import JobError, plan_shards, run_job, run_shard
 from farm.storage import Location
 from farm.tree_chain import tree_seed
-from farm_standins import StandinChain, standin_spec
+from farm_standins import SlowChain, StandinChain, standin_spec
 
 
 def part_bytes(folder: Path) -> dict[str, bytes]:
@@ -146,3 +146,21 @@ def test_job_writes_to_a_filesystem_uri_and_reads_back(finished, tmp_path):
     assert part_bytes(tmp_path / "by-uri") == finished[2]
     assert dataset.to_pandas(uri, columns=["tree_id"])["tree_id"].is_unique
     assert validate_dataset(uri) == []
+
+
+
+def test_the_progress_bar_advances_per_tree_while_a_shard_runs(tmp_path, monkeypatch, ray_session):
+    import tqdm
+
+    shown = []
+
+    class RecordingBar(tqdm.tqdm):
+        def refresh(self, *args, **kwargs):
+            shown.append(self.n)
+            return super().refresh(*args, **kwargs)
+
+    monkeypatch.setattr(tqdm, "tqdm", RecordingBar)
+    spec = standin_spec(species={"standin_a": 4}, shard_size=4)
+    run_job(spec, str(tmp_path), workers=1, builder_factory=SlowChain, progress=True)
+    assert shown == sorted(shown) and shown[-1] == 4
+    assert {1, 2, 3} <= set(shown)  # one shard: the bar moved before the shard was written

@@ -171,3 +171,17 @@ def test_export_obj_rebuilds_each_tree_from_its_parameters(reference, tmp_path):
 def test_export_rejects_an_unknown_format(reference, tmp_path, capsys):
     assert farm_main(["export", str(reference[0]), "--format", "fbx", "--to", str(tmp_path)]) == 2
     assert "allowed glb, obj" in capsys.readouterr().err
+
+
+def test_generate_bar_holds_only_the_bar_and_ray_start_up_lines_stay_out_of_it(tmp_path):
+    """The bar's per-tree steps are tested with slow stand-in trees (test_pipeline); here the real command."""
+    spec = tmp_path / "two.yaml"
+    spec.write_text(spec_to_yaml(parse_spec({"name": "two", "seed": 1, "shard_size": 2, "species": {"maple": 2},
+                                             "render": {"rig": "two-view", "size": 64}})))
+    done = subprocess.run(FARM + ["generate", str(spec), "--out", str(tmp_path / "out"), "--workers", "1"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "Token authentication" not in done.stderr
+    frames = [frame.strip() for frame in done.stderr.replace("\r", "\n").splitlines() if frame.strip()]
+    assert all(frame.startswith("farm two:") for frame in frames), frames
+    assert "2/2" in frames[-1]

@@ -191,3 +191,50 @@ def test_a_killed_driver_takes_the_local_ray_it_started_with_it(tmp_path):
     while processes_of_session(driver.pid) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert processes_of_session(driver.pid) == []
+
+
+def test_a_tree_over_the_worker_memory_limit_fails_alone_and_the_job_goes_on(tmp_path, ray_session):
+    import farm.dataset as dataset
+
+    spec = standin_spec(species={"standin_a": 2, "memory_hog": 1}, shard_size=3, resources={"memory_gb": 1})
+    manifest = run_job(spec, str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+    assert manifest["counts"]["trees"] == 3 and manifest["counts"]["failed"] == 1
+    trees = dataset.to_pandas(str(tmp_path), columns=["species", "error"]).set_index("species")
+    assert trees.loc["memory_hog", "error"].startswith("MemoryError")
+    assert "memory limit of 1.0 GiB: resources.memory_gb" in trees.loc["memory_hog", "error"]
+    assert trees.loc["standin_a", "error"].isna().all()
+
+
+def test_a_worker_limits_its_memory_to_the_spec_or_to_a_share_of_the_node(tmp_path):
+    from farm.pipeline import DEFAULT_MEMORY_SHARE, worker_memory_bytes
+
+    assert worker_memory_bytes(standin_spec(resources={"memory_gb": 2.5})) == int(2.5 * 2**30)
+    node = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    assert worker_memory_bytes(standin_spec()) == int(DEFAULT_MEMORY_SHARE * node)
+
+
+def test_a_job_whose_worker_was_killed_leaves_no_process_behind(tmp_path):
+    """A worker SIGKILLed mid-shard is restarted by Ray; once the driver ends, nothing it started lives on."""
+    out, flag = tmp_path / "out", tmp_path / "killed"
+    script = textwrap.dedent(f"""
+        import sys
+        from functools import partial
+        sys.path.insert(0, {str(Path(__file__).parent)!r})
+        from ray import cloudpickle
+        import farm_standins
+        cloudpickle.register_pickle_by_value(farm_standins)
+        from farm.pipeline import run_job
+        factory = partial(farm_standins.KillOnce, inner_factory=farm_standins.StandinChain, flag={str(flag)!r},
+                          at_index=3)
+        manifest = run_job(farm_standins.standin_spec(), {str(out)!r}, workers=2, builder_factory=factory,
+                           progress=False)
+        print("counts", manifest["counts"]["trees"], manifest["counts"]["failed"])
+    """)
+    driver = subprocess.Popen([sys.executable, "-c", script], start_new_session=True, stdout=subprocess.PIPE,
+                              stderr=subprocess.DEVNULL, text=True)
+    stdout, _ = driver.communicate(timeout=180)
+    assert driver.returncode == 0 and "counts 5 0" in stdout.splitlines() and flag.exists()
+    deadline = time.monotonic() + 30
+    while processes_of_session(driver.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert processes_of_session(driver.pid) == []

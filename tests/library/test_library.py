@@ -64,6 +64,9 @@ def test_every_glb_passes_the_khronos_validator_and_loads_in_trimesh(library, tm
     for glb in sorted(library.glob("assets/*/*.glb")):
         report = assert_valid_glb(glb.read_bytes(), tmp_path, glb.name)
         assert set(report["info"]["extensionsUsed"]) >= {"MSFT_lod", "KHR_materials_variants"}
+        # Normal-mapped primitives bring their own tangents rather than leaving them to each viewer.
+        codes = {m["code"] for m in report["issues"]["messages"]}
+        assert "MESH_PRIMITIVE_GENERATED_TANGENT_SPACE" not in codes, glb.name
         scene = trimesh.load(glb)
         assert len(scene.geometry) >= 1
 
@@ -82,6 +85,24 @@ def test_every_usd_opens_and_passes_usd_validation(library):
         assert set(sets.GetNames()) == {"lod", "season"}
         sets.GetVariantSet("season").SetVariantSelection("bare")
         assert not stage.GetPrimAtPath(stage.GetDefaultPrim().GetPath().AppendPath("Geom/leaves")).IsActive()
+
+
+def test_each_usd_season_binds_its_leaf_atlas_on_every_leaf_prototype(library):
+    from pxr import Usd, UsdGeom, UsdShade
+
+    from species.studio.pbr_textures import SEASONS
+
+    for path in sorted(library.glob("assets/*/*.usdc")):
+        stage = Usd.Stage.Open(str(path))
+        root = stage.GetDefaultPrim()
+        instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath(root.GetPath().AppendPath("Geom/leaves")))
+        prototypes = instancer.GetPrototypesRel().GetTargets()
+        assert prototypes
+        for season in (s for s in SEASONS if s != "bare"):
+            root.GetVariantSets().GetVariantSet("season").SetVariantSelection(season)
+            bound = {str(UsdShade.MaterialBindingAPI(stage.GetPrimAtPath(p)).ComputeBoundMaterial()[0].GetPath())
+                     for p in prototypes}
+            assert bound == {f"{root.GetPath()}/Looks/leaves_{season}"}, (path.name, season)
 
 
 def test_usd_textures_wrap_as_the_glb_samplers_do(library):
@@ -143,6 +164,76 @@ def test_single_leaves_use_the_leaf_tile_and_clumps_the_clump_tile_in_glb_and_us
                 usd_counts[level, kind] = int((indices == i).sum())
             assert usd_counts == {key: n for key, n in counts.items() if key[0] == level}
     assert kinds_seen == {"leaves", "clumps"}  # coarser levels hold both kinds somewhere in the library
+
+
+def test_normal_mapped_primitives_carry_unit_tangents_orthogonal_to_their_normals(library):
+    from species.meshing.gltf import read_accessor, read_glb_chunks
+
+    for glb in sorted(library.glob("assets/*/*.glb")):
+        document, binary = read_glb_chunks(glb.read_bytes())
+        for mesh in document["meshes"]:
+            primitive = mesh["primitives"][0]
+            attributes = primitive["attributes"]
+            normal_mapped = "normalTexture" in document["materials"][primitive["material"]]
+            assert ("TANGENT" in attributes) == normal_mapped, (glb.name, mesh["name"])
+            if not normal_mapped:
+                continue
+            tangent = read_accessor(document, binary, attributes["TANGENT"]).astype(np.float64)
+            normal = read_accessor(document, binary, attributes["NORMAL"]).astype(np.float64)
+            assert tangent.shape == (len(normal), 4) and np.isfinite(tangent).all()
+            np.testing.assert_allclose(np.linalg.norm(tangent[:, :3], axis=1), 1.0, atol=1e-5)
+            np.testing.assert_allclose(np.einsum("ij,ij->i", tangent[:, :3], normal), 0.0, atol=1e-4)
+            assert set(np.unique(tangent[:, 3])) <= {-1.0, 1.0}
+
+
+def test_instanced_card_meshes_are_named_leaf_card_and_clump_card(library):
+    from species.meshing.gltf import read_glb_json
+
+    kinds, names = {"leaves": "leaf", "clumps": "clump"}, set()
+    for glb in sorted(library.glob("assets/*/*.glb")):
+        document = read_glb_json(glb.read_bytes())
+        for node in document["nodes"]:
+            if "EXT_mesh_gpu_instancing" in node.get("extensions", {}):
+                level, kind = node["name"].rsplit("_", 2)[-2:]
+                name = document["meshes"][node["mesh"]]["name"]
+                assert name == f"{level}_{kinds[kind]}_card", (glb.name, name)
+                names.add(name.split("_", 1)[1])
+    assert names == {"leaf_card", "clump_card"}
+
+
+def test_load_glb_scene_draws_every_leaf_instance_in_trimesh(library):
+    import trimesh
+
+    from farm.library.glb_scene import load_glb_scene
+    from species.meshing.gltf import read_glb_chunks
+
+    def drawn_triangles(scene) -> int:
+        return sum(len(scene.geometry[scene.graph[node][1]].faces) for node in scene.graph.nodes_geometry)
+
+    for glb in sorted(library.glob("assets/*/*.glb")):
+        document, _ = read_glb_chunks(glb.read_bytes())
+        # Expected from the JSON alone: each mesh node of the default scene draws its triangles once per instance.
+        expected, pending = 0, list(document["scenes"][document["scene"]]["nodes"])
+        while pending:
+            node = document["nodes"][pending.pop()]
+            pending += node.get("children", [])
+            if "mesh" in node:
+                indices = document["meshes"][node["mesh"]]["primitives"][0]["indices"]
+                instancing = node.get("extensions", {}).get("EXT_mesh_gpu_instancing")
+                copies = document["accessors"][instancing["attributes"]["TRANSLATION"]]["count"] if instancing else 1
+                expected += document["accessors"][indices]["count"] // 3 * copies
+        lod0 = document["nodes"][document["scenes"][0]["nodes"][0]]
+        assert expected == lod0["extras"]["triangles"]
+        assert drawn_triangles(load_glb_scene(glb)) == expected == drawn_triangles(load_glb_scene(glb.read_bytes()))
+        assert drawn_triangles(trimesh.load(glb, force="scene")) < expected  # what plain trimesh draws
+
+
+def test_load_glb_scene_refuses_bytes_that_are_not_a_glb():
+    from farm.library.glb_scene import load_glb_scene
+    from species.meshing.gltf import GlbError
+
+    with pytest.raises(GlbError, match="not a glTF 2.0 binary"):
+        load_glb_scene(b"solid cube\n" * 4)
 
 
 def test_catalog_triangles_and_iou_follow_the_budgets(library):
