@@ -1,7 +1,15 @@
 """`farm tree`: grow trees from a species preset or from parameter dictionaries and write GLB or OBJ files.
 
   farm tree --species NAME --seed N --out FILE.glb
-  farm tree --params DICT.json [DICT.json ...] --out DIR [--format obj]
+  farm tree --params DICT.json|PRESET.py [...] --out DIR [--format obj] [--verbose]
+
+A --params file is a JSON dictionary or a preset file of Blender's Sapling add-on (`.py`, as it saves them; or the
+same as JSON). Its `draws` key says how the variation keys read: `realized` (TreeSketchNet's dictionaries and
+treefarm's presets: scaleV, scaleV0, leafScaleV, curveV1/2, splitAngleV1/2, ... are stored draws) or `ranges`
+(Sapling's presets: scaleV, scaleV0, leafScaleV, curveV, splitAngleV are ranges drawn from the dictionary's seed as
+Sapling draws them). Without it, a dictionary holding curveV, splitAngleV or a Blender-only key reads as `ranges`,
+any other as `realized`. Sapling presets load as the add-on loads them (values clamped to its limits); keys that
+only drive Blender (armature, wind animation, display) are ignored: --verbose lists them and the clamped values.
 """
 from __future__ import annotations
 
@@ -27,11 +35,14 @@ def register(subparsers) -> None:
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--species", help="preset name (see `farm species`)")
-    source.add_argument("--params", nargs="+", metavar="DICT.json", help="parameter dictionaries (JSON)")
+    source.add_argument("--params", nargs="+", metavar="DICT.json",
+                        help="parameter dictionaries (JSON) or Sapling preset files (.py)")
     parser.add_argument("--seed", type=int, default=0, help="seed for sampling the preset (default 0)")
     parser.add_argument("--out", required=True, help="output file (--species) or folder (--params)")
     parser.add_argument("--format", choices=FORMATS, default=None, help="glb (default) or obj")
     parser.add_argument("--save-params", action="store_true", help="also write the sampled dictionary as JSON")
+    parser.add_argument("--verbose", action="store_true",
+                        help="say how each --params file reads: draws, ignored Blender-only keys, clamped values")
     parser.set_defaults(run=run)
 
 
@@ -55,9 +66,23 @@ def write_tree(mesh, path: Path, fmt: str) -> list[Path]:
 
 
 def load_params(path: str) -> dict:
+    """The dictionary of a --params file; a Sapling preset (a .py file, or JSON that reads as `draws: ranges`) is
+    read as the add-on loads it (`species.weber_penn.load_sapling_preset`)."""
+    return _read_params(path)[0]
+
+
+def _read_params(path: str):
+    """(dictionary, SaplingPreset or None) of a --params file."""
+    from species.weber_penn import draws_semantics, load_sapling_preset
+
     file = Path(path)
     if not file.is_file():
-        raise ParamsFileError(f"parameter file {path} is missing or not a file: allowed a JSON file of parameters")
+        raise ParamsFileError(f"parameter file {path} is missing or not a file: allowed a JSON file of parameters "
+                              f"or a Sapling preset (.py)")
+    if file.suffix == ".py":
+        with user_path(path, "read"):
+            preset = load_sapling_preset(file)
+        return preset.params, preset
     with user_path(path, "read"):
         data = file.read_bytes()
     try:
@@ -68,7 +93,15 @@ def load_params(path: str) -> dict:
         raise ParamsFileError(f"{path} is not valid JSON: allowed UTF-8 text") from None
     if not isinstance(params, dict):
         raise ParamsFileError(f"{path} must hold a JSON object of parameters, not {type(params).__name__}")
-    return params
+    if params.get("generator", "weber_penn") == "weber_penn":
+        try:
+            semantics = draws_semantics(params)
+        except TreefarmError as exc:
+            raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
+        if semantics == "ranges":
+            preset = load_sapling_preset(file)
+            return preset.params, preset
+    return params, None
 
 
 def _species_output(args: argparse.Namespace) -> tuple[Path, str]:
@@ -95,9 +128,10 @@ def _params_output(args: argparse.Namespace) -> Path:
     return folder
 
 
-def _grown_dictionaries(paths: list[str]) -> list[tuple[str, dict, tuple]]:
+def _grown_dictionaries(paths: list[str], verbose: bool = False) -> list[tuple[str, dict, tuple]]:
     """(file stem, dictionary, (skeleton, mesh, seconds)) of every --params file, all read and grown before any
-    is written; an error names its file, and two files of the same stem (one output name) are refused."""
+    is written; an error names its file, and two files of the same stem (one output name) are refused.
+    verbose : print how each file reads (draws, ignored keys, clamped values)."""
     stems: dict[str, str] = {}
     for path in paths:
         stem = Path(path).stem
@@ -105,14 +139,32 @@ def _grown_dictionaries(paths: list[str]) -> list[tuple[str, dict, tuple]]:
             raise CommandLineError(f"--params {stems[stem]} and {path} would both write {stem}: allowed files "
                                    f"of different names")
         stems[stem] = path
-    loaded = [(Path(p).stem, p, load_params(p)) for p in paths]
+    loaded = [(Path(p).stem, p, *_read_params(p)) for p in paths]
+    if verbose:
+        for _, path, params, preset in loaded:
+            print(_reading(path, params, preset))
     grown = []
-    for stem, path, params in loaded:
+    for stem, path, params, _ in loaded:
         try:
             grown.append((stem, params, grow_tree(params)))
         except TreefarmError as exc:
             raise ParamsFileError(f"{path}: {str(exc).strip()}") from exc
     return grown
+
+
+def _reading(path: str, params: dict, preset) -> str:
+    """How a --params file reads, for --verbose: its draws, and a Sapling preset's ignored and clamped keys."""
+    from species.weber_penn import draws_semantics
+
+    generator = params.get("generator", "weber_penn")
+    if generator != "weber_penn":
+        return f"{path}: generator {generator}"
+    lines = [f"{path}: Weber-Penn, draws: {draws_semantics(params)}"]
+    if preset is not None:
+        lines += [f"  ignored {key}: {why}" for key, why in sorted(preset.ignored.items())]
+        lines += [f"  clamped {key}: {before} -> {after} (Sapling's limits)"
+                  for key, (before, after) in sorted(preset.clamped.items())]
+    return "\n".join(lines)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -135,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         folder = _params_output(args)
         fmt = args.format or "glb"
-        for stem, params, (skeleton, mesh, seconds) in _grown_dictionaries(args.params):
+        for stem, params, (skeleton, mesh, seconds) in _grown_dictionaries(args.params, args.verbose):
             mesh = _named(mesh, stem)
             files = write_tree(mesh, folder / f"{stem}.{fmt}", fmt)
             rows.append(_row(stem, params, skeleton, mesh, seconds, files[0]))

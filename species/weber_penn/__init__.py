@@ -1,15 +1,17 @@
 """Weber & Penn (1995) in the parameterisation of Blender's Sapling add-on: the dictionary schema and the
 parameter object read from it, the stems and leaves of each level, the crown shapes, assembly into a Skeleton,
-and the presets.
+the presets, and Sapling's own preset files (`sapling_preset`: their variation ranges, `draws: ranges`).
 """
 from __future__ import annotations
 
 from .generator import grow, grow_tree, grow_validated
 from .schema import REALIZED_DRAWS, SAPLING_KEYS, SCHEMA, validate
-from .params import LeafParams, PruneParams, RealizedDraws, StemLevelParams, WeberPennParams
+from .params import LeafParams, PruneParams, RealizedDraws, SaplingRanges, StemLevelParams, WeberPennParams
+from .sapling_preset import (BLENDER_ONLY_KEYS, DRAWS, SaplingPreset, draws_semantics, ignored_keys,
+                             load_sapling_preset, read_sapling_preset)
 from .stems import grow_level, Level, MAX_STEMS_PER_LEVEL
-from .stem_directions import (attract_up, bent_direction, branch_turn, crown_taper, segment_frames, split_angle,
-                              spread_angle, world_directions)
+from .stem_directions import (attract_up, bent_direction, branch_turn, crown_taper, sapling_split_angles,
+                              segment_frames, split_angle, spread_angle, world_directions)
 from .child_points import child_points, ChildPoints
 from .leaves import leaf_transforms
 from .assembly import assemble, MIN_RADIUS, node_key, SkeletonAssemblyError, WeberPennTree
@@ -20,9 +22,12 @@ from .presets import make_preset
 
 __all__ = [
     "grow", "grow_tree", "grow_validated", "validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS",
-    "WeberPennParams", "StemLevelParams", "LeafParams", "PruneParams", "RealizedDraws",
+    "WeberPennParams", "StemLevelParams", "LeafParams", "PruneParams", "RealizedDraws", "SaplingRanges",
+    "read_sapling_preset", "load_sapling_preset", "SaplingPreset", "draws_semantics", "ignored_keys",
+    "BLENDER_ONLY_KEYS", "DRAWS",
     "Level", "grow_level", "MAX_STEMS_PER_LEVEL",
-    "attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "branch_turn",
+    "attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "sapling_split_angles",
+    "branch_turn",
     "segment_frames", "crown_taper",
     "ChildPoints", "child_points", "leaf_transforms",
     "WeberPennTree", "assemble", "node_key", "SkeletonAssemblyError", "MIN_RADIUS",

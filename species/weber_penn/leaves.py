@@ -32,7 +32,11 @@ def leaf_transforms(points: ChildPoints, params: WeberPennParams,
     leaves = params.leaves
     placement = _fanned(points, leaves, rng) if leaves.count < 0 else _spiralled(points, leaves, rng)
     rotation = placement.frames @ placement.orientation @ _card_turn(leaves, placement.after)
-    size = _leaf_sizes(leaves, placement.along, params.draws.leaf_size_factor)
+    size_factor = params.draws.leaf_size_factor
+    ranges = params.draws.ranges
+    if ranges is not None and ranges.leaf_scale:  # Sapling: each leaf's size times uniform(1 - v, 1 + v)
+        size_factor = rng.uniform(1 - ranges.leaf_scale, 1 + ranges.leaf_scale, len(placement.pick))
+    size = _leaf_sizes(leaves, placement.along, size_factor)
     scale = np.stack([size * leaves.scale_x, size, size], axis=1)
     count = len(placement.pick)
     transforms = np.zeros((count, 4, 4))
@@ -99,8 +103,9 @@ def _card_turn(leaves: LeafParams, after: np.ndarray) -> np.ndarray:
     return card
 
 
-def _leaf_sizes(leaves: LeafParams, along: np.ndarray, size_factor: float) -> np.ndarray:
-    """(M,) metres, leaf card length: leafScale tapered along the stem by leafScaleT, times the realized draw."""
+def _leaf_sizes(leaves: LeafParams, along: np.ndarray, size_factor: float | np.ndarray) -> np.ndarray:
+    """(M,) metres, leaf card length: leafScale tapered along the stem by leafScaleT, times the realized draw
+    (one for the tree, or one per leaf)."""
     taper = leaves.scale_taper
     size = leaves.scale * ((1 - (1 - along) * -taper) if taper < 0 else (1 - along * taper)) * size_factor
     return np.abs(size)

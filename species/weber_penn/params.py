@@ -87,9 +87,12 @@ class RealizedDraws:
     split_angle_sign: float         # choiceNegPos1 as +1 or -1
     spread_angle_sign: float        # choiceNegPos2 as +1 or -1
     split_threshold: float | None   # rSplits2: what a split probability must exceed; None: drawn per decision
+    ranges: SaplingRanges | None = None  # with `draws: ranges`: what growth draws per stem, segment, split, leaf
 
     @classmethod
     def from_validated(cls, validated: dict, rng: np.random.Generator) -> RealizedDraws:
+        if validated["draws"] == "ranges":
+            return cls.from_ranges(validated, rng)
         return cls(
             scale_offset=validated.get("scaleV", 0.0),
             trunk_radius_factor=validated.get("scaleV0", 1.0),
@@ -103,6 +106,39 @@ class RealizedDraws:
             spread_angle_sign=_sign(validated.get("choiceNegPos2", 1)),
             split_threshold=validated.get("rSplits2"),
         )
+
+
+    @classmethod
+    def from_ranges(cls, validated: dict, rng: np.random.Generator) -> RealizedDraws:
+        """Sapling's per-tree draws from its ranges (scale + uniform(-scaleV, scaleV), trunk radius times
+        uniform(1 - scaleV0, 1 + scaleV0)); the rest is left to growth, in `ranges`."""
+        scale_range, radius_range = validated.get("scaleV", 0.0), validated.get("scaleV0", 0.0)
+        zeros = np.zeros(4)
+        zeros.setflags(write=False)
+        return cls(
+            scale_offset=float(rng.uniform(-scale_range, scale_range)) if scale_range else 0.0,
+            trunk_radius_factor=float(rng.uniform(1 - radius_range, 1 + radius_range)) if radius_range else 1.0,
+            leaf_size_factor=1.0, curve_variation=zeros, curve_variation_across=zeros, split_angle_variation=zeros,
+            spread_angle_variation=zeros, first_split_turn=zeros, split_angle_sign=1.0, spread_angle_sign=1.0,
+            split_threshold=None, ranges=SaplingRanges.from_validated(validated))
+
+
+@dataclass(frozen=True)
+class SaplingRanges:
+    """The variation ranges of a `draws: ranges` dictionary that growth draws from, where Sapling draws them:
+    curvature per segment, split and spread angles (and their signs) per split, the first split's turn per stem,
+    the trunk's split turn per split, leaf size per leaf. Per-level arrays are (4,) radians, read-only."""
+
+    curve: np.ndarray            # curveV: a segment bends by uniform(0, curveV / curveRes) in and across its plane
+    split_angle: np.ndarray      # splitAngleV: split and spread angles are splitAngle + uniform(-v, v), sign random
+    trunk_turn: float            # rotateV[0], degrees: each trunk split turns by rotate[0] + uniform(-v, v)
+    leaf_scale: float            # leafScaleV: each leaf's size times uniform(1 - v, 1 + v)
+
+    @classmethod
+    def from_validated(cls, validated: dict) -> SaplingRanges:
+        return cls(curve=_per_level_radians(validated, "curveV"),
+                   split_angle=_per_level_radians(validated, "splitAngleV"),
+                   trunk_turn=float(validated["rotateV"][0]), leaf_scale=float(validated.get("leafScaleV", 0.0)))
 
 
 def _per_level_radians(validated: dict, key: str, rng: np.random.Generator | None = None) -> np.ndarray:

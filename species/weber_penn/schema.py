@@ -10,6 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ParameterError
+from .sapling_preset import BLENDER_ONLY_KEYS, DRAWS, draws_semantics
 
 __all__ = ["validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS"]
 
@@ -50,6 +51,7 @@ SCHEMA: dict[str, Key] = {
     "curve": Key(F4, -360, 360, [0, -40, -40, 0]),
     "curveBack": Key(F4, -360, 360, [0, 0, 0, 0]),
     "curveRes": Key(I4, 1, 64, [8, 5, 3, 1]),
+    "curveV": Key(F4, -720, 720, None),
     "curveV1": Key(F4, -720, 720, None),
     "curveV2": Key(F4, -720, 720, None),
     "customShape": Key(F4, 0, 1, [0.5, 1.0, 0.3, 0.5]),
@@ -99,6 +101,7 @@ SCHEMA: dict[str, Key] = {
     "shape": Key("shape", 0, 10, 7),
     "shapeS": Key("shape", 0, 10, 4),
     "splitAngle": Key(F4, -360, 360, [0, 0, 0, 0]),
+    "splitAngleV": Key(F4, -360, 360, None),
     "splitAngleV1": Key(F4, -360, 360, None),
     "splitAngleV2": Key(F4, -360, 360, None),
     "splitBias": Key("float", -2, 2, 0),
@@ -113,6 +116,7 @@ SCHEMA: dict[str, Key] = {
     "closeTip": Key("bool", default=False),
     "rMode": Key("enum", options=("rotate", "random", "original"), default="rotate"),
     "generator": Key("enum", options=("weber_penn",), default="weber_penn"),
+    "draws": Key("enum", options=DRAWS, default=None),
     "species": Key("str", default="custom"),
     "bark_color": Key("color", 0, 1, None),
     "leaf_color": Key("color", 0, 1, None),
@@ -123,7 +127,11 @@ SCHEMA: dict[str, Key] = {
 REALIZED_DRAWS = ("curveV1", "curveV2", "splitAngleV1", "splitAngleV2", "rLastAng", "choiceNegPos1",
                   "choiceNegPos2", "rSplits2", "scaleV", "scaleV0", "leafScaleV")
 SAPLING_KEYS = tuple(k for k in SCHEMA if k not in ("autoTaper", "splitByLen", "closeTip", "rMode", "generator",
-                                                      "species", "bark_color", "leaf_color"))
+                                                      "species", "bark_color", "leaf_color", "draws"))
+# With `draws: ranges` these are Sapling's variation ranges, drawn as uniform(1 - v, 1 + v) or uniform(-v, v):
+# a range is never negative, and a factor's range stays within [0, 1] so the factor stays >= 0.
+RANGE_LIMITS = {"scaleV": (0.0, 1000.0), "scaleV0": (0.0, 1.0), "leafScaleV": (0.0, 1.0), "curveV": (0.0, 720.0),
+                "splitAngleV": (0.0, 360.0)}
 
 
 def _number(key: str, value: Any, spec: Key, integer: bool) -> float | int:
@@ -171,13 +179,15 @@ def _check(key: str, value: Any, spec: Key) -> Any:
 
 
 def validate(params: dict) -> dict:
-    """Check every key of a Weber-Penn dictionary; return a normalised copy with defaults filled in.
+    """Check every key of a Weber-Penn dictionary; return a normalised copy with defaults filled in and `draws`
+    set (`sapling_preset.draws_semantics`); Blender-only keys are left out of it.
 
     Realized-draw keys (REALIZED_DRAWS) that are missing stay missing: the generator draws them.
     """
     if not isinstance(params, dict):
         raise ParameterError("params", type(params).__name__, "a JSON object of Weber-Penn parameters")
-    unknown = sorted(set(params) - set(SCHEMA))
+    semantics = draws_semantics(params)
+    unknown = sorted(set(params) - set(SCHEMA) - set(BLENDER_ONLY_KEYS))
     if unknown:
         raise ParameterError(unknown[0], params[unknown[0]], f"a known Weber-Penn key (Sapling's names), e.g. "
                              f"{', '.join(sorted(SAPLING_KEYS)[:6])}, ...")
@@ -187,6 +197,12 @@ def validate(params: dict) -> dict:
             out[key] = _check(key, params[key], spec)
         elif spec.default is not None:
             out[key] = list(spec.default) if isinstance(spec.default, list) else spec.default
+    out["draws"] = semantics
+    if semantics == "ranges":
+        for key, (low, high) in RANGE_LIMITS.items():
+            if key in out:
+                out[key] = _check(key, out[key], Key(SCHEMA[key].kind, low, high))
+        return out
     scale_val = out["scale"] + out.get("scaleV", 0.0)
     if scale_val <= 0:
         raise ParameterError("scaleV", out.get("scaleV"), f"a value with scale + scaleV > 0 (scale = {out['scale']})")

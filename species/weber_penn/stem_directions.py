@@ -11,8 +11,8 @@ from ..geometry import rotations as rot
 from ..geometry.vectors import unit_vectors
 from .params import WeberPennParams
 
-__all__ = ["attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "branch_turn",
-           "segment_frames", "crown_taper"]
+__all__ = ["attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle",
+           "sapling_split_angles", "branch_turn", "segment_frames", "crown_taper"]
 
 TAU = 2 * np.pi
 
@@ -62,6 +62,18 @@ def spread_angle(params: WeberPennParams, order: int) -> float:
     draws = params.draws
     return draws.spread_angle_sign * (np.radians(params.stem_levels[order].split_angle)
                                       + draws.spread_angle_variation[order])
+
+
+def sapling_split_angles(params: WeberPennParams, order: int, count: int,
+                         rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(count,) split and (count,) spread angles, radians, drawn as Sapling draws them for each split of a
+    `draws: ranges` dictionary: each a random sign times splitAngle + uniform(-splitAngleV, splitAngleV)."""
+    base = np.radians(params.stem_levels[order].split_angle)
+    variation = params.draws.ranges.split_angle[order]
+    signs = rng.choice(np.array([-1.0, 1.0]), (2, count))
+    offsets = rng.uniform(-variation, variation, (2, count)) if variation else np.zeros((2, count))
+    split, spread = signs * (base + offsets)
+    return split, spread
 
 
 def branch_turn(params: WeberPennParams) -> float:

@@ -14,8 +14,8 @@ from ..geometry import rotations as rot
 from ..geometry.vectors import unit_vectors
 from .params import StemLevelParams, WeberPennParams
 from .shapes import shape_ratio
-from .stem_directions import (bent_direction, branch_turn, crown_taper, segment_frames, split_angle, spread_angle,
-                              world_directions)
+from .stem_directions import (bent_direction, branch_turn, crown_taper, sapling_split_angles, segment_frames,
+                              split_angle, spread_angle, world_directions)
 
 __all__ = ["Level", "grow_level", "MAX_STEMS_PER_LEVEL"]
 
@@ -139,6 +139,7 @@ class _SegmentTurns:
     bend_across: np.ndarray    # (S,) radians, bend across it
     split_angle: np.ndarray    # (S,) radians between a split and its stem (0 where none splits)
     turn: np.ndarray           # (S,) radians, rotation of a split around the stem (0 where none splits)
+    spread: np.ndarray         # (S,) radians a branch split turns out of the splitting plane (0 where none splits)
     length_factor: np.ndarray  # (S,) factor on the segment length (the trunk's crown taper; 1 for branches)
 
 
@@ -260,7 +261,8 @@ def _grow_segment(level: Level, front: _GrowthFront, params: WeberPennParams, or
     if step == int(n_segments / 2 + 0.5) and curve_back != 0:
         level.curvature += 2 * np.radians(curve_back) / n_segments
     splitting = split_counts > 0
-    turns = _segment_turns(level, front, params, order, step=step, progress=progress, splitting=splitting)
+    turns = _segment_turns(level, front, params, order, step=step, progress=progress, splitting=splitting,
+                           rng=rng)
     front.bend_sign = -front.bend_sign
     directions = _continuing_directions(params, order, turns, splitting, n_segments)
     positions = front.positions + directions * (level.segment_length * turns.length_factor)[:, None]
@@ -316,45 +318,62 @@ def _split_value(params: WeberPennParams, order: int, progress: float, split_bef
 
 
 def _segment_turns(level: Level, front: _GrowthFront, params: WeberPennParams, order: int, *, step: int,
-                   progress: float, splitting: np.ndarray) -> _SegmentTurns:
+                   progress: float, splitting: np.ndarray, rng: np.random.Generator) -> _SegmentTurns:
     """The step's frames, bends, split angles and length factors; records the splits' turns in `front`."""
-    bend, bend_across = _bend_angles(level, params, order, progress=progress, bend_sign=front.bend_sign)
+    bend, bend_across = _bend_angles(level, params, order, progress=progress, bend_sign=front.bend_sign, rng=rng)
     frames = segment_frames(params, order, front.directions, front.positions, progress)
-    angle, turn = _split_turns(params, order, frames, splitting, front)
+    angle, turn, spread = _split_turns(params, order, frames, splitting, front, rng)
     return _SegmentTurns(step=step, frames=frames, bend=bend, bend_across=bend_across, split_angle=angle,
-                         turn=turn, length_factor=crown_taper(params, order, front.directions))
+                         turn=turn, spread=spread, length_factor=crown_taper(params, order, front.directions))
 
 
 def _bend_angles(level: Level, params: WeberPennParams, order: int, *, progress: float,
-                 bend_sign: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 bend_sign: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """(S,) bend in the stem's plane and (S,) across it, radians: curvature plus the alternating variation
-    (curveV1, curveV2). The trunk below its split height does not curve."""
+    (curveV1, curveV2; with Sapling's ranges uniform(0, curveV / curveRes) per spline and segment, in and
+    across). The trunk below its split height does not curve."""
     n_segments = level.n_segments
-    in_plane = params.draws.curve_variation[order] / n_segments
-    across = params.draws.curve_variation_across[order] / n_segments
+    ranges = params.draws.ranges
+    if ranges is not None and ranges.curve[order]:
+        in_plane, across = rng.uniform(0.0, ranges.curve[order] / n_segments, (2, level.n_splines))
+    else:
+        in_plane = params.draws.curve_variation[order] / n_segments
+        across = params.draws.curve_variation_across[order] / n_segments
     straight = order == 0 and progress <= params.split_height
     curvature = np.zeros(level.n_splines) if straight else level.curvature
     return curvature + in_plane * progress * bend_sign, across * progress * bend_sign
 
 
 def _split_turns(params: WeberPennParams, order: int, frames: np.ndarray, splitting: np.ndarray,
-                 front: _GrowthFront) -> tuple[np.ndarray, np.ndarray]:
-    """(S,) split angle and (S,) turn around the stem, radians, for the splines that split now (0 elsewhere);
-    each splitting spline's turn is kept in `front.last_split_turn` for its next split."""
+                 front: _GrowthFront, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(S,) split angle, (S,) turn around the stem and (S,) spread, radians, for the splines that split now (0
+    elsewhere); each splitting spline's turn is kept in `front.last_split_turn` for its next split."""
     count = len(splitting)
-    angle, turn = np.zeros(count), np.zeros(count)
+    angle, turn, spread = np.zeros(count), np.zeros(count), np.zeros(count)
     if not splitting.any():
-        return angle, turn
-    angle[splitting] = split_angle(params, order)
+        return angle, turn, spread
+    ranges = params.draws.ranges
+    n_splitting = int(splitting.sum())
+    if ranges is None:
+        angle[splitting] = split_angle(params, order)
+        spread[splitting] = spread_angle(params, order)
+    else:  # Sapling draws both per split: choice([-1, 1]) * (splitAngle + uniform(-splitAngleV, splitAngleV))
+        angle[splitting], spread[splitting] = sapling_split_angles(params, order, n_splitting, rng)
     if order > 0:  # branches split less the more they lean
         lean = np.degrees(rot.declination(frames[splitting][:, :, 2]))
         angle[splitting] *= np.maximum(1 - lean / 90, 0) * 0.67 + 0.33
     last_turn = front.last_split_turn
     first_split = splitting & np.isnan(last_turn)
-    last_turn[first_split] = params.draws.first_split_turn[order]
-    turn[splitting] = last_turn[splitting] + branch_turn(params)
+    if ranges is None:
+        last_turn[first_split] = params.draws.first_split_turn[order]
+        turn[splitting] = last_turn[splitting] + branch_turn(params)
+    else:  # a stem's first split turns by uniform(0, 360 deg); each split by rotate[0] + uniform(-rotateV[0], ..)
+        last_turn[first_split] = rng.uniform(0.0, TAU, int(first_split.sum()))
+        trunk = params.stem_levels[0]
+        turn[splitting] = last_turn[splitting] + np.radians(
+            trunk.rotate + rng.uniform(-ranges.trunk_turn, ranges.trunk_turn, n_splitting))
     last_turn[splitting] = turn[splitting]
-    return angle, turn
+    return angle, turn, spread
 
 
 def _continuing_directions(params: WeberPennParams, order: int, turns: _SegmentTurns, splitting: np.ndarray,
@@ -364,7 +383,7 @@ def _continuing_directions(params: WeberPennParams, order: int, turns: _SegmentT
     if order == 0:
         local = rot.premul("z", turns.turn, local)
     else:
-        local = rot.premul("y", -np.where(splitting, spread_angle(params, order), 0.0), local)
+        local = rot.premul("y", -turns.spread, local)
     return world_directions(params, order, turns.frames, local, n_segments)
 
 
@@ -389,7 +408,7 @@ def _split_off(level: Level, front: _GrowthFront, turns: _SegmentTurns, params: 
         around = np.pi - (TAU / (np.repeat(per_row, per_row) + 1)) * (index_in_row + 1)
         local = rot.premul("z", around + turns.turn[parent], local)
     else:
-        local = rot.premul("y", np.full(len(parent), spread_angle(params, order)), local)
+        local = rot.premul("y", turns.spread[parent], local)
     directions = world_directions(params, order, turns.frames[parent], local, level.n_segments)
     segment_length = front.family_segment_length[parent] * length_factor
     start = front.positions[parent]

@@ -61,3 +61,29 @@ def test_species_lists_every_preset_with_its_generator(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == ["name", "generator", "description"]
     assert sum("weber_penn" in line for line in lines) >= 12
+
+
+PRESETS = SAPLING.parents[1] / "tools" / "sapling" / "add_curve_sapling" / "presets"
+
+
+def test_tree_from_a_sapling_preset_file_says_how_it_reads_with_verbose(tmp_path, capsys):
+    preset = PRESETS / "acer.py"
+    assert main(["tree", "--params", str(preset), str(SAPLING / "6_pine.json"), "--out", str(tmp_path),
+                 "--verbose"]) == 0
+    out = capsys.readouterr().out
+    assert f"{preset}: Weber-Penn, draws: ranges" in out and "ignored af1:" in out
+    assert "clamped baseSize_s: 4.0 -> 1.0" in out and "6_pine.json: Weber-Penn, draws: realized" in out
+    assert len(trimesh.load(tmp_path / "acer.glb").geometry) == 2
+
+
+def test_a_preset_as_json_reads_as_a_sapling_preset_and_a_mixed_one_is_refused(tmp_path, capsys):
+    import ast
+
+    settings = ast.literal_eval((PRESETS / "white_birch.py").read_text())
+    (tmp_path / "birch.json").write_text(json.dumps(settings))
+    assert main(["tree", "--params", str(tmp_path / "birch.json"), "--out", str(tmp_path / "out")]) == 0
+    (tmp_path / "mixed.json").write_text(json.dumps({**settings, "curveV1": [0, 1, 0, 0]}))
+    assert main(["tree", "--params", str(tmp_path / "mixed.json"), "--out", str(tmp_path / "out2")]) == 2
+    line = capsys.readouterr().err.strip()
+    assert "mixed.json" in line and "curveV1" in line and len(line.splitlines()) == 1
+    assert not (tmp_path / "out2").exists()
