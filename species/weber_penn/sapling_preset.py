@@ -24,7 +24,8 @@ from typing import Any
 from ..errors import ParameterError, PathError
 
 __all__ = ["read_sapling_preset", "load_sapling_preset", "SaplingPreset", "draws_semantics", "ignored_keys",
-           "clamp_to_sapling", "BLENDER_ONLY_KEYS", "RANGE_ONLY_KEYS", "REALIZED_ONLY_KEYS", "DRAWS", "SAPLING_BOUNDS"]
+           "clamp_to_sapling", "BLENDER_ONLY_KEYS", "RANGE_ONLY_KEYS", "REALIZED_ONLY_KEYS", "DRAWS", "SAPLING_BOUNDS",
+           "SAPLING_DEFAULTS"]
 
 DRAWS = ("realized", "ranges")
 
@@ -64,6 +65,16 @@ SAPLING_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "ratioPower": (0.0, None), "resU": (1, None), "rootFlare": (1.0, None), "scale": (0.0, None),
     "scale0": (0.0, None), "scaleV0": (0.0, 1.0), "segSplits": (0.0, None), "splitHeight": (0.0, 1.0),
     "taper": (0.0, 1.0), "taperCrown": (0.0, None),
+}
+
+
+# Sapling 0.3.4's defaults where they differ from treefarm's: what a `draws: ranges` dictionary that leaves the key
+# out grows with (treefarm's own defaults serve `realized` dictionaries, whose presets were made with them).
+SAPLING_DEFAULTS: dict[str, Any] = {
+    "branches": [50, 30, 10, 10], "curveRes": [3, 5, 3, 1], "curveV": [20, 50, 75, 0], "splitByLen": False,
+    "splitAngleV": [0, 0, 0, 0], "scaleV": 3.0, "scaleV0": 0.2, "attractUp": [0, 0, 0, 0], "minRadius": 0.0,
+    "rotate": [137.5, 137.5, 137.5, 137.5], "rotateV": [0, 0, 0, 0], "leafRotateV": 0.0, "leafScaleV": 0.0,
+    "leafDist": 6, "bevelRes": 0,
 }
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ParameterError
-from .sapling_preset import BLENDER_ONLY_KEYS, DRAWS, draws_semantics
+from .sapling_preset import BLENDER_ONLY_KEYS, DRAWS, SAPLING_DEFAULTS, draws_semantics
 
 __all__ = ["validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS"]
 
@@ -130,8 +130,7 @@ SAPLING_KEYS = tuple(k for k in SCHEMA if k not in ("autoTaper", "splitByLen", "
                                                       "species", "bark_color", "leaf_color", "draws"))
 # With `draws: ranges` these are Sapling's variation ranges, drawn as uniform(1 - v, 1 + v) or uniform(-v, v):
 # a range is never negative, and a factor's range stays within [0, 1] so the factor stays >= 0.
-RANGE_LIMITS = {"scaleV": (0.0, 1000.0), "scaleV0": (0.0, 1.0), "leafScaleV": (0.0, 1.0), "curveV": (0.0, 720.0),
-                "splitAngleV": (0.0, 360.0)}
+RANGE_LIMITS = {"scaleV": (0.0, 1000.0), "scaleV0": (0.0, 1.0), "leafScaleV": (0.0, 1.0)}
 
 
 def _number(key: str, value: Any, spec: Key, integer: bool) -> float | int:
@@ -192,11 +191,15 @@ def validate(params: dict) -> dict:
         raise ParameterError(unknown[0], params[unknown[0]], f"a known Weber-Penn key (Sapling's names), e.g. "
                              f"{', '.join(sorted(SAPLING_KEYS)[:6])}, ...")
     out: dict[str, Any] = {}
+    # A Sapling dictionary that leaves a key out gets the add-on's default, as Sapling would grow it.
+    defaults = {key: spec.default for key, spec in SCHEMA.items()}
+    if semantics == "ranges":
+        defaults.update(SAPLING_DEFAULTS)
     for key, spec in SCHEMA.items():
         if key in params:
             out[key] = _check(key, params[key], spec)
-        elif spec.default is not None:
-            out[key] = list(spec.default) if isinstance(spec.default, list) else spec.default
+        elif defaults[key] is not None:
+            out[key] = list(defaults[key]) if isinstance(defaults[key], list) else defaults[key]
     out["draws"] = semantics
     if semantics == "ranges":
         for key, (low, high) in RANGE_LIMITS.items():

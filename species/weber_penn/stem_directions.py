@@ -69,7 +69,7 @@ def sapling_split_angles(params: WeberPennParams, order: int, count: int,
     """(count,) split and (count,) spread angles, radians, drawn as Sapling draws them for each split of a
     `draws: ranges` dictionary: each a random sign times splitAngle + uniform(-splitAngleV, splitAngleV)."""
     base = np.radians(params.stem_levels[order].split_angle)
-    variation = params.draws.ranges.split_angle[order]
+    variation = abs(params.draws.ranges.split_angle[order])  # uniform(-v, v) is the same draw for v and -v
     signs = rng.choice(np.array([-1.0, 1.0]), (2, count))
     offsets = rng.uniform(-variation, variation, (2, count)) if variation else np.zeros((2, count))
     split, spread = signs * (base + offsets)

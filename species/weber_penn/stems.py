@@ -334,8 +334,8 @@ def _bend_angles(level: Level, params: WeberPennParams, order: int, *, progress:
     across). The trunk below its split height does not curve."""
     n_segments = level.n_segments
     ranges = params.draws.ranges
-    if ranges is not None and ranges.curve[order]:
-        in_plane, across = rng.uniform(0.0, ranges.curve[order] / n_segments, (2, level.n_splines))
+    if ranges is not None and ranges.curve[order]:  # uniform(0, v): a negative curveV bends the other way
+        in_plane, across = rng.random((2, level.n_splines)) * (ranges.curve[order] / n_segments)
     else:
         in_plane = params.draws.curve_variation[order] / n_segments
         across = params.draws.curve_variation_across[order] / n_segments
@@ -370,8 +370,9 @@ def _split_turns(params: WeberPennParams, order: int, frames: np.ndarray, splitt
     else:  # a stem's first split turns by uniform(0, 360 deg); each split by rotate[0] + uniform(-rotateV[0], ..)
         last_turn[first_split] = rng.uniform(0.0, TAU, int(first_split.sum()))
         trunk = params.stem_levels[0]
+        turn_range = abs(ranges.trunk_turn)  # uniform(-v, v) is the same draw for v and -v
         turn[splitting] = last_turn[splitting] + np.radians(
-            trunk.rotate + rng.uniform(-ranges.trunk_turn, ranges.trunk_turn, n_splitting))
+            trunk.rotate + rng.uniform(-turn_range, turn_range, n_splitting))
     last_turn[splitting] = turn[splitting]
     return angle, turn, spread
 

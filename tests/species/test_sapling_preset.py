@@ -127,3 +127,22 @@ def test_curve_and_split_ranges_make_stems_differ_by_seed_and_nothing_else_does(
     assert np.array_equal(same, positions({**base, "curveV": [0, 0, 0, 0]}, 1))
     curved = [positions({**base, "curveV": [60, 60, 0, 0]}, seed) for seed in (1, 2)]
     assert curved[0].shape != curved[1].shape or not np.allclose(curved[0], curved[1])
+
+
+def test_a_sapling_dictionary_that_leaves_keys_out_gets_saplings_defaults_and_ours_keeps_ours():
+    from species.weber_penn import SCHEMA
+    from species.weber_penn.sapling_preset import SAPLING_DEFAULTS
+
+    ranged, realized = validate({"draws": "ranges"}), validate({})
+    assert all(ranged[key] == value for key, value in SAPLING_DEFAULTS.items())
+    assert ranged["splitByLen"] is False and ranged["curveV"] == [20, 50, 75, 0]
+    assert realized["splitByLen"] is SCHEMA["splitByLen"].default is True and "curveV" not in realized
+
+
+def test_negative_variation_ranges_grow_as_saplings_symmetric_draws():
+    base = {"draws": "ranges", "levels": 2, "branches": [0, 8, 0, 0], "segSplits": [0.8, 0.4, 0, 0],
+            "splitAngle": [20, 20, 0, 0], "leaves": 0, "seed": 3, "curveV": [-40, -30, 0, 0]}
+    flipped = species.grow({**base, "rotateV": [-10, 0, 0, 0], "splitAngleV": [-5, -5, 0, 0]},
+                           np.random.default_rng(3))
+    plain = species.grow({**base, "rotateV": [10, 0, 0, 0], "splitAngleV": [5, 5, 0, 0]}, np.random.default_rng(3))
+    assert np.array_equal(flipped.positions, plain.positions)
