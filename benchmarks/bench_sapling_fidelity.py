@@ -65,7 +65,8 @@ def preset_as_ranges(preset, rng: np.random.Generator) -> dict:
     """One dictionary sampled from our preset (its jittered keys drawn by `rng`), with the preset's per-tree draws
     replaced by Sapling's ranges and `draws: ranges`; the tree's own seed is set per grown tree."""
     params = species.sample(preset.name, rng)
-    for key in (*REALIZED_ONLY_KEYS, *RANGE_KEYS, "seed"):
+    # splitByLen too: these dictionaries grow with Sapling's defaults on both sides (the committed Sapling run).
+    for key in (*REALIZED_ONLY_KEYS, *RANGE_KEYS, "seed", "splitByLen"):
         params.pop(key, None)
     return {**params, **preset_ranges(preset), "draws": "ranges"}
 
@@ -101,7 +102,10 @@ def harness_dictionaries(n_preset_dicts: int = N_PRESET_DICTS) -> list[HarnessDi
         out.append(HarnessDict(f"sapling:{path.stem}", "sapling_preset", params, params))
     for path in sorted(TSN_DICTS.glob("*.json")):
         params = json.loads(path.read_text())
-        out.append(HarnessDict(f"tsn:{path.stem}", "treesketchnet", params, realized_for_sapling(params)))
+        # rSplits2 is TreeSketchNet's one stored split draw for the whole tree; stock Sapling has no such key and
+        # draws each split decision afresh, so treefarm is given the dictionary without it to grow the same tree.
+        mine = {k: v for k, v in params.items() if k != "rSplits2"}
+        out.append(HarnessDict(f"tsn:{path.stem}", "treesketchnet", mine, realized_for_sapling(params)))
     presets = species.list_presets("weber_penn")
     for i in range(n_preset_dicts):
         preset = presets[i % len(presets)]

@@ -31,6 +31,8 @@ _BASE: dict[str, Any] = {
     "segSplits": [0, 0, 0, 0], "shape": "7", "shapeS": "4", "splitAngle": [0, 0, 0, 0], "splitBias": 0.0,
     "splitHeight": 0.2, "taper": [1, 1, 1, 1], "taperCrown": 0.0, "useOldDownAngle": False,
     "useParentAngle": True,
+    # Our presets were shaped with branch splits scaled by segment length (Sapling's default is off).
+    "splitByLen": True,
 }
 
 # Keys drawn per tree unless a preset fixes them: multiplicative jitter (TreeSketchNet's unfixed parameters).

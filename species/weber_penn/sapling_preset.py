@@ -71,7 +71,7 @@ SAPLING_BOUNDS: dict[str, tuple[float | None, float | None]] = {
 # Sapling 0.3.4's defaults where they differ from treefarm's: what a `draws: ranges` dictionary that leaves the key
 # out grows with (treefarm's own defaults serve `realized` dictionaries, whose presets were made with them).
 SAPLING_DEFAULTS: dict[str, Any] = {
-    "branches": [50, 30, 10, 10], "curveRes": [3, 5, 3, 1], "curveV": [20, 50, 75, 0], "splitByLen": False,
+    "branches": [50, 30, 10, 10], "curveRes": [3, 5, 3, 1], "curveV": [20, 50, 75, 0],
     "splitAngleV": [0, 0, 0, 0], "scaleV": 3.0, "scaleV0": 0.2, "attractUp": [0, 0, 0, 0], "minRadius": 0.0,
     "rotate": [137.5, 137.5, 137.5, 137.5], "rotateV": [0, 0, 0, 0], "leafRotateV": 0.0, "leafScaleV": 0.0,
     "leafDist": 6, "bevelRes": 0,

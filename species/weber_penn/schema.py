@@ -112,7 +112,7 @@ SCHEMA: dict[str, Key] = {
     "useParentAngle": Key("bool", default=True),
     # Ours (not among TreeSketchNet's 70 keys): Sapling UI options and presentation.
     "autoTaper": Key("bool", default=True),
-    "splitByLen": Key("bool", default=True),
+    "splitByLen": Key("bool", default=False),  # Sapling's default: TreeSketchNet's dictionaries grew with it
     "closeTip": Key("bool", default=False),
     "rMode": Key("enum", options=("rotate", "random", "original"), default="rotate"),
     "generator": Key("enum", options=("weber_penn",), default="weber_penn"),

@@ -128,11 +128,12 @@ def test_a_difference_is_flagged_only_when_the_interval_leaves_the_band():
     assert harness.outside_band(0.5, 0.8, 0.10) == pytest.approx(np.log(0.9 / 0.8))
 
 
-# Sapling's own presets and dictionaries from our presets that once differed in stems (splitByLen's default) or
-# crashed (a negative rotateV range): they must stay within the bands, outside the bootstrap noise.
+# Sapling's own presets, TreeSketchNet dictionaries and dictionaries from our presets that once differed in stems
+# (splitByLen's default, a stored rSplits2) or crashed (a negative rotateV range): they must stay within the bands,
+# outside the bootstrap noise.
 HELD = ("sapling:acer", "sapling:douglas_fir", "sapling:quaking_aspen", "sapling:weeping_willow",
-        "sapling:white_birch", "ours:bonsai_0", "ours:maple_0", "ours:pine_0", "ours:sassafras_1",
-        "ours:black_oak_0", "ours:weeping_willow_0")
+        "sapling:white_birch", "tsn:0_acer_2", "tsn:6_pine", "tsn:12_bonsai", "ours:bonsai_0", "ours:maple_0",
+        "ours:pine_0", "ours:sassafras_1", "ours:black_oak_0", "ours:weeping_willow_0")
 
 
 @pytest.mark.slow

@@ -135,8 +135,10 @@ def test_a_sapling_dictionary_that_leaves_keys_out_gets_saplings_defaults_and_ou
 
     ranged, realized = validate({"draws": "ranges"}), validate({})
     assert all(ranged[key] == value for key, value in SAPLING_DEFAULTS.items())
-    assert ranged["splitByLen"] is False and ranged["curveV"] == [20, 50, 75, 0]
-    assert realized["splitByLen"] is SCHEMA["splitByLen"].default is True and "curveV" not in realized
+    assert ranged["splitByLen"] is False and ranged["curveV"] == [20, 50, 75, 0] and ranged["scaleV"] == 3.0
+    # Both readings take Sapling's splitByLen (off); our presets set it on, as they were shaped with it.
+    assert realized["splitByLen"] is SCHEMA["splitByLen"].default is False and "curveV" not in realized
+    assert species.sample("maple", np.random.default_rng(0))["splitByLen"] is True
 
 
 def test_negative_variation_ranges_grow_as_saplings_symmetric_draws():
