@@ -12,6 +12,7 @@ import numpy as np
 
 from .errors import TreefarmError
 from .geometry.topology import node_depths
+from .geometry.vectors import column_bounds
 
 __all__ = ["Skeleton", "SkeletonError", "LEAF_CARD_CORNERS"]
 
@@ -240,12 +241,10 @@ class Skeleton:
     def bounds(self) -> np.ndarray:
         """(2, 3) float32, min and max corner over nodes (grown by their radius) and leaf corners."""
         r = self.radius[:, None]
-        lo = (self.positions - r).min(axis=0)
-        hi = (self.positions + r).max(axis=0)
+        lo, hi = column_bounds(self.positions - r)[0], column_bounds(self.positions + r)[1]
         if self.n_leaves:
-            corners = self.leaf_corners().reshape(-1, 3)
-            lo = np.minimum(lo, corners.min(axis=0))
-            hi = np.maximum(hi, corners.max(axis=0))
+            corner_lo, corner_hi = column_bounds(self.leaf_corners().reshape(-1, 3))
+            lo, hi = np.minimum(lo, corner_lo), np.maximum(hi, corner_hi)
         return np.stack([lo, hi]).astype(np.float32)
 
     def leaf_corners(self) -> np.ndarray:

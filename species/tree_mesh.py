@@ -11,6 +11,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .errors import TreefarmError
+from .geometry.vectors import column_bounds
 
 __all__ = ["MeshPart", "TreeMesh", "MeshError", "MESH_WRITERS"]
 
@@ -120,8 +121,7 @@ class TreeMesh:
     @cached_property
     def bounds(self) -> np.ndarray:
         """(2, 3) float32, min and max corner over bark and leaves."""
-        pts = np.concatenate([self.bark.vertices, self.leaves.vertices])
-        return np.stack([pts.min(axis=0), pts.max(axis=0)])
+        return np.stack(column_bounds(np.concatenate([self.bark.vertices, self.leaves.vertices])))
 
     def export(self, file_format: str) -> Any:
         """The tree written in `file_format` (a `MESH_WRITERS` name)."""

@@ -12,6 +12,7 @@ import struct
 import numpy as np
 
 from ..errors import TreefarmError
+from ..geometry.vectors import column_bounds
 from .textures import bark_png, leaf_png
 from ..tree_mesh import MeshPart, TreeMesh
 
@@ -41,8 +42,9 @@ class GlbError(TreefarmError):
 def z_up_to_y_up(vectors: np.ndarray) -> np.ndarray:
     """(K, 3) float32: our Z-up world (x, y, z) in glTF's Y-up frame, (x, z, -y) (`Z_UP_TO_Y_UP` applied by
     reordering, so no value is rounded). A rotation, so normals too."""
-    vectors = np.asarray(vectors, np.float32)
-    return np.ascontiguousarray(np.stack([vectors[:, 0], vectors[:, 2], -vectors[:, 1]], axis=1))
+    turned = np.asarray(vectors, np.float32)[:, [0, 2, 1]]  # a new C-ordered array
+    np.negative(turned[:, 2], out=turned[:, 2])
+    return turned
 
 
 class GlbBuffer:
@@ -62,7 +64,9 @@ class GlbBuffer:
     def view(self, data: bytes, target: int | None = None) -> int:
         """Index of a new buffer view holding `data` (`target`: ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER or None)."""
         if self.keep_bytes:
-            self.blobs.append(data + b"\0" * ((-len(data)) % 4))
+            self.blobs.append(data)
+            if len(data) % 4:
+                self.blobs.append(b"\0" * (-len(data) % 4))
         return self._record_view(len(data), target)
 
     def _record_view(self, length: int, target: int | None) -> int:
@@ -79,13 +83,15 @@ class GlbBuffer:
         them)."""
         component = _COMPONENTS[array.dtype]
         if self.keep_bytes:
-            view = self.view(np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<")).tobytes(), target)
+            little = np.ascontiguousarray(array).astype(array.dtype.newbyteorder("<"), copy=False)
+            view = self.view(little.tobytes(), target)
         else:
             view = self._record_view(int(array.nbytes), target)
         entry = {"bufferView": view, "componentType": component, "count": int(len(array)), "type": kind}
         if with_bounds:
-            entry["min"] = [float(x) for x in array.min(axis=0)]
-            entry["max"] = [float(x) for x in array.max(axis=0)]
+            low, high = column_bounds(array.reshape(len(array), -1))
+            entry["min"] = [float(x) for x in low]
+            entry["max"] = [float(x) for x in high]
         self.accessors.append(entry)
         return len(self.accessors) - 1
 
@@ -178,10 +184,13 @@ class GlbWriter:
         """GLB bytes: header, JSON chunk (compact, ASCII, space-padded), BIN chunk when the buffer holds bytes.
         No timestamps: the same entries give the same bytes."""
         json_bytes = self._json_chunk(head)
-        chunks = struct.pack("<II", len(json_bytes), _CHUNK_JSON) + json_bytes
+        pieces = [struct.pack("<II", len(json_bytes), _CHUNK_JSON), json_bytes]
         if self.buffer.size:
-            chunks += struct.pack("<II", self.buffer.size, _CHUNK_BIN) + self.buffer.tobytes()
-        return struct.pack("<III", _GLB_MAGIC, 2, 12 + len(chunks)) + chunks
+            if not self.buffer.keep_bytes:
+                raise TypeError("this GlbBuffer counts bytes without keeping them (keep_bytes=False)")
+            pieces += [struct.pack("<II", self.buffer.size, _CHUNK_BIN), *self.buffer.blobs]
+        length = 12 + sum(len(piece) for piece in pieces)
+        return b"".join([struct.pack("<III", _GLB_MAGIC, 2, length), *pieces])  # one copy of the buffers
 
     def glb_length(self, head: dict) -> int:
         """len(self.to_glb(head)), exactly, without packing the binary chunk (works with keep_bytes=False)."""
