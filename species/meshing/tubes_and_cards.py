@@ -124,16 +124,17 @@ def _branch_polylines(skeleton: Skeleton):
     Returns (points (K, 3) float64 m, radius (K,) float64 m, offsets (P + 1,) int64, branch (P,) int64):
     only branches left with at least two distinct points, in branch-id order.
     """
-    paths = skeleton.branch_paths
-    nodes = np.concatenate(paths).astype(np.int64)
-    sizes = np.array([len(p) for p in paths], np.int64)
-    first = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    branch = np.repeat(np.arange(len(paths)), sizes)
+    path_nodes, path_offsets = skeleton.branch_path_nodes
+    nodes = path_nodes.astype(np.int64)
+    sizes = np.diff(path_offsets)
+    n_paths = len(sizes)
+    first = path_offsets[:-1]
+    branch = np.repeat(np.arange(n_paths), sizes)
     points = skeleton.positions[nodes].astype(np.float64)
     radius = skeleton.radius[nodes].astype(np.float64)
     # A child branch's first point is its junction on the parent's axis: give it the child's own radius
     # (clamped to the parent's, so the first ring sits inside the parent tube and the joint has no gap).
-    junction = skeleton.branch_id[nodes[first]] != np.arange(len(paths))
+    junction = skeleton.branch_id[nodes[first]] != np.arange(n_paths)
     junction &= sizes > 1
     at, after = first[junction], first[junction] + 1
     parent_radius = radius[at]
@@ -149,7 +150,7 @@ def _branch_polylines(skeleton: Skeleton):
     step = np.linalg.norm(np.diff(points, axis=0), axis=1)
     keep[1:] = step > np.maximum(_MERGE_DISTANCE, _MERGE_RADIUS_FRACTION * radius[1:])
     keep[first] = True
-    counts = np.bincount(branch[keep], minlength=len(paths))
+    counts = np.bincount(branch[keep], minlength=n_paths)
     keep &= (counts >= 2)[branch]
     kept_counts = counts[counts >= 2]
     offsets = np.concatenate([[0], np.cumsum(kept_counts)])
