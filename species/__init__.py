@@ -19,10 +19,12 @@ from .skeleton import Skeleton, SkeletonError
 from .tree_mesh import MeshPart, TreeMesh
 
 __all__ = [
-    "list_presets", "get_preset", "sample", "sapling_preset", "grow", "build_mesh", "rebuild", "rng_for", "generator_of",
+    "list_presets", "get_preset", "sample", "sapling_preset", "grow", "build_mesh", "rebuild", "rng_for",
+    "generator_of",
     "Skeleton", "TreeMesh", "MeshPart", "Preset",
     "TreefarmError", "ParameterError", "PresetError", "SkeletonError", "TreeTooLargeError", "GENERATORS",
 ]
+
 
 def sapling_preset(path) -> dict:
     """The dictionary of a Sapling preset file (.py as Blender's add-on saves it, or .json), as the add-on loads

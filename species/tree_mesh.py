@@ -11,6 +11,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .errors import TreefarmError
+from .geometry.tangents import vertex_tangents
 from .geometry.vectors import column_bounds
 
 __all__ = ["MeshPart", "TreeMesh", "MeshError", "MESH_WRITERS"]
@@ -68,6 +69,12 @@ class MeshPart:
         object.__setattr__(self, "normals", n)
         object.__setattr__(self, "uvs", uv)
         object.__setattr__(self, "attributes", attrs)
+
+    @cached_property
+    def tangents(self) -> np.ndarray:
+        """(V, 4) float64 per-vertex tangents for normal maps (`species.geometry.vertex_tangents`), worked out
+        once however many files are written from this part."""
+        return vertex_tangents(self.vertices, self.normals, self.uvs, self.faces)
 
     @classmethod
     def empty(cls) -> "MeshPart":

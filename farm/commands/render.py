@@ -118,16 +118,16 @@ def _render_blender(args, mesh, out: Path) -> list[dict]:
 
 def _photo_sheet_rows(photos) -> list:
     """Contact sheet rows of a Blender photos job: one row per camera, its photo, depth and part mask."""
-    import cv2
-
     from renderers import viewable
+
+    from farm.image_codec import decode_map
 
     rows = []
     for camera, photo, depth, mask, scale in zip(photos.cameras, photos.images, photos.depths, photos.masks,
                                                  photos.depth_scales):
-        rgb = cv2.cvtColor(cv2.imread(str(photo), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
-        metres = cv2.imread(str(depth), cv2.IMREAD_UNCHANGED).astype(np.float32) * scale
-        labels = cv2.imread(str(mask), cv2.IMREAD_GRAYSCALE)
+        rgb = decode_map(photo.read_bytes())[..., :3]
+        metres = decode_map(depth.read_bytes(), scale=scale, offset=0.0)  # 16-bit, `scale` metres per unit
+        labels = decode_map(mask.read_bytes())
         rows.append((camera.name, [("photo", rgb), ("depth", viewable("depth", metres)),
                                    ("mask", viewable("mask", labels))]))
     return rows

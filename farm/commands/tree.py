@@ -73,7 +73,7 @@ def load_params(path: str) -> dict:
 
 def _read_params(path: str):
     """(dictionary, SaplingPreset or None) of a --params file."""
-    from species.weber_penn import draws_semantics, load_sapling_preset
+    from species.weber_penn import draws_semantics, load_sapling_preset, sapling_preset_from_settings
 
     file = Path(path)
     if not file.is_file():
@@ -98,8 +98,8 @@ def _read_params(path: str):
             semantics = draws_semantics(params)
         except TreefarmError as exc:
             raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
-        if semantics == "ranges":
-            preset = load_sapling_preset(file)
+        if semantics == "ranges":  # the file already read: loaded as the add-on loads a preset
+            preset = sapling_preset_from_settings(params)
             return preset.params, preset
     return params, None
 

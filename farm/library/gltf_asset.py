@@ -41,14 +41,16 @@ def _quaternions(rotation: np.ndarray) -> np.ndarray:
 
 
 def _primitive(writer: GlbWriter, vertices, normals, uvs, faces, material: int, extra: dict | None = None,
-               variants: list[dict] | None = None) -> dict:
+               variants: list[dict] | None = None, tangents: np.ndarray | None = None) -> dict:
     """A triangle primitive (see `GlbWriter.triangles`), its season variants' material mappings in
-    KHR_materials_variants. A primitive drawn with a normal map (in `material` or a variant's) gets TANGENT."""
+    KHR_materials_variants. A primitive drawn with a normal map (in `material` or a variant's) gets TANGENT:
+    `tangents` (V, 4) of these arrays (a MeshPart's cached `tangents`), or worked out here."""
     mapped = [material] + [mapping["material"] for mapping in variants or []]
     if any("normalTexture" in writer.materials[m] for m in mapped):
         # Left to the viewer, tangents differ between implementations (the validator's
         # MESH_PRIMITIVE_GENERATED_TANGENT_SPACE); the writer turns only POSITION and NORMAL to Y up.
-        tangents = vertex_tangents(vertices, normals, uvs, faces)
+        if tangents is None:
+            tangents = vertex_tangents(vertices, normals, uvs, faces)
         extra = {"TANGENT": (np.concatenate([z_up_to_y_up(tangents[:, :3]), tangents[:, 3:]], axis=1), "VEC4"),
                  **(extra or {})}
     attributes, indices = writer.triangles(vertices, normals, uvs, faces, extra)
@@ -122,13 +124,14 @@ def _document(asset: LibraryAsset, instanced: bool, pngs: PngCache | None,
         mesh = level.mesh
         if level.name == "IMPOSTOR":
             part = mesh.bark
-            prim = _primitive(writer, part.vertices, part.normals, part.uvs, part.faces, materials["impostor"])
+            prim = _primitive(writer, part.vertices, part.normals, part.uvs, part.faces, materials["impostor"],
+                              tangents=part.tangents)
             children.append(writer.node({"name": f"{asset.asset_id}_IMPOSTOR_card", "mesh": writer.mesh("impostor", prim)}))
         else:
             bark = mesh.bark
             prim = _primitive(writer, bark.vertices, bark.normals, bark.uvs, bark.faces, materials["bark"],
                               {"_WIND": (level.bark_wind, "VEC4"),
-                               "_WIND_PIVOT": (z_up_to_y_up(level.bark_pivot), "VEC3")})
+                               "_WIND_PIVOT": (z_up_to_y_up(level.bark_pivot), "VEC3")}, tangents=bark.tangents)
             children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_bark",
                                          "mesh": writer.mesh(f"{level.name}_bark", prim)}))
             if level.skeleton.n_leaves:

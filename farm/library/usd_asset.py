@@ -113,16 +113,10 @@ def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = N
 PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
-def _prototype_kinds(level) -> list[str]:
-    """The prototype names `_leaf_instancer` makes for a level: one per card kind present."""
-    clumps = card_clumps(level.mesh.leaves)
-    return [PROTOTYPE_NAMES[kind] for kind in (False, True) if (clumps == kind).any()]
-
-
-def _leaf_instancer(stage, path: str, level, card_material):
+def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
+    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
     from scipy.spatial.transform import Rotation
-
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
     card = MeshPart(LEAF_CARD_CORNERS, CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), CARD_UVS)
@@ -148,7 +142,7 @@ def _leaf_instancer(stage, path: str, level, card_material):
         Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(level.leaf_wind, np.float32)))
     primvars.CreatePrimvar("windPivot", Sdf.ValueTypeNames.Float3Array, UsdGeom.Tokens.vertex).Set(
         Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(level.leaf_pivot, np.float32)))
-    return instancer
+    return [PROTOTYPE_NAMES[kind] for kind in kinds]
 
 
 def asset_to_usdc(asset: LibraryAsset) -> bytes:
@@ -179,6 +173,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     geom = f"{root_path}/Geom"
     UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")
+    prototype_names: set[str] = set()  # the leaf prototypes of every level, which each season binds
     for level in asset.levels:
         lod_set.AddVariant(level.name)
         lod_set.SetVariantSelection(level.name)
@@ -190,12 +185,10 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
                 if level.skeleton.n_leaves:
-                    _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
+                    prototype_names.update(_leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"]))
             stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
     lod_set.SetVariantSelection("LOD0")
     season_set = root.GetVariantSets().AddVariantSet("season")
-    prototype_kinds = sorted({kind for level in asset.levels if level.name != "IMPOSTOR" and level.skeleton.n_leaves
-                              for kind in _prototype_kinds(level)})
     for season in SEASONS:
         season_set.AddVariant(season)
         season_set.SetVariantSelection(season)
@@ -203,9 +196,9 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             over = stage.OverridePrim(f"{geom}/leaves")
             if season == "bare":
                 over.SetActive(False)
-            else:  # the prototypes `_leaf_instancer` made in any level
-                for kind in prototype_kinds:
-                    card = stage.OverridePrim(f"{geom}/leaves/prototypes/{kind}")
+            else:
+                for name in sorted(prototype_names):
+                    card = stage.OverridePrim(f"{geom}/leaves/prototypes/{name}")
                     UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
     season_set.SetVariantSelection("summer")
     # `season` first among the prim's variant sets: its leaf bindings are then stronger than the `lod` variants'.

@@ -95,10 +95,14 @@ class GlbBuffer:
         self.accessors.append(entry)
         return len(self.accessors) - 1
 
-    def tobytes(self) -> bytes:
+    def pieces(self) -> list[bytes]:
+        """The buffer's bytes as the pieces it holds, in order (joined once, by whoever writes them)."""
         if not self.keep_bytes:
             raise TypeError("this GlbBuffer counts bytes without keeping them (keep_bytes=False)")
-        return b"".join(self.blobs)
+        return self.blobs
+
+    def tobytes(self) -> bytes:
+        return b"".join(self.pieces())
 
 
 class GlbWriter:
@@ -186,9 +190,7 @@ class GlbWriter:
         json_bytes = self._json_chunk(head)
         pieces = [struct.pack("<II", len(json_bytes), _CHUNK_JSON), json_bytes]
         if self.buffer.size:
-            if not self.buffer.keep_bytes:
-                raise TypeError("this GlbBuffer counts bytes without keeping them (keep_bytes=False)")
-            pieces += [struct.pack("<II", self.buffer.size, _CHUNK_BIN), *self.buffer.blobs]
+            pieces += [struct.pack("<II", self.buffer.size, _CHUNK_BIN), *self.buffer.pieces()]
         length = 12 + sum(len(piece) for piece in pieces)
         return b"".join([struct.pack("<III", _GLB_MAGIC, 2, length), *pieces])  # one copy of the buffers
 

@@ -8,7 +8,7 @@ from .generator import grow, grow_tree, grow_validated
 from .schema import REALIZED_DRAWS, SAPLING_KEYS, SCHEMA, validate
 from .params import LeafParams, PruneParams, RealizedDraws, SaplingRanges, StemLevelParams, WeberPennParams
 from .sapling_preset import (BLENDER_ONLY_KEYS, DRAWS, SaplingPreset, draws_semantics, ignored_keys,
-                             load_sapling_preset, read_sapling_preset)
+                             load_sapling_preset, read_sapling_preset, sapling_preset_from_settings)
 from .stems import grow_level, Level, MAX_STEMS_PER_LEVEL
 from .stem_directions import (attract_up, bent_direction, branch_turn, crown_taper, sapling_split_angles,
                               segment_frames, split_angle, spread_angle, world_directions)
@@ -23,7 +23,8 @@ from .presets import make_preset
 __all__ = [
     "grow", "grow_tree", "grow_validated", "validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS",
     "WeberPennParams", "StemLevelParams", "LeafParams", "PruneParams", "RealizedDraws", "SaplingRanges",
-    "read_sapling_preset", "load_sapling_preset", "SaplingPreset", "draws_semantics", "ignored_keys",
+    "read_sapling_preset", "load_sapling_preset", "sapling_preset_from_settings", "SaplingPreset",
+    "draws_semantics", "ignored_keys",
     "BLENDER_ONLY_KEYS", "DRAWS",
     "Level", "grow_level", "MAX_STEMS_PER_LEVEL",
     "attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "sapling_split_angles",

@@ -107,7 +107,6 @@ class RealizedDraws:
             split_threshold=validated.get("rSplits2"),
         )
 
-
     @classmethod
     def from_ranges(cls, validated: dict, rng: np.random.Generator) -> RealizedDraws:
         """Sapling's per-tree draws from its ranges (scale + uniform(-scaleV, scaleV), trunk radius times

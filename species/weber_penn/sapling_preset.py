@@ -23,9 +23,9 @@ from typing import Any
 
 from ..errors import ParameterError, PathError
 
-__all__ = ["read_sapling_preset", "load_sapling_preset", "SaplingPreset", "draws_semantics", "ignored_keys",
-           "clamp_to_sapling", "BLENDER_ONLY_KEYS", "RANGE_ONLY_KEYS", "REALIZED_ONLY_KEYS", "DRAWS", "SAPLING_BOUNDS",
-           "SAPLING_DEFAULTS"]
+__all__ = ["read_sapling_preset", "load_sapling_preset", "sapling_preset_from_settings", "SaplingPreset",
+           "draws_semantics", "ignored_keys", "clamp_to_sapling", "BLENDER_ONLY_KEYS", "RANGE_ONLY_KEYS",
+           "REALIZED_ONLY_KEYS", "DRAWS", "SAPLING_BOUNDS", "SAPLING_DEFAULTS"]
 
 DRAWS = ("realized", "ranges")
 
@@ -106,7 +106,13 @@ def load_sapling_preset(path: str | Path) -> SaplingPreset:
     raw = _parse(text, path)
     if not isinstance(raw, dict):
         raise ParameterError("preset", type(raw).__name__, f"a dict of Sapling settings in {path}")
-    params = {key: _lists(value) for key, value in raw.items()}
+    return sapling_preset_from_settings(raw)
+
+
+def sapling_preset_from_settings(settings: dict) -> SaplingPreset:
+    """A Sapling settings dict already read from its file, loaded as the add-on loads it (see
+    `load_sapling_preset`)."""
+    params = {key: _lists(value) for key, value in settings.items()}
     _upgrade_old_preset(params)
     params.setdefault("draws", "ranges")
     params, clamped = clamp_to_sapling(params)
