@@ -12,7 +12,7 @@ import numpy as np
 
 from .errors import TreefarmError
 from .geometry.topology import node_depths
-from .geometry.vectors import column_bounds
+from .geometry.vectors import column_bounds, row_norms
 
 __all__ = ["Skeleton", "SkeletonError", "LEAF_CARD_CORNERS"]
 
@@ -141,7 +141,7 @@ class Skeleton:
     def segment_lengths(self) -> np.ndarray:
         """(N,) float32, metres, length of the edge from each node's parent to it (0 for the root)."""
         lengths = np.zeros(len(self), np.float32)
-        lengths[1:] = np.linalg.norm(self.positions[1:] - self.positions[self.parent[1:]], axis=1)
+        lengths[1:] = row_norms(self.positions[1:] - self.positions[self.parent[1:]])
         return lengths
 
     @cached_property

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import TreefarmError
-from .vectors import unit_vectors
+from .vectors import cross_rows, row_norms, unit_vectors
 
 __all__ = ["FrameError", "polyline_tangents", "parallel_transport_frames", "rotation_minimizing_frames"]
 
@@ -43,7 +43,7 @@ def polyline_tangents(points: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """
     points, offsets = _check_polylines(points, offsets)
     seg = np.diff(points, axis=0)  # seg[k] joins point k to k + 1 (meaningless across polylines)
-    seg_len = np.linalg.norm(seg, axis=1)
+    seg_len = row_norms(seg)
     last = offsets[1:] - 1  # last point of each polyline: its outgoing "segment" crosses into the next
     inner_seg = np.ones(len(seg), bool)
     inner_seg[last[:-1]] = False
@@ -70,18 +70,18 @@ def _reference_normals(tangents: np.ndarray) -> np.ndarray:
     near_y = np.abs(tangents[:, 1]) > 0.9
     ref[~near_y, 1] = 1.0
     ref[near_y, 0] = 1.0
-    return unit_vectors(np.cross(tangents, ref))
+    return unit_vectors(cross_rows(tangents, ref))
 
 
 def _transport(vectors: np.ndarray, t_from: np.ndarray, t_to: np.ndarray) -> np.ndarray:
     """Rotate each vector by the smallest rotation that takes unit t_from to unit t_to (Rodrigues form)."""
-    axis = np.cross(t_from, t_to)  # |axis| = sin of the angle
+    axis = cross_rows(t_from, t_to)  # |axis| = sin of the angle
     cos = np.einsum("ij,ij->i", t_from, t_to)
     # R x = x + v x x + v x (v x x) / (1 + c); undefined for a full reversal, where we keep x.
     denom = 1.0 + cos
     ok = denom > 1e-9
-    vxx = np.cross(axis, vectors)
-    rotated = vectors + vxx + np.cross(axis, vxx) / np.where(ok, denom, 1.0)[:, None]
+    vxx = cross_rows(axis, vectors)
+    rotated = vectors + vxx + cross_rows(axis, vxx) / np.where(ok, denom, 1.0)[:, None]
     return np.where(ok[:, None], rotated, vectors)
 
 
@@ -111,18 +111,18 @@ def parallel_transport_frames(points: np.ndarray, offsets: np.ndarray,
     reference = _reference_normals(tangents)
     carried = _transport(reference[:-1], tangents[:-1], tangents[1:])  # reference k moved to k + 1
     # Signed angle from reference[k+1] to carried[k] about tangent[k+1].
-    sin = np.einsum("ij,ij->i", tangents[1:], np.cross(reference[1:], carried))
+    sin = np.einsum("ij,ij->i", tangents[1:], cross_rows(reference[1:], carried))
     cos = np.einsum("ij,ij->i", reference[1:], carried)
     step = np.zeros(len(points))
     step[1:] = np.arctan2(sin, cos)
     step[offsets[:-1]] = 0.0  # no twist carried across polylines
     twist = np.cumsum(step)
     twist -= np.repeat(twist[offsets[:-1]], np.diff(offsets))
-    binormal_ref = np.cross(tangents, reference)
+    binormal_ref = cross_rows(tangents, reference)
     cos_t, sin_t = np.cos(twist)[:, None], np.sin(twist)[:, None]
     normals = cos_t * reference + sin_t * binormal_ref
     normals = unit_vectors(normals - tangents * np.einsum("ij,ij->i", normals, tangents)[:, None])
-    binormals = np.cross(tangents, normals)
+    binormals = cross_rows(tangents, normals)
     return tangents, normals, binormals
 
 

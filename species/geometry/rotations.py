@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .vectors import row_norms
+
 __all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
            "euler_xyz", "from_euler_xyz"]
 
@@ -69,7 +71,7 @@ def track_frames(directions: np.ndarray) -> np.ndarray:
     runs once per stem step and per leaf.
     """
     d = np.atleast_2d(np.asarray(directions, np.float64))
-    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    d = d / np.maximum(row_norms(d)[:, None], 1e-300)
     dx, dy, dz = d[:, 0], d[:, 1], d[:, 2]
     s = np.hypot(dx, dy)
     vertical = s < 1e-12
@@ -105,7 +107,7 @@ def tilt_frames(directions: np.ndarray) -> np.ndarray:
     Closed form of Ry(ry) @ Rx(-rx).
     """
     d = np.atleast_2d(np.asarray(directions, np.float64))
-    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    d = d / np.maximum(row_norms(d)[:, None], 1e-300)
     ry = np.arctan2(d[:, 0], d[:, 2])
     rx = np.arctan2(d[:, 1], np.hypot(d[:, 0], d[:, 2]))
     cy, sy, cx, sx = np.cos(ry), np.sin(ry), np.cos(rx), np.sin(rx)
@@ -131,7 +133,7 @@ def zxz(alpha, beta, gamma) -> np.ndarray:
 def declination(directions: np.ndarray) -> np.ndarray:
     """(N,) radians between each direction and world up."""
     d = np.atleast_2d(np.asarray(directions, np.float64))
-    return np.arccos(np.clip(d[:, 2] / np.maximum(np.linalg.norm(d, axis=1), 1e-300), -1, 1))
+    return np.arccos(np.clip(d[:, 2] / np.maximum(row_norms(d), 1e-300), -1, 1))
 
 
 def euler_xyz(frames: np.ndarray, reference_z: np.ndarray) -> np.ndarray:

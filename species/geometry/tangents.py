@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .frames import _reference_normals
-from .vectors import unit_vectors
+from .vectors import cross_rows, unit_vectors
 
 __all__ = ["vertex_tangents", "DEGENERATE_UV_SINE"]
 
@@ -49,7 +49,7 @@ def vertex_tangents(vertices: np.ndarray, normals: np.ndarray, uvs: np.ndarray, 
     tangent = unit_vectors(along_u - normals * np.einsum("ij,ij->i", along_u, normals)[:, None])
     undefined = ~tangent.any(axis=1)
     tangent[undefined] = _reference_normals(normals[undefined])
-    handedness = np.where(np.einsum("ij,ij->i", np.cross(normals, tangent), along_v) < 0.0, -1.0, 1.0)
+    handedness = np.where(np.einsum("ij,ij->i", cross_rows(normals, tangent), along_v) < 0.0, -1.0, 1.0)
     return np.concatenate([tangent, handedness[:, None]], axis=1)
 
 

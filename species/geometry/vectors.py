@@ -7,16 +7,36 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH"]
+__all__ = ["unit_vectors", "unit_vectors_and_lengths", "row_norms", "cross_rows", "column_bounds", "MIN_LENGTH"]
 
 # Shorter than this (metres, or a dimensionless cross product) a vector has no usable direction.
 MIN_LENGTH = 1e-12
 
 
+def row_norms(vectors: np.ndarray) -> np.ndarray:
+    """(...) Euclidean lengths of (..., 3) vectors: the same values as `np.linalg.norm(vectors, axis=-1)` (the
+    squares summed in the same order), without its per-call overhead, which dominates for the small arrays of a
+    growth step."""
+    v = np.asarray(vectors)
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    return np.sqrt(x * x + y * y + z * z)
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 3) cross products a x b of (..., 3) vectors: `np.cross`'s values (the same products and differences),
+    without its generic axis handling."""
+    a, b = np.asarray(a), np.asarray(b)
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), np.result_type(a, b))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def unit_vectors_and_lengths(vectors: np.ndarray, min_length: float = MIN_LENGTH) -> tuple[np.ndarray, np.ndarray]:
     """(..., 3) unit vectors (zero where the length is <= min_length) and (...) lengths."""
     vectors = np.asarray(vectors)
-    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    length = row_norms(vectors)[..., None]
     unit = np.divide(vectors, length, out=np.zeros_like(vectors), where=length > min_length)
     return unit, length[..., 0]
 

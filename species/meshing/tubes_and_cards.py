@@ -8,6 +8,7 @@ import numpy as np
 
 from ..errors import ParameterError, TreefarmError
 from ..geometry.frames import parallel_transport_frames, polyline_tangents
+from ..geometry.vectors import cross_rows, row_norms
 from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh
 
@@ -142,12 +143,12 @@ def _branch_polylines(skeleton: Skeleton):
     # Pull that ring back along the child's direction so its rim hides inside the parent: by half the parent
     # radius at most, and never so far that the ring (radius r) leaves a parent tube of radius R (R - r).
     direction = points[after] - points[at]
-    length = np.linalg.norm(direction, axis=1, keepdims=True)
+    length = row_norms(direction)[:, None]
     pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])
     pull = np.where(nodes[at] == 0, 0.0, pull)[:, None]  # at the root that would go below the ground
     points[at] -= np.where(length > 0, pull * direction / np.maximum(length, 1e-30), 0.0)
     keep = np.ones(len(nodes), bool)
-    step = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    step = row_norms(np.diff(points, axis=0))
     keep[1:] = step > np.maximum(_MERGE_DISTANCE, _MERGE_RADIUS_FRACTION * radius[1:])
     keep[first] = True
     counts = np.bincount(branch[keep], minlength=n_paths)
@@ -194,7 +195,7 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     repeat = np.maximum(1.0, np.round(2 * np.pi * base_radius / _BARK_TILE_WIDTH))
     tile_height = _BARK_TILE_ASPECT * 2 * np.pi * base_radius / repeat
     seg = np.zeros(len(points))
-    seg[1:] = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    seg[1:] = row_norms(np.diff(points, axis=0))
     seg[starts] = 0.0
     arc = np.cumsum(seg)
     arc -= np.repeat(arc[starts], sizes)
@@ -211,7 +212,8 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
         part["order"] = order[chosen][part["local_branch"]].astype(np.uint8)
         part["branch"] = branch[chosen][part["local_branch"]].astype(np.int32)
         parts.append(part)
-    cat = {key: np.concatenate([p[key] for p in parts]) for key in parts[0] if key != "local_branch"}
+    cat = {key: parts[0][key] if len(parts) == 1 else np.concatenate([p[key] for p in parts])
+           for key in parts[0] if key != "local_branch"}
     return MeshPart(cat["vertices"], cat["faces"], cat["normals"], cat["uvs"],
                     attributes={"order": cat["order"], "branch": cat["branch"]})
 
@@ -226,46 +228,58 @@ def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent
     local_branch = np.repeat(np.arange(len(chosen)), sizes)
     n_rings = len(point_ids)
     ring_size = sides + 1
+    n_ring_vertices = n_rings * ring_size
+    last_ring = np.cumsum(sizes) - 1
+    cone = np.flatnonzero(coned[chosen])
+    roots = np.flatnonzero(is_root[chosen])
+    n_vertices = n_ring_vertices + len(cone) + len(roots)
+    vertices = np.empty((n_vertices, 3), np.float32)
+    normals = np.empty((n_vertices, 3), np.float32)
+    uvs = np.empty((n_vertices, 2), np.float32)
+
+    # Ring vertex k of a ring at point p: p + r (cos a_k n + sin a_k b), worked out in float64 one coordinate at
+    # a time ((R, S + 1) arrays with unit stride, twice as fast as broadcasting over (R, S + 1, 3)) and rounded
+    # once, into float32.
     angle = 2 * np.pi * np.arange(ring_size) / sides
     cos, sin = np.cos(angle), np.sin(angle)
     cos[-1], sin[-1] = 1.0, 0.0  # the seam column coincides exactly with the first
-    direction = (cos[None, :, None] * normal[point_ids][:, None, :]
-                 + sin[None, :, None] * binormal[point_ids][:, None, :])  # (R, S + 1, 3)
-    ring_vertices = points[point_ids][:, None, :] + radius[point_ids][:, None, None] * direction
-    u = repeat[chosen][local_branch][:, None] * (np.arange(ring_size) / sides)[None, :]
-    ring_uvs = np.stack([np.broadcast_to(u, (n_rings, ring_size)),
-                         np.broadcast_to(v_coord[point_ids][:, None], (n_rings, ring_size))], axis=-1)
+    ring_radius = radius[point_ids][:, None]
+    ring_vertices = vertices[:n_ring_vertices].reshape(n_rings, ring_size, 3)
+    ring_normals = normals[:n_ring_vertices].reshape(n_rings, ring_size, 3)
+    for axis in range(3):
+        coordinate = np.multiply.outer(normal[point_ids, axis], cos)
+        coordinate += np.multiply.outer(binormal[point_ids, axis], sin)
+        ring_normals[:, :, axis] = coordinate
+        coordinate *= ring_radius
+        coordinate += points[point_ids, axis][:, None]
+        ring_vertices[:, :, axis] = coordinate
+    ring_uvs = uvs[:n_ring_vertices].reshape(n_rings, ring_size, 2)
+    ring_uvs[..., 0] = repeat[chosen][local_branch][:, None] * (np.arange(ring_size) / sides)[None, :]
+    ring_uvs[..., 1] = v_coord[point_ids][:, None]
 
-    # Quads between consecutive rings of the same branch: (a, b, c) and (a, c, d), counter-clockwise
-    # from outside because the ring runs counter-clockwise about the tangent.
-    last_ring = np.cumsum(sizes) - 1
+    # Quads between consecutive rings of the same branch: (a, b, c) and (a, c, d) with b = a + 1, c = a + S + 2,
+    # d = a + S + 1, counter-clockwise from outside because the ring runs counter-clockwise about the tangent.
     joined = np.ones(n_rings, bool)
     joined[last_ring] = False
-    lower = np.flatnonzero(joined)[:, None] * ring_size + np.arange(sides)[None, :]
-    a, b = lower, lower + 1
-    c, d = lower + ring_size + 1, lower + ring_size
-    quads = np.stack([np.stack([a, b, c], -1), np.stack([a, c, d], -1)], axis=2).reshape(-1, 3)
+    lower = (np.flatnonzero(joined)[:, None] * ring_size + np.arange(sides)[None, :]).astype(np.int32)
+    quad_corners = np.array([0, 1, ring_size + 1, 0, ring_size + 1, ring_size], np.int32)
+    quads = (lower.reshape(-1, 1) + quad_corners[None, :]).reshape(-1, 3)
 
     # Tip cones: one apex past the last ring of each coned branch.
-    n_ring_vertices = n_rings * ring_size
-    cone = np.flatnonzero(coned[chosen])
     tip_point = point_ids[last_ring[cone]]
     tip_height = _TIP_CAP_HEIGHT * radius[tip_point]
-    apex = points[tip_point] + tangent[tip_point] * tip_height[:, None]
+    apex_rows = slice(n_ring_vertices, n_ring_vertices + len(cone))
+    vertices[apex_rows] = points[tip_point] + tangent[tip_point] * tip_height[:, None]
+    normals[apex_rows] = tangent[tip_point]
+    uvs[apex_rows, 0] = 0.5 * repeat[chosen][cone]
+    uvs[apex_rows, 1] = v_coord[tip_point] + tip_height / tile_height[chosen][cone]
     apex_index = n_ring_vertices + np.arange(len(cone))
     ring_start = last_ring[cone][:, None] * ring_size + np.arange(sides)[None, :]
     tip_faces = np.stack([ring_start, ring_start + 1, np.broadcast_to(apex_index[:, None], ring_start.shape)],
                          axis=-1).reshape(-1, 3)
-    apex_uv = np.stack([0.5 * repeat[chosen][cone], v_coord[tip_point] + tip_height / tile_height[chosen][cone]],
-                       axis=1)
-
-    vertices = [ring_vertices.reshape(-1, 3), apex]
-    normals = [direction.reshape(-1, 3), tangent[tip_point]]
-    uvs = [ring_uvs.reshape(-1, 2), apex_uv]
     faces = [quads, tip_faces]
     owners = [np.repeat(local_branch, ring_size), cone]
 
-    roots = np.flatnonzero(is_root[chosen])
     if len(roots):  # the trunk's bottom: a disc facing down, closing the tube at the ground
         first_ring = (np.cumsum(sizes) - sizes)[roots]
         centre_index = n_ring_vertices + len(cone) + np.arange(len(roots))
@@ -273,17 +287,14 @@ def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent
         faces.append(np.stack([rim + 1, rim, np.broadcast_to(centre_index[:, None], rim.shape)],
                               axis=-1).reshape(-1, 3))
         base_point = point_ids[first_ring]
-        vertices.append(points[base_point])
-        normals.append(-tangent[base_point])
-        uvs.append(np.stack([0.5 * repeat[chosen][roots], np.zeros(len(roots))], axis=1))
+        base_rows = slice(n_ring_vertices + len(cone), n_vertices)
+        vertices[base_rows] = points[base_point]
+        normals[base_rows] = -tangent[base_point]
+        uvs[base_rows, 0] = 0.5 * repeat[chosen][roots]
+        uvs[base_rows, 1] = 0.0
         owners.append(roots)
-    return {
-        "vertices": np.concatenate(vertices).astype(np.float32),
-        "faces": np.concatenate(faces).astype(np.int64),
-        "normals": np.concatenate(normals).astype(np.float32),
-        "uvs": np.concatenate(uvs).astype(np.float32),
-        "local_branch": np.concatenate(owners),
-    }
+    return {"vertices": vertices, "faces": np.concatenate(faces).astype(np.int32), "normals": normals, "uvs": uvs,
+            "local_branch": np.concatenate(owners)}
 
 
 def _empty_bark() -> MeshPart:
@@ -296,8 +307,9 @@ def _empty_bark() -> MeshPart:
 CARD_UVS = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], np.float32)
 # Two triangles per card, wound so their normal is the card's +y (T x ... see leaf_part).
 CARD_FACES = np.array([[0, 2, 1], [0, 3, 2]], np.int64)
-CARD_UVS.setflags(write=False)
-CARD_FACES.setflags(write=False)
+CARD_FACES_32 = CARD_FACES.astype(np.int32)  # MeshPart's index dtype, so a leaf part's faces are not cast again
+for _table in (CARD_UVS, CARD_FACES, CARD_FACES_32):
+    _table.setflags(write=False)
 
 
 def leaf_part(skeleton: Skeleton) -> MeshPart:
@@ -305,22 +317,24 @@ def leaf_part(skeleton: Skeleton) -> MeshPart:
 
     Cards are single-sided geometry; the exporters mark the leaf material double-sided.
     """
-    corners = skeleton.leaf_corners().astype(np.float64)  # (M, 4, 3)
+    corners = skeleton.leaf_corners()  # (M, 4, 3) float32, the vertices as they are stored
     count = len(corners)
     if count == 0:
         return MeshPart(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)),
                         attributes={"node": np.zeros(0, np.int32)})
-    # (corner 3 - corner 0) x (corner 1 - corner 0) = length x width = +y for an unsheared card.
-    normal = np.cross(corners[:, 3] - corners[:, 0], corners[:, 1] - corners[:, 0])
-    length = np.linalg.norm(normal, axis=1)
-    scale = np.maximum(np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1),
-                       np.linalg.norm(corners[:, 3] - corners[:, 0], axis=1))
+    # Edges in float64 (a float32 corner minus a float64 one is exact), so normals round once, to float32.
+    origin = corners[:, 0].astype(np.float64)
+    length_edge, width_edge = corners[:, 3] - origin, corners[:, 1] - origin
+    # length x width = +y for an unsheared card.
+    normal = cross_rows(length_edge, width_edge)
+    length = row_norms(normal)
+    scale = np.maximum(row_norms(width_edge), row_norms(length_edge))
     flat = length <= 1e-9 * np.maximum(scale * scale, 1e-30)
     if flat.any():
         i = int(np.flatnonzero(flat)[0])
         raise MeshBuildError(f"leaf {i} (node {int(skeleton.leaf_node[i])}) has a transform that maps the "
                              f"card to zero area; leaf transforms need non-zero width and length")
-    normal = np.repeat(normal / length[:, None], 4, axis=0)
-    faces = (CARD_FACES[None, :, :] + 4 * np.arange(count)[:, None, None]).reshape(-1, 3)
+    normal = np.repeat((normal / length[:, None]).astype(np.float32), 4, axis=0)
+    faces = (CARD_FACES_32[None, :, :] + 4 * np.arange(count, dtype=np.int32)[:, None, None]).reshape(-1, 3)
     return MeshPart(corners.reshape(-1, 3), faces, normal, np.tile(CARD_UVS, (count, 1)),
-                    attributes={"node": np.repeat(skeleton.leaf_node, 4).astype(np.int32)})
+                    attributes={"node": np.repeat(skeleton.leaf_node, 4)})

@@ -28,7 +28,8 @@ class _Placement:
 
 def leaf_transforms(points: ChildPoints, params: WeberPennParams,
                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """(M, 4, 4) leaf transforms and (M,) int the child point each hangs on; leaves of zero size are left out."""
+    """(M, 4, 4) float32 leaf transforms and (M,) int the child point each hangs on; leaves of zero size are left
+    out."""
     leaves = params.leaves
     placement = _fanned(points, leaves, rng) if leaves.count < 0 else _spiralled(points, leaves, rng)
     rotation = placement.frames @ placement.orientation @ _card_turn(leaves, placement.after)
@@ -37,14 +38,16 @@ def leaf_transforms(points: ChildPoints, params: WeberPennParams,
     if ranges is not None and ranges.leaf_scale:  # Sapling: each leaf's size times uniform(1 - v, 1 + v)
         size_factor = rng.uniform(1 - ranges.leaf_scale, 1 + ranges.leaf_scale, len(placement.pick))
     size = _leaf_sizes(leaves, placement.along, size_factor)
-    scale = np.stack([size * leaves.scale_x, size, size], axis=1)
-    count = len(placement.pick)
-    transforms = np.zeros((count, 4, 4))
-    transforms[:, :3, :3] = rotation * scale[:, None, :]
-    transforms[:, :3, 3] = points.position[placement.pick]
-    transforms[:, 3, 3] = 1.0
     keep = size > 0
-    return transforms[keep], placement.pick[keep]
+    pick = placement.pick
+    if not keep.all():
+        pick, size, rotation = pick[keep], size[keep], rotation[keep]
+    # Written straight into float32, the skeleton's dtype: the same rounding as casting a float64 array after.
+    transforms = np.zeros((len(pick), 4, 4), np.float32)
+    transforms[:, :3, :3] = rotation * np.stack([size * leaves.scale_x, size, size], axis=1)[:, None, :]
+    transforms[:, :3, 3] = points.position[pick]
+    transforms[:, 3, 3] = 1.0
+    return transforms, pick
 
 
 def _fanned(points: ChildPoints, leaves: LeafParams, rng: np.random.Generator) -> _Placement:
@@ -88,7 +91,7 @@ def _spiralled(points: ChildPoints, leaves: LeafParams, rng: np.random.Generator
         down_offset = -down_variation * points.offset
     else:
         down_offset = rng.uniform(down_variation, -down_variation, count) if down_variation else np.zeros(count)
-    horizontal = -after + rotate if (rotate > 0 and leaves.horizontal) else np.zeros(count)
+    horizontal = -after + rotate if (rotate > 0 and leaves.horizontal) else 0.0  # zxz broadcasts a scalar
     return _Placement(pick=np.arange(count), frames=rot.track_frames(points.tangent),
                       orientation=rot.zxz(before, down + down_offset, horizontal), after=after, along=points.offset)
 
