@@ -1,0 +1,126 @@
+"""Inference time on ONE core of the networks reconstruction runs per sketch, torch against ONNX Runtime, by width.
+
+Networks: the pix2pix U-Nets of both tasks (silhouette 1 -> 3 channels, trunk 3 -> 1) at each `--widths`, and
+TreeSketchNet at its default size when `trainers.sketchnet` exists (skipped with a note otherwise). Weights are
+untrained (timing does not depend on them); inputs are 256 px ink images, batch 1. torch runs with
+torch.set_num_threads(1) under inference_mode; ONNX Runtime with intra_op_num_threads=1 (trainers.onnx_runtime).
+Prints median (and min) ms per image per backend, then the per-sketch total of both U-Nets at one width plus
+TreeSketchNet, each on its faster backend, against the issue's 0.5 s budget.
+Run: .venv/bin/python benchmarks/bench_inference.py [--widths 8,16,32,64] [--repeats 7]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from farm.table import format_table
+from trainers.onnx_runtime import OnnxModel, export_onnx
+from trainers.pix2pix import PIX2PIX_TASKS
+
+BUDGET_MS = 500.0
+SIZE = 256
+
+
+def _times_ms(run, repeats: int) -> tuple[float, float]:
+    """(median, min) ms of `run()` after two warm-up calls."""
+    run()
+    run()
+    samples = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        run()
+        samples.append((time.perf_counter() - start) * 1e3)
+    return statistics.median(samples), min(samples)
+
+
+def measure(net: torch.nn.Module, example: torch.Tensor, output_names: list[str], output_shapes: dict,
+            folder: Path, repeats: int) -> dict:
+    """Torch and ONNX Runtime timings of one network on `example` (1, C, S, S)."""
+    net.eval()
+    with torch.inference_mode():
+        torch_median, torch_min = _times_ms(lambda: net(example), repeats)
+    path = export_onnx(net, example, folder / "net.onnx", ["input"], output_names)
+    model = OnnxModel(path, {"input": (None, *example.shape[1:])}, output_shapes)
+    array = example.numpy()
+    ort_median, ort_min = _times_ms(lambda: model.run(array), repeats)
+    return {"params": sum(p.numel() for p in net.parameters()), "torch": torch_median, "torch_min": torch_min,
+            "ort": ort_median, "ort_min": ort_min, "onnx_mb": path.stat().st_size / 2**20}
+
+
+def sketchnet_case(rng: np.random.Generator):
+    """(TreeSketchNet at its default size, its input, output names, output shapes), or a reason it is skipped."""
+    if importlib.util.find_spec("trainers.sketchnet") is None:
+        return "trainers.sketchnet does not exist yet"
+    import species
+    from trainers.sketchnet import TreeSketchNet
+    from trainers.sketchnet_codec import ParameterCodec, weber_penn_species
+
+    names = weber_penn_species()
+    codec = ParameterCodec.fit([species.sample(name, rng) for name in names for _ in range(2)], names)
+    try:
+        net = TreeSketchNet(codec.head_sizes, codec.n_species, in_channels=1)
+    except TypeError as error:
+        return f"TreeSketchNet's constructor does not take (head_sizes, n_species, in_channels=1): {error}"
+    example = torch.rand(1, 1, SIZE, SIZE, generator=torch.Generator().manual_seed(0))
+    with torch.no_grad():
+        out = net.eval()(example)
+    names = list(out)
+    return net, example, names, {k: (None, *out[k].shape[1:]) for k in names}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--widths", default="8,16,32,64", help="U-Net widths, comma separated")
+    parser.add_argument("--repeats", type=int, default=7)
+    args = parser.parse_args()
+    widths = [int(w) for w in args.widths.split(",")]
+    torch.set_num_threads(1)
+    torch.set_num_interop_threads(1)
+    results: dict[tuple[str, int | str], dict] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        for name, task in PIX2PIX_TASKS.items():
+            for width in widths:
+                net = task.generator(width=width, generator=torch.Generator().manual_seed(0))
+                example = torch.rand(1, task.in_channels, SIZE, SIZE, generator=torch.Generator().manual_seed(1))
+                out = {"output": (None, task.out_channels, SIZE, SIZE)}
+                results[(f"unet-{name}", width)] = measure(net, example, ["output"], out, folder, args.repeats)
+                print(f"  measured unet-{name} width {width}", flush=True)
+        case = sketchnet_case(np.random.default_rng(0))
+        if isinstance(case, str):
+            print(f"  TreeSketchNet skipped: {case}")
+        else:
+            net, example, names, shapes = case
+            results[("treesketchnet", "default")] = measure(net, example, names, shapes, folder, args.repeats)
+
+    rows = []
+    for (network, width), r in results.items():
+        faster = "onnxruntime" if r["ort"] < r["torch"] else "torch"
+        rows.append([network, str(width), f"{r['params'] / 1e6:.2f}", f"{r['onnx_mb']:.1f}", r["torch"],
+                     r["torch_min"], r["ort"], r["ort_min"], f"{r['torch'] / r['ort']:.2f}x", faster])
+    print(f"\nms per {SIZE} px image, batch 1, one core (median of {args.repeats}, and min)")
+    print(format_table(["network", "width", "M params", "ONNX MB", "torch ms", "torch min", "ORT ms", "ORT min",
+                        "ORT speed-up", "faster"], rows))
+
+    tsn = results.get(("treesketchnet", "default"))
+    tsn_ms = min(tsn["torch"], tsn["ort"]) if tsn else 0.0
+    rows = []
+    for width in widths:
+        pair = sum(min(results[(f"unet-{n}", width)]["torch"], results[(f"unet-{n}", width)]["ort"])
+                   for n in PIX2PIX_TASKS)
+        total = pair + tsn_ms
+        rows.append([str(width), pair, tsn_ms if tsn else "skipped", total, "yes" if total < BUDGET_MS else "no"])
+    print(f"\nper sketch: both U-Nets at one width{' + TreeSketchNet' if tsn else ''}, faster backend each, "
+          f"budget {BUDGET_MS:.0f} ms")
+    print(format_table(["U-Net width", "U-Nets ms", "TreeSketchNet ms", "total ms", "under budget"], rows))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,133 @@
+"""The three training tasks as data: which dataset outputs each reads, which job spec makes them, which model it trains.
+
+In: a task name (`TASKS`) and dataset folders; out: `Task` records, dataset checks that name the missing output and
+the spec that makes it (`TrainingDataError`), and the shipped job specs as YAML text (`print_data_spec`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from farm.dataset import DatasetError, read_manifest
+from farm.storage import Location
+from species.errors import TreefarmError
+
+__all__ = ["Task", "TASKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task", "print_data_spec"]
+
+SPECS_DIR = Path(__file__).resolve().parent / "specs"
+_DATASET_FORMAT = "treefarm-dataset"  # manifest.json's `format` (docs/dataset.md)
+
+
+class TrainingDataError(TreefarmError):
+    """A folder given as training data is missing, empty, not a treefarm dataset, or unfit for the task."""
+
+
+class MissingOutputError(TrainingDataError):
+    """A dataset lacks a views-table output the task reads; the message names it and the spec that makes it."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One network's training data.
+
+    name         : the task name (`farm train NAME`).
+    inputs       : views-table outputs the network reads, first = its main input style.
+    styles       : further input styles of the same view that augmentation swaps in (sketchnet: `sketch_hand`).
+    targets      : views-table outputs the loss compares with (pix2pix); sketchnet's targets are the trees
+                   table's `params_json` and `species`.
+    input_kind   : `trainers.preprocess` kind of the input ("sketch" 1 channel, "strokes" 3 channels).
+    input_size   : the network's input width and height, pixels.
+    spec_name    : the shipped job spec `trainers/specs/<spec_name>.yaml` that makes this task's data.
+    model_name   : the model's name in the registry.
+    rigs         : view rigs (`render.rig` without ":jitter") the data must come from; empty: any rig.
+    """
+
+    name: str
+    inputs: tuple[str, ...]
+    styles: tuple[str, ...]
+    targets: tuple[str, ...]
+    input_kind: str
+    input_size: int
+    spec_name: str
+    model_name: str
+    rigs: tuple[str, ...] = ()
+
+    @property
+    def spec_path(self) -> Path:
+        return SPECS_DIR / f"{self.spec_name}.yaml"
+
+    @property
+    def required_outputs(self) -> tuple[str, ...]:
+        return self.inputs + self.styles + self.targets
+
+    def _how_to_make(self) -> str:
+        return (f"make it with `farm train {self.name} --print-data-spec > {self.spec_name}.yaml` and "
+                f"`farm generate {self.spec_name}.yaml --out DIR`")
+
+    def check_dataset(self, path: str) -> dict:
+        """The manifest of the dataset at `path` when it holds every output this task needs from the rig it
+        needs; a `TrainingDataError` (one line) for a missing, empty or non-dataset folder, a
+        `MissingOutputError` naming the first missing output and the spec that makes it."""
+        location = Location.resolve(str(path))
+        if location.is_local:
+            folder = Path(location.root)
+            if not folder.exists():
+                raise TrainingDataError(f"training data folder {path} does not exist: {self._how_to_make()}")
+            if not folder.is_dir():
+                raise TrainingDataError(f"training data {path} is a file, not a dataset folder: "
+                                        f"{self._how_to_make()}")
+            if not any(folder.iterdir()):
+                raise TrainingDataError(f"training data folder {path} is empty, not a treefarm dataset: "
+                                        f"{self._how_to_make()}")
+        try:
+            manifest = read_manifest(location)
+        except DatasetError as exc:
+            raise TrainingDataError(f"{exc}; for task {self.name}, {self._how_to_make()}") from None
+        if not isinstance(manifest, dict) or manifest.get("format") != _DATASET_FORMAT:
+            raise TrainingDataError(f"{path}/manifest.json is not a treefarm dataset manifest (format "
+                                    f"{manifest.get('format') if isinstance(manifest, dict) else None!r}, "
+                                    f"expected {_DATASET_FORMAT!r})")
+        render = manifest.get("job", {}).get("render", {})
+        stored = list(render.get("outputs", []))
+        for output in self.required_outputs:
+            if output not in stored:
+                raise MissingOutputError(
+                    f"dataset {path} lacks output {output!r}, which task {self.name} needs (it stores "
+                    f"{', '.join(stored) or 'no views'}): the spec trainers/specs/{self.spec_name}.yaml makes it; "
+                    f"{self._how_to_make()}")
+        rig = str(render.get("rig", "")).split(":")[0]
+        if self.rigs and rig not in self.rigs:
+            raise TrainingDataError(f"dataset {path} was rendered with rig {render.get('rig')!r}; task {self.name} "
+                                    f"needs rig {' or '.join(self.rigs)}: {self._how_to_make()}")
+        if not manifest.get("counts", {}).get("views"):
+            raise TrainingDataError(f"dataset {path} has no views (every tree failed?): `farm inspect {path}` "
+                                    f"shows its failures")
+        return manifest
+
+
+TASKS: dict[str, Task] = {
+    # TreeSketchNet (digest 4.2-4.3): a sketch to a Weber-Penn dictionary and its species, 224 px.
+    "sketchnet": Task("sketchnet", inputs=("sketch_tsn",), styles=("sketch_hand",), targets=(),
+                      input_kind="sketch", input_size=224, spec_name="sketchnet", model_name="sketchnet"),
+    # Seed 000's cGANs (digest 1.8-1.9): orthographic pairs at 256 px.
+    "pix2pix-silhouette": Task("pix2pix-silhouette", inputs=("sketch_edges",), styles=(), targets=("silhouette",),
+                               input_kind="sketch", input_size=256, spec_name="pix2pix-silhouette",
+                               model_name="pix2pix-silhouette", rigs=("two-view",)),
+    "pix2pix-trunk": Task("pix2pix-trunk", inputs=("trunk_strokes",), styles=(), targets=("trunk_depth",),
+                          input_kind="strokes", input_size=256, spec_name="pix2pix-trunk",
+                          model_name="pix2pix-trunk", rigs=("two-view",)),
+}
+
+
+def get_task(task: str | Task) -> Task:
+    """A task by name, or the task itself; an unknown name raises TrainingDataError listing the known ones."""
+    if isinstance(task, Task):
+        return task
+    if task not in TASKS:
+        raise TrainingDataError(f"task {task!r} is unknown: allowed {', '.join(TASKS)}")
+    return TASKS[task]
+
+
+def print_data_spec(task: str | Task) -> str:
+    """The YAML text of the job spec that makes the task's training data (`farm train TASK --print-data-spec`)."""
+    return get_task(task).spec_path.read_text()
