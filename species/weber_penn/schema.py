@@ -15,6 +15,12 @@ from .sapling_preset import BLENDER_ONLY_KEYS, DRAWS, SAPLING_DEFAULTS, draws_se
 __all__ = ["validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS"]
 
 
+# Sapling's shape menus: the tree's shape may be the custom profile (8); secondary branches and the leaf
+# distribution may not (their shape ratio has no custom profile). 9 is the pruning envelope, in no menu.
+TREE_SHAPES = (0, 1, 2, 3, 4, 5, 6, 7, 8, 10)
+SIDE_SHAPES = (0, 1, 2, 3, 4, 5, 6, 7, 10)
+
+
 @dataclass(frozen=True)
 class Key:
     kind: str          # float, int, bool, shape, enum, float4, int4, color
@@ -27,7 +33,7 @@ class Key:
         if self.kind == "bool":
             return "true or false"
         if self.kind == "shape":
-            return f"an integer shape id {int(self.low)}..{int(self.high)} (number or numeric string)"
+            return f"a shape id, one of {list(self.options)} (number or numeric string)"
         if self.kind == "enum":
             return f"one of {list(self.options)}"
         what = {"float": "a number", "int": "an integer", "float4": "a list of 4 numbers",
@@ -58,7 +64,7 @@ SCHEMA: dict[str, Key] = {
     "downAngle": Key(F4, -360, 360, [90, 60, 45, 45]),
     "downAngleV": Key(F4, -360, 360, [0, -50, 10, 10]),
     "horzLeaves": Key("bool", default=True),
-    "leafDist": Key("shape", 0, 10, 4),
+    "leafDist": Key("shape", 0, 10, 4, SIDE_SHAPES),
     "leafDownAngle": Key("float", -360, 360, 45),
     "leafDownAngleV": Key("float", -360, 360, 10),
     "leafRotate": Key("float", -360, 360, 137.5),
@@ -98,8 +104,8 @@ SCHEMA: dict[str, Key] = {
     "scaleV0": Key("float", 0, 2, None),
     "seed": Key("int", 0, 2**53, 0),
     "segSplits": Key(F4, 0, 3, [0, 0, 0, 0]),
-    "shape": Key("shape", 0, 10, 7),
-    "shapeS": Key("shape", 0, 10, 4),
+    "shape": Key("shape", 0, 10, 7, TREE_SHAPES),
+    "shapeS": Key("shape", 0, 10, 4, SIDE_SHAPES),
     "splitAngle": Key(F4, -360, 360, [0, 0, 0, 0]),
     "splitAngleV": Key(F4, -360, 360, None),
     "splitAngleV1": Key(F4, -360, 360, None),
@@ -156,7 +162,7 @@ def _check(key: str, value: Any, spec: Key) -> Any:
             number = int(value) if not isinstance(value, bool) and str(value).strip().lstrip("-").isdigit() else None
         except (TypeError, ValueError):
             number = None
-        if number is None or not (spec.low <= number <= spec.high):
+        if number is None or number not in spec.options:
             raise ParameterError(key, value, spec.allowed())
         return number
     if kind == "enum":

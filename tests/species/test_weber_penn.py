@@ -132,7 +132,10 @@ def test_pruning_keeps_branch_tips_inside_the_envelope():
     ("levels", 5, "in [1, 4]"),
     ("levels", "3", "'levels' = '3'"),
     ("branches", [0, 10, 5], "list of 4 integers"),
-    ("shape", "12", "shape id 0..10"),
+    ("shape", "12", "one of [0, 1, 2, 3, 4, 5, 6, 7, 8, 10]"),
+    ("shape", 9, "one of [0, 1, 2, 3, 4, 5, 6, 7, 8, 10]"),  # the pruning envelope is in no Sapling menu
+    ("shapeS", 8, "one of [0, 1, 2, 3, 4, 5, 6, 7, 10]"),    # no custom profile for secondary branches
+    ("leafDist", 8, "one of [0, 1, 2, 3, 4, 5, 6, 7, 10]"),
     ("leafShape", "round", "['rect', 'hex']"),
     ("horzLeaves", 1, "true or false"),
     ("ratio", float("nan"), "'ratio'"),
