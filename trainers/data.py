@@ -280,6 +280,19 @@ class TrainingData:
         """Trees left out because a reviewer rejected them, over every folder."""
         return sum(len(source.rejected) for source in self.sources)
 
+    @property
+    def paths(self) -> list[str]:
+        return [source.path for source in self.sources]
+
+    def params_of(self, key: Key) -> dict:
+        """The parameter dictionary of tree `key`, with its species under `species`."""
+        digest, tree_id = key
+        for source in self.sources:
+            if source.spec_digest == digest and tree_id in source.trees:
+                species, params_json = source.trees[tree_id]
+                return {**json.loads(params_json), "species": species}
+        raise TrainingDataError(f"tree {tree_id} (spec digest {digest[:12]}) is not in these datasets")
+
     def split(self, fractions: Sequence[float] = DEFAULT_FRACTIONS, frozen: Split | None = None) -> Split:
         """The split of the usable trees: by hash, or `frozen` reapplied (its trees keep their part, new ones go to
         train; see the module docstring)."""
@@ -458,23 +471,36 @@ class TaskDataset(torch.utils.data.Dataset):
             self._views[key] = ViewsDataset(self.data.sources[source].path, outputs=[output])
         return self._views[key][row]
 
-    def record(self, index: int, epoch: int | None = None) -> dict:
-        """Item `index` as numpy arrays and strings (augmented with `epoch`, default the dataset's)."""
+    def styles(self) -> tuple[str, ...]:
+        """The input outputs a record may be drawn from: the task's input, then its augmentation styles."""
+        return (self.data.task.inputs[0],) + tuple(self.data.task.styles)
+
+    def draw(self, index: int, epoch: int | None = None) -> tuple[str, np.random.Generator | None]:
+        """The style record `index` is drawn in at `epoch` and the generator its augmentation continues with
+        (None without augmentation): default_rng([seed, epoch, index]), the style choice its first draw."""
+        if not self.augment:
+            return self.styles()[0], None
+        rng = np.random.default_rng([self.seed, self.epoch if epoch is None else int(epoch), int(index)])
+        style = self.styles()[0]
+        if self.data.task.styles and rng.random() < HAND_STYLE_P:
+            style = self.data.task.styles[0]
+        return style, rng
+
+    def plain_record(self, index: int, style: str | None = None) -> dict:
+        """Item `index` in `style` (default the task's input) as numpy arrays and strings, preprocessed and not
+        augmented: what Ray Data decodes in its tasks, the worker augmenting it per epoch (`augmented`)."""
         if not 0 <= index < len(self):
             raise IndexError(f"record {index} out of range [0, {len(self)})")
         task = self.data.task
+        style = self.styles()[0] if style is None else style
         s, row = (int(v) for v in self.rows[index])
         source = self.data.sources[s]
         tree_id = str(source.view_trees[row])
-        rng = np.random.default_rng([self.seed, self.epoch if epoch is None else int(epoch), int(index)])
-        style = task.inputs[0]
-        if self.augment and task.styles and rng.random() < HAND_STYLE_P:
-            style = task.styles[0]
         item = self._item(s, style, row)
         raw = _hwc(item[style])
         prepared = prepare(raw, task.input_kind, task.input_size)
-        out = {"tree_id": tree_id, "view": int(item["view"]), "spec_digest": source.spec_digest, "style": style}
-        targets: list[tuple[np.ndarray, tuple]] = []
+        out = {"tree_id": tree_id, "view": int(item["view"]), "spec_digest": source.spec_digest, "style": style,
+               "input": prepared.image}
         if task.targets:
             # The target maps and the raw input cut alike; the mask rule is pix2pix's own.
             cut = {style: apply_crop(raw, prepared.crop, task.input_size, 255)}
@@ -483,19 +509,30 @@ class TaskDataset(torch.utils.data.Dataset):
                                          task.input_size, _BACKGROUND[output])
             cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
             _, target, mask = targets_from_views(_PIX2PIX_TASK[task.name], cut)
-            targets = [(target.numpy(), _BACKGROUND[task.targets[0]]), (mask.numpy(), (0.0,))]
+            out["target"], out["mask"] = target.numpy(), mask.numpy()
         else:
             species, params_json = source.trees[tree_id]
             out.update(species=species, params_json=params_json)
-        x = prepared.image
-        if self.augment:
-            x, warped = augment(x, rng, targets)
-        else:
-            warped = [t for t, _ in targets]
-        out["input"] = x
+        return out
+
+    def augmented(self, plain: dict, rng: np.random.Generator | None) -> dict:
+        """`plain` (a plain record in the style `draw` chose) with the augmentation `rng` continues (unchanged for
+        None): input, and pix2pix's target and mask, warped alike."""
+        if rng is None:
+            return plain
+        out = dict(plain)
+        targets = []
+        if "target" in plain:
+            targets = [(plain["target"], _BACKGROUND[self.data.task.targets[0]]), (plain["mask"], (0.0,))]
+        out["input"], warped = augment(plain["input"], rng, targets)
         if warped:
             out["target"], out["mask"] = warped
         return out
+
+    def record(self, index: int, epoch: int | None = None) -> dict:
+        """Item `index` as numpy arrays and strings (augmented with `epoch`, default the dataset's)."""
+        style, rng = self.draw(index, epoch)
+        return self.augmented(self.plain_record(index, style), rng)
 
     def __getitem__(self, index: int) -> dict:
         return {k: torch.from_numpy(v) if isinstance(v, np.ndarray) else v for k, v in self.record(index).items()}
