@@ -26,6 +26,7 @@ COMMAND_MODULES = [
     "farm.commands.render",
     "farm.commands.review",
     "farm.commands.library",
+    "farm.commands.train",
 ]
 
 EXIT_USER_ERROR = 2

@@ -6,6 +6,7 @@ Same spec and seed, same part-file bytes, whatever the number of workers or thei
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import os
@@ -27,8 +28,8 @@ from .storage import Location, TransientWriteError
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 
-__all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "JobError", "WORKER_ENV", "ACTOR_RETRIES",
-           "worker_env", "ShardWorker", "DEFAULT_MEMORY_SHARE", "worker_memory_bytes", "limit_memory"]
+__all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "ray_connection", "JobError", "WORKER_ENV",
+           "ACTOR_RETRIES", "worker_env", "ShardWorker", "DEFAULT_MEMORY_SHARE", "worker_memory_bytes", "limit_memory"]
 
 # Worker processes render offscreen through EGL (no display on farm machines).
 WORKER_ENV = {"PYOPENGL_PLATFORM": "egl"}
@@ -237,14 +238,16 @@ def _quiet_local_token_warning(record: logging.LogRecord) -> bool:
     return not record.getMessage().startswith("Token authentication is enabled for this Ray cluster")
 
 
-def _connect_ray(address: str | None, workers: int | None) -> tuple[bool, subprocess.Popen | None]:
+def _connect_ray(address: str | None, workers: int | None,
+                 log_to_driver: bool = True) -> tuple[bool, subprocess.Popen | None]:
     """Start or join Ray unless this process already has: (whether we started it and must shut it down, the
     watchdog that ends a local Ray's processes with this one)."""
     import ray
 
     if ray.is_initialized():
         return False, None
-    options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
+    options = dict(include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV},
+                   log_to_driver=log_to_driver)
     address = address or os.environ.get("RAY_ADDRESS")  # set inside a RayJob or by `ray job submit`
     if address is None:
         # "local": always a fresh Ray of our own, never a cluster some other process left running here.
@@ -255,6 +258,28 @@ def _connect_ray(address: str | None, workers: int | None) -> tuple[bool, subpro
         logging.getLogger(_RAY_TOKEN_LOGGER).addFilter(_quiet_local_token_warning)
     ray.init(address=address, **options)
     return True, start_reaper() if address == "local" else None
+
+
+def _disconnect_ray(started_ray: bool, reaper: subprocess.Popen | None) -> None:
+    import ray
+
+    if started_ray:
+        ray.shutdown()
+    if reaper is not None:  # end of its pipe: it ends what ray.shutdown left running
+        reaper.stdin.close()
+        reaper.wait()
+
+
+@contextlib.contextmanager
+def ray_connection(address: str | None = None, workers: int | None = None, log_to_driver: bool = True):
+    """Ray for a command's duration, as `run_job` connects it (joined at `address`, or a local Ray of this
+    process's own whose processes end with it); `log_to_driver=False` keeps workers' log lines off the terminal
+    (training: Ray Train reports every checkpoint)."""
+    started_ray, reaper = _connect_ray(address, workers, log_to_driver)
+    try:
+        yield
+    finally:
+        _disconnect_ray(started_ray, reaper)
 
 
 def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan], records: dict[int, dict],
@@ -344,7 +369,6 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
     address : an existing Ray cluster (`ray://...` or `host:port`); default a local Ray started here.
     builder_factory : called once per actor with the spec; returns `builder(species, seed, timer) -> BuiltTree`.
     """
-    import ray
     from tqdm import tqdm
 
     if workers is not None and workers < 1:
@@ -379,9 +403,5 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
     finally:
         if bar is not None:
             bar.close()
-        if started_ray:
-            ray.shutdown()
-        if reaper is not None:  # end of its pipe: it ends what ray.shutdown left running
-            reaper.stdin.close()
-            reaper.wait()
+        _disconnect_ray(started_ray, reaper)
     return manifest

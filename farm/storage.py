@@ -81,6 +81,14 @@ class Location:
             infos = self.filesystem.get_file_info(FileSelector(self.path(folder), allow_not_found=True))
         return sorted(info.base_name for info in infos if info.type == FileType.File)
 
+    def subfolders(self, folder: str = "") -> list[str]:
+        """Names of the folders directly in `folder` (relative to the root), sorted; [] if it does not exist."""
+        from pyarrow.fs import FileSelector, FileType
+
+        with user_path(self.path(folder), "list"):
+            infos = self.filesystem.get_file_info(FileSelector(self.path(folder), allow_not_found=True))
+        return sorted(info.base_name for info in infos if info.type == FileType.Directory)
+
     def write_atomic(self, relative: str, data: bytes) -> None:
         """Write `data` to a temporary sibling and rename it onto `relative` (a copy + delete on object stores)."""
         fs = self.filesystem

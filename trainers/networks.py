@@ -163,7 +163,7 @@ class SketchNetwork(TaskNetwork):
     def predict(self, inputs: np.ndarray) -> dict[str, torch.Tensor]:
         model = self.modules["model"]
         model.eval()
-        return model(torch.as_tensor(inputs))
+        return model(torch.tensor(np.asarray(inputs)))  # a copy: Ray's batches are read-only
 
     def metrics(self, batches: Sequence[Mapping[str, np.ndarray]]) -> dict[str, float]:
         outputs = [self.predict(b["input"]) for b in batches]
@@ -231,7 +231,7 @@ class Pix2PixNetwork(TaskNetwork):
     def predict(self, inputs: np.ndarray) -> torch.Tensor:
         generator = self.modules["generator"]
         generator.eval()
-        return generator(torch.as_tensor(inputs))
+        return generator(torch.tensor(np.asarray(inputs)))  # a copy: Ray's batches are read-only
 
     def metrics(self, batches: Sequence[Mapping[str, np.ndarray]]) -> dict[str, float]:
         predicted = torch.cat([self.predict(b["input"]) for b in batches])

@@ -328,9 +328,12 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
         run_config=ray.train.RunConfig(name="ray_train", storage_path=str(run_dir),
                                        checkpoint_config=ray.train.CheckpointConfig(num_to_keep=2),
                                        failure_config=ray.train.FailureConfig(max_failures=0)))
-    result = _fit(trainer, queue, settings, len(train_set), workers, last_epoch)
-    if result.error is not None:
-        raise result.error
+    try:
+        result = _fit(trainer, queue, settings, len(train_set), workers, last_epoch)
+        if result.error is not None:
+            raise result.error
+    except Exception as exc:  # noqa: BLE001 - a worker's user error (a corrupt checkpoint, bad data) comes back
+        raise _worker_user_error(exc) or exc  # wrapped; it is shown as its own one line
     if result.checkpoint is None:
         raise TrainingError(f"training {task_spec.name} in {run_dir} ended without a checkpoint")
     with result.checkpoint.as_directory() as folder:
@@ -355,6 +358,17 @@ def _baseline(network: TaskNetwork, batches, train_set: TaskDataset, codec) -> d
     plain.augment = False
     mean = network.mean_depth([_plain_rows(plain, sample, codec)])
     return network.baseline_metrics(batches, mean)
+
+
+def _worker_user_error(exc: BaseException) -> TreefarmError | None:
+    """The TreefarmError a worker raised, out of Ray Train's WorkerGroupError (None when it was something else)."""
+    for failure in getattr(exc, "worker_failures", {}).values():
+        cause = failure
+        while cause is not None and not isinstance(cause, TreefarmError):
+            cause = getattr(cause, "cause", None) or cause.__cause__
+        if isinstance(cause, TreefarmError):
+            return cause
+    return None
 
 
 def _progress_queue():

@@ -1,0 +1,202 @@
+"""Training on Ray Train end to end, on tiny datasets and tiny networks: the CLI, resume after a crash, the
+registry, retraining's promotion rule, a predictor in a fresh process, and bad input."""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from farm.jobs import load_spec
+from farm.pipeline import run_job
+from trainers import models as trained_models
+from trainers.curves import read_metrics_csv
+from trainers.networks import SettingsError, TrainSettings
+from trainers.registry import RegistryError, open_registry
+from trainers.tasks import TASKS
+from trainers.training import TrainingError, train
+
+ROOT = Path(__file__).resolve().parents[2]
+FARM = [sys.executable, "-m", "farm.cli"]
+torch.set_num_threads(1)
+TINY = {"pix2pix-trunk": dict(width=4, batch_size=8), "sketchnet": dict(width=0.25, depth=0.34, batch_size=8)}
+
+pytestmark = pytest.mark.slow
+
+
+def _tiny_spec(name: str, trees: int):
+    spec = load_spec(TASKS[name].spec_path).with_trees(trees)
+    return dataclasses.replace(spec, render=dataclasses.replace(spec.render, size=64), shard_size=4)
+
+
+@pytest.fixture(scope="module")
+def datasets(tmp_path_factory, ray_session) -> dict[str, Path]:
+    """A 24-tree dataset of the pix2pix-trunk and sketchnet specs at 64 px (enough for a tree in each split part)."""
+    root = tmp_path_factory.mktemp("training-data")
+    out = {}
+    for name in ("pix2pix-trunk", "sketchnet"):
+        out[name] = root / name
+        run_job(_tiny_spec(name, 24), str(out[name]), workers=2, progress=False)
+    return out
+
+
+def _env(tmp_path: Path) -> dict:
+    return {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT)}
+
+
+# ------------------------------------------------------------------------------------------ the CLI
+def test_farm_train_trains_registers_and_lists(datasets, tmp_path):
+    registry = tmp_path / "registry"
+    run = subprocess.run(FARM + ["train", "pix2pix-trunk", "--data", str(datasets["pix2pix-trunk"]), "--epochs", "2",
+                                 "--width", "4", "--batch-size", "8", "--models", str(registry), "--quiet",
+                                 "--run-dir", str(tmp_path / "run")],
+                         cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert "registered pix2pix-trunk v1 (champion, latest)" in run.stdout
+    assert "depth_error" in run.stdout
+    rows = read_metrics_csv(tmp_path / "run" / "metrics.csv")
+    assert [r["epoch"] for r in rows] == [0, 1] and all(np.isfinite(r["val_depth_error"]) for r in rows)
+    assert (tmp_path / "run" / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    listing = subprocess.run(FARM + ["models", "list", "--models", str(registry)], cwd=tmp_path,
+                             env=_env(tmp_path), capture_output=True, text=True, timeout=120)
+    assert listing.returncode == 0 and "pix2pix-trunk" in listing.stdout and "v1" in listing.stdout
+    version = open_registry(registry).champion("pix2pix-trunk")
+    assert {"depth_error", "depth_error_baseline"} <= set(version.metrics)
+    assert version.tags["task"] == "pix2pix-trunk" and version.tags["code_version"]
+    split = open_registry(registry).load_json("pix2pix-trunk", "champion", "split")
+    assert split["test"], "the held-out split is stored with the model"
+
+    # A predictor in a fresh process, without Ray: the ONNX file through ONNX Runtime.
+    code = ("import sys, numpy as np; from trainers.models import load; "
+            f"p = load('pix2pix-trunk', {str(registry)!r}); "
+            "img = np.full((300, 200, 3), 255, np.uint8); img[40:260, 95:105] = (200, 30, 30); "
+            "d = p.predict(img); assert d.shape == (1, 256, 256), d.shape; "
+            "assert 0 <= d.min() and d.max() <= 1; assert 'ray' not in sys.modules; print('ok')")
+    fresh = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
+                           text=True, timeout=120)
+    assert fresh.returncode == 0 and fresh.stdout.strip() == "ok", fresh.stderr[-2000:]
+
+
+def test_print_data_spec_is_the_shipped_spec():
+    run = subprocess.run(FARM + ["train", "sketchnet", "--print-data-spec"], capture_output=True, text=True,
+                         timeout=120, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert run.returncode == 0 and run.stdout == TASKS["sketchnet"].spec_path.read_text()
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["train", "pix2pix-trunk", "--data", "{empty}"], "empty"),
+    (["train", "pix2pix-trunk", "--data", "{sketchnet}"], "trunk_strokes"),
+    (["train", "pix2pix-trunk"], "--data"),
+    (["train", "pix2pix-trunk", "--data", "{trunk}", "--models", "{file}/registry"], "registry"),
+    (["train", "pix2pix-trunk", "--data", "{trunk}", "--epochs", "0"], "epochs"),
+    (["models", "show", "nope", "--models", "{registry}"], "nope"),
+])
+def test_bad_input_is_one_line_and_exit_2(datasets, tmp_path, args, fragment):
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "file").write_text("not a folder")
+    names = {"empty": tmp_path / "empty", "sketchnet": datasets["sketchnet"], "trunk": datasets["pix2pix-trunk"],
+             "file": tmp_path / "file", "registry": tmp_path / "registry"}
+    argv = [a.format(**{k: str(v) for k, v in names.items()}) for a in args]
+    run = subprocess.run(FARM + argv, cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=120)
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert run.returncode == 2, run.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("farm: error:") and fragment in lines[0], run.stderr
+    assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+# ------------------------------------------------------------------------------------------ resume
+@pytest.fixture(scope="module")
+def trunk_run(datasets, tmp_path_factory):
+    """An uninterrupted two-epoch pix2pix-trunk run."""
+    settings = TrainSettings(epochs=2, **TINY["pix2pix-trunk"])
+    return train("pix2pix-trunk", [str(datasets["pix2pix-trunk"])], settings=settings,
+                 run_dir=tmp_path_factory.mktemp("trunk-run") / "run")
+
+
+def test_a_crashed_run_resumes_at_its_step_with_the_same_losses(datasets, trunk_run, tmp_path):
+    settings = trunk_run.network.settings
+    data = [str(datasets["pix2pix-trunk"])]
+    with pytest.raises(Exception, match="injected crash after epoch 0"):
+        train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "crashed", crash_after_epoch=0)
+    assert [r["epoch"] for r in read_metrics_csv(tmp_path / "crashed" / "metrics.csv")] == [0]
+    shutil.copytree(tmp_path / "crashed", tmp_path / "corrupt")
+    resumed = train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "crashed")
+    assert resumed.resumed_from_epoch == 0
+    assert resumed.steps == trunk_run.steps and resumed.epochs == trunk_run.epochs == 2
+    for a, b in zip(trunk_run.history, resumed.history):
+        assert a["step"] == b["step"] and a["train_loss"] == b["train_loss"], (a, b)
+        assert a["val_depth_error"] == b["val_depth_error"]
+    assert resumed.test_metrics == trunk_run.test_metrics
+    # A run folder is kept to its own settings.
+    with pytest.raises(TrainingError, match="another run"):
+        train("pix2pix-trunk", data, settings=dataclasses.replace(settings, seed=5), run_dir=tmp_path / "crashed")
+    # A damaged checkpoint is a clear error, not a traceback from torch.
+    for state in (tmp_path / "corrupt").rglob("state.pt"):
+        state.write_bytes(b"not a checkpoint")
+    with pytest.raises(TrainingError, match="checkpoint .* cannot be read"):
+        train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "corrupt")
+
+
+# ------------------------------------------------------------------------------------------ retraining
+def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_worse(datasets, tmp_path,
+                                                                                    monkeypatch):
+    registry = open_registry(tmp_path / "registry")
+    data = [str(datasets["sketchnet"])]
+    settings = TrainSettings(epochs=1, **TINY["sketchnet"])
+    first = train("sketchnet", data, settings=settings, run_dir=tmp_path / "first")
+    champion = trained_models.register_result(registry, first, code_version="test")
+    assert champion.is_champion and champion.version == 1
+    primary = first.network.primary
+
+    # The champion scored (on the champion's own held-out split) just above whatever the challenger reaches.
+    real_score = trained_models._score_folder
+    monkeypatch.setattr(trained_models, "_score_folder", lambda folder, task, batches: {
+        **real_score(folder, task, batches), primary: 1e9})
+    kept = trained_models.retrain("sketchnet", data, registry, run_dir=tmp_path / "worse", settings=settings)
+    assert not kept.promoted and "champion stays" in kept.reason
+    assert registry.champion("sketchnet").version == 1 and registry.latest("sketchnet").version == 2
+    report = json.loads((tmp_path / "worse" / "retrain-report.json").read_text())
+    assert report["promoted"] is False and report["champion_version"] == 1
+    assert (tmp_path / "worse" / "retrain-report.md").read_text().startswith("# Retraining sketchnet: champion kept")
+
+    monkeypatch.setattr(trained_models, "_score_folder", lambda folder, task, batches: {
+        **real_score(folder, task, batches), primary: -1e9})
+    better = trained_models.retrain("sketchnet", data, registry, run_dir=tmp_path / "better", settings=settings)
+    assert better.promoted and registry.champion("sketchnet").version == 3
+    # The challenger was scored on the champion's frozen held-out split.
+    assert registry.load_json("sketchnet", 3, "split")["test"] == \
+        registry.load_json("sketchnet", 1, "split")["test"]
+    # And a predictor of the new champion gives a dictionary the generator grows.
+    import species
+
+    predictor = trained_models.load("sketchnet", registry)
+    drawing = np.full((320, 240), 255, np.uint8)
+    drawing[40:300, 115:125] = 0
+    drawing[120:128, 60:180] = 0
+    params = predictor.predict(drawing)
+    assert species.grow(params, np.random.default_rng(0)).n_nodes > 1
+
+
+def test_a_failed_registration_leaves_nothing(trunk_run, tmp_path, monkeypatch):
+    registry = open_registry(tmp_path / "registry")
+    monkeypatch.setattr(type(trunk_run.network), "export", lambda self, folder: (_ for _ in ()).throw(
+        OSError("disk full")))
+    with pytest.raises(OSError, match="disk full"):
+        trained_models.register_result(registry, trunk_run)
+    assert registry.names() == [] and registry.champion("pix2pix-trunk") is None
+
+
+def test_settings_and_missing_models_are_refused():
+    with pytest.raises(SettingsError, match="batch_size"):
+        TrainSettings(batch_size=0)
+    with pytest.raises(SettingsError, match="unknown"):
+        TrainSettings.from_dict({"epochs": 2, "widht": 3})
+    with pytest.raises((RegistryError, trained_models.ModelFilesError)):
+        trained_models.predictor_from_folder(ROOT / "docs")
