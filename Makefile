@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: run test env blender-env node-env browser-env bench golden clean
+.PHONY: run test env blender-env node-env browser-env bench golden models clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -52,6 +52,14 @@ golden: env
 
 bench: env
 	$(PY) benchmarks/bench_weber_penn.py
+
+# The default models shipped in models/: the shipped data specs generated (once) into out/train-full, each
+# network trained for bench_train.py's fixed budget with seed 0, exported as model folders.
+TRAIN_TASKS := sketchnet pix2pix-silhouette pix2pix-trunk
+models: env
+	for task in $(TRAIN_TASKS); do test -f out/train-full/$$task/manifest.json || \
+		$(VENV)/bin/farm generate trainers/specs/$$task.yaml --out out/train-full/$$task --quiet || exit 1; done
+	$(PY) benchmarks/bench_train.py --data-root out/train-full --skip-throughput --export-models models
 
 clean:
 	rm -rf $(VENV) $(BLENDER_VENV) node_modules out

@@ -46,6 +46,7 @@ RUN_FILES = {"metrics": "metrics.csv", "curves": "curves.png", "split": "split.j
              "settings": "settings.json"}
 _CHECKPOINT_FILE = "state.pt"
 _EVAL_BATCH = 32
+_DATA_CPUS = 0.5  # CPUs kept free for Ray Data's decoding tasks when the training workers would take them all
 
 
 class TrainingError(TreefarmError):
@@ -198,10 +199,11 @@ def _worker_loop(config: dict) -> None:
 
 
 def _unwrapped(network: TaskNetwork) -> TaskNetwork:
-    """The network with DDP wrappers taken off its modules (for scoring and saving)."""
-    for name, module in network.modules.items():
-        network.modules[name] = getattr(module, "module", module)
-    return network
+    """A view of the network with the DDP wrappers taken off its modules (for scoring and saving); the network
+    itself keeps them, so every rank goes on stepping through DDP."""
+    view = copy.copy(network)
+    view.modules = {name: getattr(module, "module", module) for name, module in network.modules.items()}
+    return view
 
 
 def _read_checkpoint(path: Path) -> dict:
@@ -260,12 +262,13 @@ def _check_run_folder(run_dir: Path, task: str, settings: TrainSettings, split: 
 def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | None = None,
           run_dir: str | Path, workers: int = 1, gpus: int = 0, frozen_split: Split | None = None,
           warm_start: str | Path | None = None, codec: ParameterCodec | None = None, progress: bool = False,
-          crash_after_epoch: int | None = None) -> TrainResult:
+          threads_per_worker: int | None = None, crash_after_epoch: int | None = None) -> TrainResult:
     """Train `task` on the dataset folders `data` (see the module docstring). Ray must be connected, or a local
     Ray is started. run_dir : the run's folder (Ray Train's storage; metrics.csv, curves.png, split.json);
     the same folder again resumes. frozen_split : a split to reapply (a retrain's champion split).
     warm_start : torch weights (`weights.pt` of a model) to start from. codec : TreeSketchNet's codec to keep
-    (a retrain keeps the champion's normalisation); fitted on the training dictionaries otherwise."""
+    (a retrain keeps the champion's normalisation); fitted on the training dictionaries otherwise.
+    threads_per_worker : torch threads in each worker (default: the cluster's CPUs shared among the workers)."""
     import ray
     import ray.data
     import ray.train
@@ -308,23 +311,27 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
     context = ray.data.DataContext.get_current()
     context.execution_options.preserve_order = True
     context.enable_progress_bars = False
-    train_rows = ray.data.range(len(train_set), override_num_blocks=max(1, min(64, len(train_set) // 64))) \
-        .map_batches(lambda batch: _plain_rows(train_set, batch["id"], codec), batch_size=32,
-                     batch_format="numpy")
-    queue = _progress_queue() if progress else None
     cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+    # Ray Data's decoding tasks need CPU beside the training workers: where the workers would take every CPU,
+    # each takes a little less, so the tasks (a quarter CPU each) always find room and training never starves.
+    worker_cpus = 1.0 if workers + _DATA_CPUS <= cpus else max(0.25, (cpus - _DATA_CPUS) / workers)
+    # The indices are made here (ray.data.range's read tasks would each ask for a whole CPU).
+    train_rows = ray.data.from_numpy(np.arange(len(train_set))) \
+        .map_batches(lambda batch: _plain_rows(train_set, batch["data"], codec), batch_size=32,
+                     batch_format="numpy", num_cpus=_DATA_CPUS / 2)
+    queue = _progress_queue() if progress else None
     config = {"task": task_spec.name, "settings": settings.to_dict(),
               "codec": None if codec is None else codec.to_dict(), "train_dataset": train_set,
               "val_batches": val_batches, "baseline": baseline_val, "run_dir": str(run_dir),
               "n_train": len(train_set), "shuffle_buffer": max(64, min(len(train_set), 4096)),
-              "threads_per_worker": max(1, cpus // workers if not gpus else 1),
+              "threads_per_worker": threads_per_worker or max(1, cpus // workers if not gpus else 1),
               "warm_start": None if warm_start is None else str(warm_start), "progress": queue,
               "crash_after_epoch": crash_after_epoch}
     trainer = TorchTrainer(
         _worker_loop, train_loop_config=config, datasets={"train": train_rows},
         scaling_config=ray.train.ScalingConfig(num_workers=workers, use_gpu=gpus > 0,
-                                               resources_per_worker={"CPU": 1, **({"GPU": gpus / workers}
-                                                                                  if gpus else {})}),
+                                               resources_per_worker={"CPU": worker_cpus,
+                                                                     **({"GPU": gpus / workers} if gpus else {})}),
         run_config=ray.train.RunConfig(name="ray_train", storage_path=str(run_dir),
                                        checkpoint_config=ray.train.CheckpointConfig(num_to_keep=2),
                                        failure_config=ray.train.FailureConfig(max_failures=0)))
