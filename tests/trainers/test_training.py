@@ -144,6 +144,18 @@ def test_a_crashed_run_resumes_at_its_step_with_the_same_losses(datasets, trunk_
         train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "corrupt")
 
 
+def test_two_workers_train_data_parallel(datasets, tmp_path):
+    """Two DDP workers on two CPUs finish (they used to wait forever: Ray Data had no CPU left, and rank 0 took
+    DDP off its own modules) and each steps half the views."""
+    settings = TrainSettings(epochs=2, **TINY["pix2pix-trunk"])
+    result = train("pix2pix-trunk", [str(datasets["pix2pix-trunk"])], settings=settings, run_dir=tmp_path / "run",
+                   workers=2)
+    views = result.summary["views"]["train"]
+    assert result.epochs == 2
+    assert result.steps == 2 * -(-(views // 2) // settings.batch_size)
+    assert np.isfinite(result.test_metrics["depth_error"])
+
+
 # ------------------------------------------------------------------------------------------ retraining
 def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_worse(datasets, tmp_path,
                                                                                     monkeypatch):
@@ -200,3 +212,21 @@ def test_settings_and_missing_models_are_refused():
         TrainSettings.from_dict({"epochs": 2, "widht": 3})
     with pytest.raises((RegistryError, trained_models.ModelFilesError)):
         trained_models.predictor_from_folder(ROOT / "docs")
+
+
+@pytest.mark.parametrize("task", list(TASKS))
+def test_the_shipped_default_models_load_and_predict(task):
+    """models/ (make models) loads without a registry; its outputs have the task's shapes and ranges."""
+    import species
+
+    predictor = trained_models.load(task)
+    drawing = np.full((400, 300, 3), 255, np.uint8)
+    drawing[60:360, 145:155] = (40, 40, 40) if task != "pix2pix-trunk" else (200, 30, 30)
+    drawing[150:160, 80:220] = drawing[60, 145]
+    out = predictor.predict(drawing if task == "pix2pix-trunk" else drawing[..., 0])
+    if task == "sketchnet":
+        assert out["species"] in TASKS["sketchnet"].spec_path.read_text()
+        assert species.grow(out, np.random.default_rng(0)).n_nodes > 1
+    else:
+        channels = 3 if task == "pix2pix-silhouette" else 1
+        assert out.shape == (channels, 256, 256) and 0.0 <= out.min() and out.max() <= 1.0
