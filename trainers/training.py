@@ -305,7 +305,8 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
 
     network = network_for(task_spec, settings, codec).build()
     val_batches = evaluation_batches(val_set, codec)
-    baseline_val = _baseline(network, val_batches, train_set, codec)
+    reference = _baseline_reference(network, train_set, codec)
+    baseline_val = _baseline(network, val_batches, reference)
     if not ray.is_initialized():
         ray.init(include_dashboard=False, logging_level="WARNING")
     context = ray.data.DataContext.get_current()
@@ -350,21 +351,27 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
     history = read_metrics_csv(run_dir / RUN_FILES["metrics"])
     return TrainResult(network=network, run_dir=run_dir, split=split, data=training_data, epochs=state["epoch"] + 1,
                        steps=state["step"], history=history, test_metrics=network.metrics(test_batches),
-                       baseline_metrics=_baseline(network, test_batches, train_set, codec),
+                       baseline_metrics=_baseline(network, test_batches, reference),
                        summary=training_data.summary(split, frozen_split), resumed_from_epoch=last_epoch,
                        seconds=time.perf_counter() - started)
 
 
-def _baseline(network: TaskNetwork, batches, train_set: TaskDataset, codec) -> dict[str, float]:
-    """The trivial baseline's metrics on `batches`: mean parameters (the codec's), or the mean depth of (a
-    sample of) the training views."""
+def _baseline_reference(network: TaskNetwork, train_set: TaskDataset, codec) -> np.ndarray | None:
+    """What the trivial baseline predicts from the training views: None for TreeSketchNet (its codec holds the
+    training means), else the mean depth per channel of (a sample of) the training views, decoded once."""
     if network.family == "sketchnet":
-        return network.baseline_metrics(batches)
+        return None
     sample = np.linspace(0, len(train_set) - 1, min(len(train_set), 256)).astype(int)
     plain = copy.copy(train_set)
     plain.augment = False
-    mean = network.mean_depth([_plain_rows(plain, sample, codec)])
-    return network.baseline_metrics(batches, mean)
+    return network.mean_depth([_plain_rows(plain, sample, codec)])
+
+
+def _baseline(network: TaskNetwork, batches, reference: np.ndarray | None) -> dict[str, float]:
+    """The trivial baseline's metrics on `batches` (mean parameters, or `reference`'s mean depth)."""
+    if reference is None:
+        return network.baseline_metrics(batches)
+    return network.baseline_metrics(batches, reference)
 
 
 def _worker_user_error(exc: BaseException) -> TreefarmError | None:
