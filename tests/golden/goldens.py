@@ -3,8 +3,15 @@
 `species_digests()` grows every preset (seed 0) and the TreeSketchNet dictionaries in `shared/data/sapling/` and
 hashes skeleton arrays, GLB and OBJ bytes; `job_digests(folder)` runs a small default `farm generate` and hashes
 every part file; `library_digests(folder)` runs a one-asset `farm library` (every format, Blender included) and
-hashes every file but `manifest.json` and `_shards/` (timings, process ids, code version). `make golden` rewrites
-the JSON files beside this module; `tests/test_golden.py` compares against them.
+hashes every file but `manifest.json` and `_shards/` (timings, process ids, code version). `make golden` records
+this machine's digests in the JSON files beside this module; `tests/test_golden.py` compares against them.
+
+Rasterised outputs depend on the CPU as well as on the versions: llvmpipe (Mesa's CPU renderer) and the SIMD
+kernels numpy and OpenCV dispatch to give other last bits on an AVX-512 machine than on an AVX2 one (the same
+code and versions gave two digests of the default job's views). So each golden file holds one entry per
+platform (`platform()`: the x86-64 level or machine, and the OpenGL renderer), and `make golden` rewrites only
+this platform's entry. On a platform with no entry, the outputs whose digests agree on every recorded platform are
+still checked; those that differ between platforms cannot be, and the test says so.
 """
 from __future__ import annotations
 
@@ -109,10 +116,10 @@ def library_digests(folder: Path) -> dict[str, str]:
     return folder_digests(folder)
 
 
-def _mesa_version() -> str:
-    """The OpenGL version string of the offscreen (EGL) context the renderers use."""
+def _gl_string(name: str) -> str:
+    """An OpenGL string (VERSION, RENDERER) of the offscreen (EGL) context the renderers use."""
     code = ("import pyrender; from OpenGL import GL; r = pyrender.OffscreenRenderer(8, 8); "
-            "print(GL.glGetString(GL.GL_VERSION).decode()); r.delete()")
+            f"print(GL.glGetString(GL.GL_{name}).decode()); r.delete()")
     result = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYOPENGL_PLATFORM="egl"),
                             capture_output=True, text=True)
     return result.stdout.strip() or f"unavailable ({result.stderr.strip().splitlines()[-1:]})"
@@ -123,6 +130,18 @@ def _bpy_version() -> str:
     return found[-1].name[len("bpy-"):-len(".dist-info")] if found else "not installed"
 
 
+def platform() -> str:
+    """What besides the versions decides rasterised bytes: the CPU's x86-64 level as numpy detects it (or the
+    machine name elsewhere) and the OpenGL renderer, e.g. "x86-64-v3, llvmpipe (LLVM 15.0.6, 256 bits)"."""
+    import platform as host
+
+    from numpy._core._multiarray_umath import __cpu_features__ as features
+
+    levels = [level for level in ("X86_V4", "X86_V3", "X86_V2") if features.get(level)]
+    cpu = f"x86-64-v{levels[0][-1]}" if levels else host.machine()
+    return f"{cpu}, {_gl_string('RENDERER')}"
+
+
 def versions() -> dict[str, str]:
     """The versions of everything that decides the outputs' bytes besides the code itself."""
     import zlib
@@ -131,7 +150,7 @@ def versions() -> dict[str, str]:
     out = {name: version(name) for name in ("numpy", "scipy", "opencv-contrib-python-headless", "pyarrow",
                                             "pillow", "trimesh", "usd-core")}
     out["zlib"] = zlib.ZLIB_RUNTIME_VERSION
-    out["mesa"] = _mesa_version()
+    out["mesa"] = _gl_string("VERSION")
     out["bpy"] = _bpy_version()
     return out
 
@@ -151,13 +170,29 @@ def compute(name: str, scratch: Path) -> dict[str, str]:
     return make(folder)
 
 
-def load(name: str) -> dict:
-    return json.loads(golden_path(name).read_text())
+def load(name: str) -> dict[str, dict]:
+    """The golden's entries by platform: {platform: {"versions": ..., "digests": ...}}."""
+    return json.loads(golden_path(name).read_text())["platforms"]
 
 
-def write(name: str, digests: dict[str, str], found_versions: dict[str, str]) -> None:
-    golden_path(name).write_text(json.dumps({"versions": found_versions, "digests": digests}, indent=1,
-                                            sort_keys=True) + "\n")
+def expected_digests(entries: dict[str, dict], here: str) -> tuple[dict, dict, list[str]]:
+    """What to compare on platform `here`: (digests, versions they were made with, outputs left unchecked).
+    Here's own entry if recorded; otherwise the digests every recorded platform agrees on, leaving out (and
+    naming) the outputs whose bytes differ between platforms."""
+    if here in entries:
+        return entries[here]["digests"], entries[here]["versions"], []
+    recorded = list(entries.values())
+    first = recorded[0]["digests"]
+    agreed = {k: v for k, v in first.items() if all(e["digests"].get(k) == v for e in recorded[1:])}
+    return agreed, recorded[0]["versions"], sorted(set(first) - set(agreed))
+
+
+def write(name: str, digests: dict[str, str], found_versions: dict[str, str], here: str) -> None:
+    """Record `digests` as platform `here`'s entry, keeping the other platforms' entries."""
+    path = golden_path(name)
+    entries = load(name) if path.exists() else {}
+    entries[here] = {"versions": found_versions, "digests": digests}
+    path.write_text(json.dumps({"platforms": entries}, indent=1, sort_keys=True) + "\n")
 
 
 def main(argv: list[str]) -> int:
@@ -168,12 +203,12 @@ def main(argv: list[str]) -> int:
     if unknown:
         print(f"make_golden: unknown golden {unknown[0]!r}: allowed {', '.join(GOLDENS)}", file=sys.stderr)
         return 2
-    found_versions = versions()
+    found_versions, here = versions(), platform()
     with tempfile.TemporaryDirectory() as scratch:
         for name in names:
             digests = compute(name, Path(scratch))
-            write(name, digests, found_versions)
-            print(f"{golden_path(name).relative_to(ROOT)}: {len(digests)} digests")
+            write(name, digests, found_versions, here)
+            print(f"{golden_path(name).relative_to(ROOT)}: {len(digests)} digests for {here}")
     return 0
 
 
