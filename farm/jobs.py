@@ -37,7 +37,7 @@ class JobSpecError(TreefarmError):
 class RenderSpec:
     """How each tree is rendered.
 
-    rig     : view rig name (`tsn4`, `orbit:N`, `two-view`, each optionally `:jitter`).
+    rig     : view rig name (`tsn4`, `orbit:N`, `two-view`, `two-view:shared`, each optionally `:jitter`).
     size    : image width and height in pixels (16..4096).
     outputs : the maps and sketch styles stored, one views-table column each (`renderers.OUTPUTS` names).
     """
@@ -245,7 +245,8 @@ def _check_rig(rig: Any) -> None:
     try:
         parse_rig(rig)
     except CameraError:
-        raise JobSpecError("render.rig", rig, "tsn4, orbit:N[:E1,E2], two-view, each optionally with :jitter") from None
+        raise JobSpecError("render.rig", rig, "tsn4, orbit:N[:E1,E2], two-view[:shared], each optionally with "
+                           ":jitter") from None
 
 
 def _default_outputs() -> Sequence[str]:

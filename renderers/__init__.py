@@ -1,7 +1,9 @@
 """treefarm renderers: cameras and view rigs, depth/mask/silhouette maps, trunk strokes, sketch styles, contact sheets.
 
-Public surface: `ViewRenderer(size).render(tree, skeleton, rig, outputs, rng) -> list[RenderedView]`, `Camera`,
-`make_rig`/`RIGS`, `OUTPUTS`/`DEFAULT_OUTPUTS`, `PALETTE`, `write_contact_sheet`. Output arrays (per view):
+Public surface: `ViewRenderer(size).render(tree, skeleton, rig, outputs, rng) -> list[RenderedView]`, the same in
+given cameras `.render_cameras(tree, skeleton, cameras, outputs, rng)`, `.silhouette_masks(tree, cameras) -> (V, H,
+W) bool`, `Camera`, `make_rig`/`RIGS` (rig "two-view:shared": front and side at one pixel scale), `OUTPUTS`/
+`DEFAULT_OUTPUTS`, `PALETTE`, `write_contact_sheet`. Output arrays (per view):
 "depth" (H, W) float32 metres, 0 background; "depth01" (H, W) float32 in [0, 1], 1 background/far;
 "mask" (H, W) uint8 0 background / 1 bark / 2 leaves; "order" (H, W) uint8 branch order + 1 on bark, 0 elsewhere;
 "normals" (H, W, 3) uint8 camera-frame normals; "silhouette" (H, W, 3) float32 (front depth01, front-to-back gap,

@@ -22,8 +22,12 @@ Rigs (`make_rig(name, points, size, rng)`): "tsn4" (TreeSketchNet: perspective, 
 the tree filling 90% of the frame height, front/right/back/left at azimuths 0/90/180/270, 10 deg elevation),
 "orbit:N" or "orbit:N:E1,E2" (perspective, N azimuths 360/N apart at each elevation E, default 10 deg),
 "two-view" (seed 001 / seed 000: orthographic "front" and "side" at azimuths 0 and 90, elevation 0, volume
-= bounding box + 5% margin). A ":jitter" suffix perturbs each view with the rng: azimuth +-7.5 deg, elevation
-+-3 deg, distance x U(0.95, 1.05) (two-view: one common azimuth offset so the views stay orthogonal).
+= bounding box + 5% margin, each view framed on its own), "two-view:shared" (the same two views with one
+metres-per-pixel: the larger of the two views' half extents, so that a point's image row is the same in both
+views, which seed 001's equal-height matching of front and side needs; plain "two-view" gives the views
+different scales when the crown is wider than the tree is tall). A ":jitter" suffix (last) perturbs each view
+with the rng: azimuth +-7.5 deg, elevation +-3 deg, distance x U(0.95, 1.05) (two-view: one common azimuth
+offset so the views stay orthogonal, and elevation 0 so rows still match under ":shared").
 """
 from __future__ import annotations
 
@@ -34,7 +38,8 @@ import numpy as np
 from species.errors import TreefarmError
 
 __all__ = ["Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "look_at", "perspective_camera",
-           "orthographic_camera", "OPENCV_TO_OPENGL", "TSN_FOV_DEG", "TSN_FILL", "ORTHO_MARGIN"]
+           "orthographic_camera", "orthographic_half_extent", "OPENCV_TO_OPENGL", "TSN_FOV_DEG", "TSN_FILL",
+           "ORTHO_MARGIN"]
 
 OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
 TSN_FOV_DEG = 40.0   # vertical field of view of TreeSketchNet views (digest 4.2)
@@ -42,7 +47,7 @@ TSN_FILL = 0.9       # fraction of the frame height the tree fills
 TSN_ELEVATION_DEG = 10.0
 ORTHO_MARGIN = 0.05  # orthographic volume = bounding box + 5% (digest 1.8)
 DEPTH_MARGIN = 0.02  # near/far planes sit this fraction of the depth range outside the tree
-RIGS = ("tsn4", "orbit:N[:E1,E2,...]", "two-view")
+RIGS = ("tsn4", "orbit:N[:E1,E2,...]", "two-view[:shared]")
 
 
 class CameraError(TreefarmError):
@@ -273,13 +278,34 @@ def perspective_camera(points: np.ndarray, azimuth_deg: float, elevation_deg: fl
     return Camera(size, size, K, E, "perspective", near, far, name=name)
 
 
-def orthographic_camera(points: np.ndarray, azimuth_deg: float, elevation_deg: float, size: int,
-                        margin: float = ORTHO_MARGIN, name: str = "view") -> Camera:
-    """A square orthographic camera whose volume is the box around `points` (N, 3) metres plus
-    `margin`, centred on the box; one scale for both axes (the larger half extent binds)."""
-    centre, direction, rel = _view_frame(_columns(points), azimuth_deg, elevation_deg)
+def _fitted_half(rel: np.ndarray, margin: float) -> float:
+    """Metres, the half extent of a square orthographic view of camera-axes points `rel` (3, N) plus `margin`."""
     half = max(float(np.abs(rel[0]).max()), float(np.abs(rel[1]).max())) * (1 + margin)
-    half = max(half, 1e-3)
+    return max(half, 1e-3)
+
+
+def orthographic_half_extent(points: np.ndarray, azimuth_deg: float, elevation_deg: float,
+                             margin: float = ORTHO_MARGIN) -> float:
+    """Metres, the half width (= half height) `orthographic_camera` fits to `points` (N, 3) metres for a view."""
+    return _fitted_half(_view_frame(_columns(points), azimuth_deg, elevation_deg)[2], margin)
+
+
+def orthographic_camera(points: np.ndarray, azimuth_deg: float, elevation_deg: float, size: int,
+                        margin: float = ORTHO_MARGIN, name: str = "view", half_extent: float | None = None) -> Camera:
+    """A square orthographic camera whose volume is the box around `points` (N, 3) metres plus
+    `margin`, centred on the box; one scale for both axes (the larger half extent binds).
+
+    half_extent : metres, a half width (= half height) to use instead of the fitted one, so that several
+                  views share one metres-per-pixel (rig "two-view:shared"); it must cover the points to keep
+                  them in the frame (the larger of the views' `orthographic_half_extent` does).
+    """
+    centre, direction, rel = _view_frame(_columns(points), azimuth_deg, elevation_deg)
+    if half_extent is None:
+        half = _fitted_half(rel, margin)
+    elif np.isfinite(half_extent) and half_extent > 0:
+        half = float(half_extent)
+    else:
+        raise CameraError(f"half_extent {half_extent} must be a finite number of metres > 0")
     z_min, z_max = float(rel[2].min()), float(rel[2].max())
     d = -z_min + half  # in front of everything, with room to spare
     E = look_at(centre + d * direction, centre)
@@ -292,16 +318,19 @@ def orthographic_camera(points: np.ndarray, azimuth_deg: float, elevation_deg: f
 # ------------------------------------------------------------------------------------------------ rigs
 @dataclass(frozen=True)
 class RigSpec:
-    """A parsed rig name: kind, projection, the (name, azimuth, elevation) of each view, and jitter."""
+    """A parsed rig name: kind, projection, the (name, azimuth, elevation) of each view, jitter, and whether
+    the (orthographic) views share one scale ("two-view:shared")."""
 
     kind: str
     projection: str
     views: tuple[tuple[str, float, float], ...]
     jitter: bool
+    shared_scale: bool = False
 
 
 def parse_rig(rig: str) -> RigSpec:
-    """Parse "tsn4", "orbit:N", "orbit:N:E1,E2", "two-view", each optionally followed by ":jitter"."""
+    """Parse "tsn4", "orbit:N", "orbit:N:E1,E2", "two-view", "two-view:shared", each optionally followed by
+    ":jitter"."""
     if not isinstance(rig, str) or not rig:
         raise CameraError(f"rig {rig!r} is unknown: allowed {', '.join(RIGS)} (optionally with ':jitter')")
     parts = rig.split(":")
@@ -314,8 +343,9 @@ def parse_rig(rig: str) -> RigSpec:
         views = tuple((n, a, TSN_ELEVATION_DEG) for n, a in
                       (("front", 0.0), ("right", 90.0), ("back", 180.0), ("left", 270.0)))
         return RigSpec(kind, "perspective", views, jitter)
-    if kind == "two-view" and len(parts) == 1:
-        return RigSpec(kind, "orthographic", (("front", 0.0, 0.0), ("side", 90.0, 0.0)), jitter)
+    if kind == "two-view" and (len(parts) == 1 or parts[1:] == ["shared"]):
+        return RigSpec(kind, "orthographic", (("front", 0.0, 0.0), ("side", 90.0, 0.0)), jitter,
+                       shared_scale=len(parts) == 2)
     if kind == "orbit" and len(parts) in (2, 3):
         try:
             n = int(parts[1])
@@ -351,11 +381,13 @@ def make_rig(rig: str, points: np.ndarray, size: int, rng: np.random.Generator) 
             d_el = rng.uniform(-3.0, 3.0, n)
             scale = rng.uniform(0.95, 1.05, n)
     columns = _columns(points)
+    angles = [(azimuth + d_az[i], elevation + d_el[i]) for i, (_, azimuth, elevation) in enumerate(spec.views)]
+    # One half extent for every view: equal pixel scales, and (elevation 0, one box centre) equal rows.
+    half = max(orthographic_half_extent(columns, az, el) for az, el in angles) if spec.shared_scale else None
     cameras = []
-    for i, (name, azimuth, elevation) in enumerate(spec.views):
-        az, el = azimuth + d_az[i], elevation + d_el[i]
+    for i, ((name, _, _), (az, el)) in enumerate(zip(spec.views, angles)):
         if spec.projection == "orthographic":
-            cameras.append(orthographic_camera(columns, az, el, int(size), name=name))
+            cameras.append(orthographic_camera(columns, az, el, int(size), name=name, half_extent=half))
         else:
             cameras.append(perspective_camera(columns, az, el, int(size), distance_scale=scale[i], name=name))
     return cameras

@@ -1,6 +1,6 @@
-"""ViewRenderer: the one-per-process renderer that turns a tree and a rig into named images per view.
+"""ViewRenderer: the one-per-process renderer that turns a tree and a rig (or given cameras) into named images per view.
 
-In: TreeMesh, Skeleton, rig name, output names, rng; out: a list of RenderedView (camera + images by name).
+In: TreeMesh, Skeleton, rig name or Cameras, output names, rng; out: a list of RenderedView (camera + images by name).
 """
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 from . import sketch
-from .camera import Camera, make_rig, parse_rig
+from .camera import Camera, CameraError, make_rig, parse_rig
 from .maps import DepthRenderer, combine_parts, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
@@ -131,11 +131,38 @@ class ViewRenderer:
         """
         names = check_outputs(outputs)
         parse_rig(rig)
-        if not isinstance(rng, np.random.Generator):
-            raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-        if tree.n_faces == 0:
-            raise TreefarmError(f"tree {tree.name!r} has no triangles to render")
-        cameras = self.cameras(tree, rig, rng)
+        _check_rng(rng)
+        _check_tree(tree)
+        return self._render(tree, skeleton, self.cameras(tree, rig, rng), names, rng)
+
+    def render_cameras(self, tree: TreeMesh, skeleton: Skeleton, cameras: Sequence[Camera],
+                       outputs: Sequence[str], rng: np.random.Generator) -> list[RenderedView]:
+        """Render the named outputs in given cameras (each with its own image size): a reconstruction seen
+        in its input view and in unseen views, for the metrics. Views keep the cameras' order and names.
+
+        The rng gives one seed per view for the hand-drawn style; `render(tree, skeleton, rig, ...)` is this
+        call on `cameras(tree, rig, rng)`, so a plain rig's cameras give its views byte for byte.
+        """
+        names = check_outputs(outputs)
+        cameras = _check_cameras(cameras)
+        _check_rng(rng)
+        _check_tree(tree)
+        return self._render(tree, skeleton, cameras, names, rng)
+
+    def silhouette_masks(self, tree: TreeMesh, cameras: Sequence[Camera]) -> np.ndarray:
+        """(V, H, W) bool, True where the tree (bark or leaves) covers a pixel in each camera: the "mask" output
+        above 0, without a skeleton or rng, for silhouette IoU. The cameras must share one image size; a tree
+        with no triangles (an empty reconstruction) covers no pixel."""
+        cameras = _check_cameras(cameras)
+        sizes = sorted({(c.width, c.height) for c in cameras})
+        if len(sizes) > 1:
+            raise CameraError(f"cameras of image sizes {sizes} (width, height) cannot stack into one mask array: "
+                              "allowed one size for all")
+        self._gl.load(tree)
+        return np.stack([combine_parts(self._gl.part_depths(c, False))[1] > 0 for c in cameras])
+
+    def _render(self, tree: TreeMesh, skeleton: Skeleton, cameras: list[Camera], names: tuple[str, ...],
+                rng: np.random.Generator) -> list[RenderedView]:
         view_seeds = rng.integers(0, 2**63, len(cameras))
         self._gl.load(tree)
         views = []
@@ -144,3 +171,28 @@ class ViewRenderer:
                                np.random.default_rng(int(view_seeds[index])))
             views.append(RenderedView(index, camera.name, camera, {n: OUTPUTS[n](frame) for n in names}))
         return views
+
+
+def _check_rng(rng) -> None:
+    if not isinstance(rng, np.random.Generator):
+        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+
+
+def _check_tree(tree: TreeMesh) -> None:
+    if tree.n_faces == 0:
+        raise TreefarmError(f"tree {tree.name!r} has no triangles to render")
+
+
+def _check_cameras(cameras) -> list[Camera]:
+    """The cameras as a list, or a CameraError when there are none or one is not a `Camera` (a rig name is
+    not: `render` takes those)."""
+    if isinstance(cameras, (str, Camera)) or not isinstance(cameras, Sequence):
+        raise CameraError(f"cameras must be a sequence of Camera, got a {type(cameras).__name__}: pass a list "
+                          "(a rig name goes to `render`)")
+    cameras = list(cameras)
+    if not cameras:
+        raise CameraError("no cameras given: allowed one Camera or more")
+    for i, camera in enumerate(cameras):
+        if not isinstance(camera, Camera):
+            raise CameraError(f"camera {i} is a {type(camera).__name__}, not a Camera: allowed Camera objects only")
+    return cameras

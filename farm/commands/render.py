@@ -1,7 +1,7 @@
 """`farm render`: grow one tree and write its views (maps and sketch styles) as PNGs with a cameras.json,
 plus a contact_sheet.png of views x outputs to look at.
 
-  farm render --species NAME --seed N [--params DICT.json] --rig tsn4|orbit:N|two-view[:jitter]
+  farm render --species NAME --seed N [--params DICT.json] --rig tsn4|orbit:N|two-view[:shared][:jitter]
               --styles depth,mask,sketch_tsn,... --size PX [--backend pyrender|blender] --out DIR
 """
 from __future__ import annotations
@@ -30,7 +30,7 @@ def register(subparsers) -> None:
     parser.add_argument("--species", help="preset name (see `farm species`); needed unless --params is given")
     parser.add_argument("--seed", type=int, default=0, help="seed for sampling the preset and the views (default 0)")
     parser.add_argument("--params", metavar="DICT.json", help="a parameter dictionary to grow instead of sampling")
-    parser.add_argument("--rig", default="tsn4", help="tsn4, orbit:N[:E1,E2], two-view, optionally :jitter")
+    parser.add_argument("--rig", default="tsn4", help="tsn4, orbit:N[:E1,E2], two-view[:shared], optionally :jitter")
     parser.add_argument("--styles", default=None,
                         help="comma-separated outputs (maps and sketch styles); default the farm's default set")
     parser.add_argument("--size", type=int, default=256, help="image size in pixels (default 256)")

@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from renderers.camera import Camera, CameraError, look_at, make_rig, orthographic_camera, parse_rig, \
-    perspective_camera
+from renderers.camera import Camera, CameraError, look_at, make_rig, orthographic_camera, \
+    orthographic_half_extent, parse_rig, perspective_camera
+from tree_factory import make_skeleton
 
 SIZE = 128
 
@@ -124,7 +125,73 @@ def test_jitter_is_seeded_and_plain_rigs_ignore_the_rng():
     assert np.array_equal(plain[0].world_to_camera, plain[1].world_to_camera)
 
 
-@pytest.mark.parametrize("rig", ["tsn5", "orbit", "orbit:x", "orbit:0", "two-view:3", "", "jitter"])
+@pytest.mark.parametrize("rig", ["tsn5", "orbit", "orbit:x", "orbit:0", "two-view:3", "", "jitter", "tsn4:shared",
+                                 "two-view:shared:3", "two-view:jitter:shared", "orbit:4:shared"])
 def test_unknown_rigs_are_rejected_with_the_allowed_list(rig):
     with pytest.raises(CameraError, match="tsn4"):
         parse_rig(rig)
+
+
+def _wide_tree_points(seed: int) -> np.ndarray:
+    """(N, 3) skeleton node positions of a random test tree stretched along X until its crown is wider than the
+    tree is tall: the case where plain two-view frames front and side at different scales."""
+    positions = make_skeleton(np.random.default_rng(seed)).positions.astype(np.float64)
+    return positions * [3.0, 1.0, 1.0]
+
+
+@pytest.mark.parametrize("rig", ["two-view:shared", "two-view:shared:jitter"])
+@pytest.mark.parametrize("seed", [0, 1])
+def test_shared_two_view_puts_each_point_on_the_same_row_in_both_views(rig, seed):
+    points = _wide_tree_points(seed)
+    front, side = make_rig(rig, points, SIZE, np.random.default_rng(seed))
+    rows_front, rows_side = front.project(points)[0][:, 1], side.project(points)[0][:, 1]
+    np.testing.assert_allclose(rows_front, rows_side, rtol=0, atol=1e-4)
+    # Plain two-view on the same tree does not (what makes the shared rig necessary).
+    plain = make_rig("two-view", points, SIZE, np.random.default_rng(seed))
+    assert np.abs(plain[0].project(points)[0][:, 1] - plain[1].project(points)[0][:, 1]).max() > 1.0
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_shared_two_view_has_one_scale_that_keeps_the_tree_in_both_frames(seed):
+    points = _wide_tree_points(seed)
+    cameras = make_rig("two-view:shared", points, SIZE, np.random.default_rng(0))
+    plain = make_rig("two-view", points, SIZE, np.random.default_rng(0))
+    front, side = cameras
+    assert front.metres_per_pixel(1.0) == side.metres_per_pixel(1.0)
+    np.testing.assert_array_equal(front.K, side.K)
+    assert front.ortho_half_width == side.ortho_half_width == front.ortho_half_height
+    assert front.ortho_half_width == max(c.ortho_half_width for c in plain)
+    for camera in cameras:
+        pixels, depth = camera.project(points)
+        assert pixels.min() > 0 and pixels.max() < SIZE - 1
+        assert depth.min() > camera.near and depth.max() < camera.far
+    assert [c.name for c in cameras] == ["front", "side"]
+
+
+def test_shared_two_view_jitter_keeps_the_views_orthogonal_and_repeats_with_the_rng():
+    points = _wide_tree_points(2)
+    a = make_rig("two-view:shared:jitter", points, SIZE, np.random.default_rng(4))
+    b = make_rig("two-view:shared:jitter", points, SIZE, np.random.default_rng(4))
+    plain = make_rig("two-view:shared", points, SIZE, np.random.default_rng(4))
+    assert abs(np.dot(a[0].world_to_camera[2, :3], a[1].world_to_camera[2, :3])) < 1e-9
+    assert all(np.array_equal(x.world_to_camera, y.world_to_camera) for x, y in zip(a, b))
+    assert not np.allclose(a[0].world_to_camera, plain[0].world_to_camera)
+
+
+def test_parse_rig_marks_only_the_shared_two_view_as_shared():
+    assert parse_rig("two-view:shared").shared_scale and parse_rig("two-view:shared:jitter").jitter
+    assert not any(parse_rig(r).shared_scale for r in ("two-view", "two-view:jitter", "tsn4", "orbit:4"))
+
+
+def test_an_orthographic_camera_with_its_own_fitted_half_extent_is_the_fitted_camera():
+    points = _wide_tree_points(3)
+    half = orthographic_half_extent(points, 90.0, 0.0)
+    fitted = orthographic_camera(points, 90.0, 0.0, SIZE, name="side")
+    given = orthographic_camera(points, 90.0, 0.0, SIZE, name="side", half_extent=half)
+    assert given.to_dict() == fitted.to_dict()
+
+
+@pytest.mark.parametrize("half", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_half_extent_that_is_not_positive_and_finite_is_rejected(half):
+    with pytest.raises(CameraError, match="half_extent"):
+        orthographic_camera(_wide_tree_points(0), 0.0, 0.0, SIZE, half_extent=half)

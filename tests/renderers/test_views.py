@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from renderers import DEFAULT_OUTPUTS, OUTPUTS, CameraError, OutputError, write_contact_sheet
+from renderers.camera import perspective_camera
+from species.tree_mesh import MeshPart, TreeMesh
 
 CONTRACT = {
     "depth": ((), np.float32), "depth01": ((), np.float32), "mask": ((), np.uint8), "order": ((), np.uint8),
@@ -85,3 +87,67 @@ def test_jittered_rig_repeats_with_the_rng_and_moves_the_cameras(view_renderer, 
     plain = view_renderer.render(mesh, skeleton, "tsn4", ["mask"], np.random.default_rng(9))
     np.testing.assert_array_equal(a[1].images["mask"], b[1].images["mask"])
     assert not np.allclose(a[1].camera.world_to_camera, plain[1].camera.world_to_camera)
+
+
+def test_rendering_a_plain_rigs_cameras_gives_the_rigs_views_byte_for_byte(view_renderer, tree, all_outputs):
+    mesh, skeleton = tree
+    cameras = view_renderer.cameras(mesh, "two-view", np.random.default_rng(3))
+    views = view_renderer.render_cameras(mesh, skeleton, cameras, list(OUTPUTS), np.random.default_rng(3))
+    assert [v.name for v in views] == ["front", "side"] and [v.index for v in views] == [0, 1]
+    for first, second in zip(all_outputs["two-view"], views):
+        for name in OUTPUTS:
+            np.testing.assert_array_equal(first.images[name], second.images[name], err_msg=name)
+
+
+def test_given_cameras_render_at_their_own_size_and_order(view_renderer, tree):
+    mesh, skeleton = tree
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    unseen = perspective_camera(points, 45.0, 30.0, 48, name="unseen")
+    wide = view_renderer.cameras(mesh, "tsn4", np.random.default_rng(0))[2]
+    views = view_renderer.render_cameras(mesh, skeleton, [unseen, wide], ["mask", "depth"], np.random.default_rng(0))
+    assert [v.name for v in views] == ["unseen", "back"]
+    assert views[0].images["mask"].shape == (48, 48) and views[0].camera is unseen
+    assert views[1].images["depth"].shape == (view_renderer.size, view_renderer.size)
+    assert 0.02 < (views[0].images["mask"] > 0).mean() < 0.9
+
+
+def test_silhouette_masks_are_the_mask_output_above_zero(view_renderer, tree, all_outputs):
+    mesh, _ = tree
+    views = all_outputs["tsn4"]
+    masks = view_renderer.silhouette_masks(mesh, [v.camera for v in views])
+    assert masks.shape == (4, view_renderer.size, view_renderer.size) and masks.dtype == bool
+    for view, mask in zip(views, masks):
+        np.testing.assert_array_equal(mask, view.images["mask"] > 0)
+
+
+def test_an_empty_tree_covers_no_pixel(view_renderer, tree):
+    mesh, _ = tree
+    cameras = view_renderer.cameras(mesh, "two-view", np.random.default_rng(0))
+    empty = TreeMesh(MeshPart.empty(), MeshPart.empty(), name="empty")
+    masks = view_renderer.silhouette_masks(empty, cameras)
+    assert masks.shape == (2, view_renderer.size, view_renderer.size) and not masks.any()
+
+
+def test_shared_two_view_silhouettes_span_the_same_rows(view_renderer, other_tree):
+    mesh, _ = other_tree
+    wide = TreeMesh(*(MeshPart(p.vertices * np.float32([3, 1, 1]), p.faces, p.normals, p.uvs, p.attributes)
+                      for p in (mesh.bark, mesh.leaves)), name="wide")
+    cameras = view_renderer.cameras(wide, "two-view:shared", np.random.default_rng(0))
+    rows = view_renderer.silhouette_masks(wide, cameras).any(axis=2)  # (2, H): rows the tree covers per view
+    spans = [np.flatnonzero(r)[[0, -1]] for r in rows]
+    assert np.abs(spans[0] - spans[1]).max() <= 1
+
+
+@pytest.mark.parametrize("cameras", ["two-view", [], ["front"]])
+def test_render_cameras_rejects_what_is_not_a_list_of_cameras(view_renderer, tree, cameras):
+    mesh, skeleton = tree
+    with pytest.raises(CameraError, match="Camera"):
+        view_renderer.render_cameras(mesh, skeleton, cameras, ["mask"], np.random.default_rng(0))
+
+
+def test_silhouette_masks_reject_cameras_of_different_sizes(view_renderer, tree):
+    mesh, _ = tree
+    big = view_renderer.cameras(mesh, "two-view", np.random.default_rng(0))[0]
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    with pytest.raises(CameraError, match="one size"):
+        view_renderer.silhouette_masks(mesh, [big, perspective_camera(points, 0.0, 0.0, 32)])
