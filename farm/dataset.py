@@ -9,19 +9,24 @@ import json
 from contextlib import contextmanager
 from typing import Iterable, Sequence
 
+import numpy as np
+
 from species.errors import TreefarmError
+from species.skeleton import Skeleton, SkeletonError
 
 from .storage import Location
 
 __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_schema", "part_name",
            "serialize_table", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface", "part_files",
-           "read_manifest", "reading_part",
+           "read_manifest", "reading_part", "skeleton_from_row", "SKELETON_COLUMNS",
            "DatasetError"]
 
 SCHEMA_VERSION = 1
 TABLES = ("trees", "views")
 # Renderer outputs that are float maps, stored as 16-bit PNG with `<name>_scale` and `<name>_offset` columns.
 FLOAT_OUTPUTS = frozenset({"depth", "depth01", "silhouette", "depth_back", "trunk_depth"})
+# The trees-table columns a Skeleton is stored in, flattened row-major: (N, 3) positions, (M, 4, 4) leaves.
+SKELETON_COLUMNS = ("positions", "parent", "radius", "order", "leaves", "leaf_node")
 # Fixed writer options: part files are compared byte for byte across runs.
 _PARQUET_OPTIONS = dict(compression="zstd", compression_level=3, row_group_size=4096, use_dictionary=True,
                         write_statistics=True, data_page_version="2.0", version="2.6")
@@ -78,6 +83,35 @@ def views_schema(outputs: Sequence[str]):
             fields += [(f"{name}_scale", pa.float64()), (f"{name}_offset", pa.float64())]
     return pa.schema(fields, metadata={"treefarm.table": "views", "treefarm.schema_version": str(SCHEMA_VERSION),
                                        "treefarm.outputs": json.dumps(list(outputs))})
+
+
+def skeleton_from_row(row: dict) -> Skeleton:
+    """The Skeleton of one trees-table row: a dict with the SKELETON_COLUMNS as flat lists or numpy arrays
+    (`pyarrow.Table.to_pylist()`, a pandas row's `to_dict()`). The inverse of the pipeline's tree row
+    (`farm.tree_chain.tree_row`); a failed tree's row (no skeleton, `error` set) raises DatasetError."""
+    if not isinstance(row, dict):
+        raise DatasetError(f"a trees row must be a dict of columns; got {type(row).__name__}")
+    name = row.get("tree_id", "?")
+    missing = [column for column in SKELETON_COLUMNS if column not in row]
+    if missing:
+        raise DatasetError(f"trees row {name} lacks the skeleton columns {', '.join(missing)}: read them with the "
+                           f"row (allowed: a row holding {', '.join(SKELETON_COLUMNS)})")
+    if any(row[column] is None for column in SKELETON_COLUMNS):
+        reason = row.get("error") or "its skeleton columns are empty"
+        raise DatasetError(f"trees row {name} has no skeleton: the tree failed ({reason})")
+    arrays = {column: np.asarray(row[column]).ravel() for column in SKELETON_COLUMNS}
+    if arrays["positions"].size % 3 or arrays["leaves"].size % 16:
+        raise DatasetError(f"trees row {name}: positions ({arrays['positions'].size} values) must hold 3 per node "
+                           f"and leaves ({arrays['leaves'].size} values) 16 per leaf")
+    n_nodes = row.get("n_nodes")
+    if n_nodes is not None and arrays["positions"].size != 3 * int(n_nodes):
+        raise DatasetError(f"trees row {name}: positions hold {arrays['positions'].size // 3} nodes but n_nodes is "
+                           f"{n_nodes}")
+    try:
+        return Skeleton(arrays["positions"].reshape(-1, 3), arrays["parent"], arrays["radius"], arrays["order"],
+                        arrays["leaves"].reshape(-1, 4, 4), arrays["leaf_node"])
+    except SkeletonError as exc:
+        raise DatasetError(f"trees row {name} holds an invalid skeleton: {exc}") from None
 
 
 def part_name(table: str, shard: int) -> str:

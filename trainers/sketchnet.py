@@ -271,6 +271,17 @@ def sketchnet_metrics(outputs: Mapping[str, torch.Tensor], targets: Mapping[str,
     return metrics
 
 
+def height_crown_row(predicted: "species.Skeleton", true: "species.Skeleton") -> dict[str, float]:
+    """Height and crown radius (metres) of a predicted and a true skeleton and their relative errors
+    |pred - true| / true: keys `height`, `true_height`, `height_rel_error`, and the same for `crown_radius`."""
+    row = {}
+    for measure in ("height", "crown_radius"):
+        value, reference = float(getattr(predicted, measure)), float(getattr(true, measure))
+        row[measure], row[f"true_{measure}"] = value, reference
+        row[f"{measure}_rel_error"] = abs(value - reference) / max(reference, 1e-9)
+    return row
+
+
 def grown_tree_errors(predicted: Sequence[dict], true: Sequence[dict], seed: int = 0) -> dict:
     """Grow each predicted and true dictionary (`species.grow`, the same fixed seed for both) and compare
     height and crown radius (metres, `Skeleton.height` / `.crown_radius`): relative errors |pred - true| / true,
@@ -278,16 +289,8 @@ def grown_tree_errors(predicted: Sequence[dict], true: Sequence[dict], seed: int
     if len(predicted) != len(true) or len(true) == 0:
         raise SketchNetError(f"grown_tree_errors needs as many predicted as true dictionaries (at least one); got "
                              f"{len(predicted)} and {len(true)}")
-    trees = []
-    for guess, truth in zip(predicted, true):
-        grown = [species.grow(d, np.random.default_rng(seed)) for d in (guess, truth)]
-        row = {}
-        for measure in ("height", "crown_radius"):
-            value, reference = (getattr(g, measure) for g in grown)
-            row[measure] = value
-            row[f"true_{measure}"] = reference
-            row[f"{measure}_rel_error"] = abs(value - reference) / max(reference, 1e-9)
-        trees.append(row)
+    trees = [height_crown_row(*(species.grow(d, np.random.default_rng(seed)) for d in (guess, truth)))
+             for guess, truth in zip(predicted, true)]
     return {"height_rel_error": float(np.mean([t["height_rel_error"] for t in trees])),
             "crown_radius_rel_error": float(np.mean([t["crown_radius_rel_error"] for t in trees])),
             "n": len(trees), "trees": trees}

@@ -1,0 +1,609 @@
+"""Depth-guided growth from one sketch (seed 000, chapter 3; digest 1.10-1.12), the geometry half.
+
+In: silhouette maps (front depth01, gap, mask), trunk depth, colour trunk strokes and the input view's `Camera`
+(network outputs, or ground-truth renders standing in for them). Out: a grown `Skeleton`, its `TreeMesh`, a report.
+
+Steps, each a plain function over arrays: `denoise_depth` (eq. 3.4-3.5), `backproject` (depth01 to world
+points), `trace_trunk` (breadth-first stroke tracing into a 3D main skeleton), `CameraCrown` (the growth space
+between front and back depth seen through any camera), `geodesic_field` (Dijkstra bins joined into a 2D
+attraction skeleton), then `from_sketch` revolves the field, grows from the main skeleton and meshes.
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, dijkstra
+
+from renderers.camera import Camera
+from renderers.strokes import PALETTE, STROKE_WIDTH_PX
+from species.colonization import GrowthSpace, MarkerSteering, grow_in_space, revolved_field, validate
+from species.errors import TreefarmError
+from species.geometry.vectors import unit_vectors
+from species.meshing import build_mesh
+from species.presets import get_preset
+from species.skeleton import Skeleton
+from species.tree_mesh import TreeMesh
+
+__all__ = ["SketchError", "SketchReconstruction", "CameraCrown", "from_sketch", "backproject", "denoise_depth",
+           "trace_trunk", "stroke_labels", "geodesic_field", "crown_maps", "DEFAULT_SPECIES", "DENOISE_EPSILON",
+           "TRACE_STEP_PX", "TRACE_RADIUS_PX"]
+
+DEFAULT_SPECIES = "sc_round_maple"  # a round crown with balanced allocation: the general-purpose default
+DENOISE_EPSILON = 0.019             # thesis eq. 3.5
+TRACE_STEP_PX = 4.0                 # thesis 3.3: probe step of the trunk tracing
+TRACE_RADIUS_PX = 4.0               # and the radius whose stroke pixels' centroid is a node
+_CONSUMED_PX = 3.5                  # stroke pixels this near a node are traced (below the step, so probes land)
+_MERGE_GAP_PX = 6                   # same-colour stroke pieces this close are one branch (a crossing hides ~4 px)
+_MIN_BRANCH_NODES = 3               # a side chain of fewer traced nodes is a spur of a wide stroke, dropped
+_MIN_SATURATION, _MIN_VALUE = 0.35, 0.25  # below either, a pixel is paper, pencil or ink, not a colour stroke
+_REFERENCE_PX = 256                 # the thesis's image size; pixel constants below scale from it
+_BIN_PX = 8.0                       # digest 1.12: geodesic bin width at 256 px
+_CLOSE_PX = 3.0                     # crown closing radius at 256 px (joins the leaves of a sparse silhouette)
+
+
+class SketchError(TreefarmError):
+    """Sketch-reconstruction input that cannot make a tree: blank maps, no trunk stroke, wrong shapes."""
+
+
+@dataclass(frozen=True, eq=False)
+class SketchReconstruction:
+    """A tree grown from one sketch.
+
+    skeleton : the grown tree (metres, Z up, base at the origin); its first nodes are the traced main skeleton.
+    mesh     : its bark and leaves (species.build_mesh with the growth dictionary).
+    params   : the colonization dictionary it grew with (the preset's draw, `height` set).
+    timings  : seconds per stage ("denoise", "trunk", "crown", "field", "growth", "mesh", "total").
+    maps     : intermediate arrays by name (see `from_sketch`).
+    """
+
+    skeleton: Skeleton
+    mesh: TreeMesh
+    params: dict
+    timings: dict[str, float] = field(default_factory=dict)
+    maps: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------------------------ inputs
+def _image(value, name: str, channels: tuple[int, ...]) -> np.ndarray:
+    """`value` as an array of shape (H, W) (channels contains 0) or (H, W, C), C in channels."""
+    array = np.asarray(value)
+    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
+        raise SketchError(f"{name} must be a numeric image array; got dtype {array.dtype}")
+    if array.ndim == 3 and array.shape[2] == 1 and 0 in channels:
+        array = array[..., 0]
+    c = 0 if array.ndim == 2 else (array.shape[2] if array.ndim == 3 else -1)
+    if c not in channels or min(array.shape[:2], default=0) < 8:
+        want = " or ".join("(H, W)" if k == 0 else f"(H, W, {k})" for k in channels)
+        raise SketchError(f"{name} has shape {array.shape}: allowed {want} with H, W >= 8")
+    return array
+
+
+def _check_camera(camera, shape: tuple[int, int]) -> Camera:
+    if not isinstance(camera, Camera):
+        raise SketchError(f"camera must be a renderers.Camera; got {type(camera).__name__}")
+    if (camera.height, camera.width) != tuple(shape):
+        raise SketchError(f"maps of {shape[1]}x{shape[0]} px do not match the camera's "
+                          f"{camera.width}x{camera.height} px: allowed maps of the camera's size")
+    return camera
+
+
+def _metres(camera: Camera, depth01: np.ndarray) -> np.ndarray:
+    return camera.near + np.asarray(depth01, np.float64) * (camera.far - camera.near)
+
+
+# ------------------------------------------------------------------------------------------------ depth
+def backproject(depth01: np.ndarray, mask: np.ndarray, camera: Camera) -> np.ndarray:
+    """(N, 3) float64 world points (metres) of the mask's pixels (row-major order) at their depth01.
+
+    depth01 : (H, W) float in [0, 1] between the camera's near and far planes (`Camera.depth01`'s inverse);
+    mask    : (H, W) bool or 0/1, the pixels to lift. Pixel (row i, column j) is (u, v) = (j, i).
+    """
+    depth01 = _image(depth01, "depth01", (0,)).astype(np.float64)
+    mask = _image(mask, "mask", (0,)).astype(bool)
+    if mask.shape != depth01.shape:
+        raise SketchError(f"mask {mask.shape} and depth01 {depth01.shape} must have one shape")
+    _check_camera(camera, depth01.shape)
+    rows, cols = np.nonzero(mask)
+    return camera.unproject(np.stack([cols, rows], axis=1), _metres(camera, depth01[rows, cols]))
+
+
+_RING = [(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if (dy, dx) != (0, 0)]  # N(p): 5x5 minus centre
+
+
+def _shifted(image: np.ndarray, fill) -> np.ndarray:
+    """(24, H, W): image[p + offset] for every offset of the 5x5 ring, `fill` outside the image."""
+    h, w = image.shape
+    padded = np.pad(image, 2, constant_values=fill)
+    return np.stack([padded[2 + dy:2 + dy + h, 2 + dx:2 + dx + w] for dy, dx in _RING])
+
+
+def denoise_depth(depth: np.ndarray, mask: np.ndarray, epsilon: float = DENOISE_EPSILON
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Seed 000's boundary denoising (eq. 3.4-3.5, digest 1.10): returns (depth, mask), cleaned.
+
+    depth : (H, W) or (H, W, C) float, e.g. depth01 or (front, gap); each channel is cleaned on its own.
+    mask  : (H, W) bool foreground. N(p) = the foreground pixels of p's 5x5 window minus p.
+    d(p) = mean over N(p) of |depth(p) - depth(i)|; a boundary pixel (removed by a 3x3 erosion of the mask) is
+    noise when mean over N(p) of (d(i) - d(p))^2 > epsilon (eq. 3.5's self-referring d_avg read as p's own d).
+    A noisy pixel takes the mean depth of its clean neighbours; one with none leaves the mask.
+    """
+    depth = np.asarray(depth, np.float64)
+    if depth.ndim not in (2, 3):
+        raise SketchError(f"depth has shape {depth.shape}: allowed (H, W) or (H, W, C)")
+    mask = _image(mask, "mask", (0,)).astype(bool)
+    if mask.shape != depth.shape[:2]:
+        raise SketchError(f"mask {mask.shape} and depth {depth.shape} must share (H, W)")
+    if not epsilon >= 0:
+        raise SketchError(f"epsilon {epsilon} must be >= 0")
+    planes = depth[..., None] if depth.ndim == 2 else depth
+    border = mask & ~ndimage.binary_erosion(mask, np.ones((3, 3), bool), border_value=0)
+    near = _shifted(mask, False)                                   # (24, H, W) foreground neighbours
+    count = near.sum(axis=0)
+    out, keep = planes.copy(), mask.copy()
+    for k in range(planes.shape[2]):  # a channel or two
+        values = np.where(mask, planes[..., k], 0.0)
+        around = _shifted(values, 0.0)
+        spread = np.where(near, np.abs(around - values), 0.0).sum(axis=0) / np.maximum(count, 1)
+        variance = (np.where(near, (_shifted(spread, 0.0) - spread) ** 2, 0.0).sum(axis=0)
+                    / np.maximum(count, 1))
+        noisy = border & (variance > epsilon)
+        clean = near & ~_shifted(noisy, True)
+        n_clean = clean.sum(axis=0)
+        mean = np.where(clean, around, 0.0).sum(axis=0) / np.maximum(n_clean, 1)
+        out[..., k] = np.where(noisy, mean, planes[..., k])
+        keep &= ~(noisy & (n_clean == 0))
+    out = out[..., 0] if depth.ndim == 2 else out
+    return out, keep
+
+
+# ------------------------------------------------------------------------------------------------ trunk
+def stroke_labels(strokes_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Colour strokes to branch pieces: labels (H, W) int64 (-1 off the strokes) and each label's palette index.
+
+    A pixel is a stroke pixel when it is saturated and bright enough; its colour snaps to the palette entry of
+    the nearest hue (the 12 entries are 30 deg apart, and paper, anti-aliasing and scanning change a drawn
+    colour's saturation and value far more than its hue). Pixels of one palette index within _MERGE_GAP_PX of
+    each other are one piece, so a branch hidden for a stroke width under a crossing stays one branch.
+    """
+    rgb = _image(strokes_rgb, "strokes", (3, 4))[..., :3].astype(np.float64)
+    if rgb.max(initial=0) > 1.0:
+        rgb = rgb / 255.0
+    top, low = rgb.max(axis=2), rgb.min(axis=2)
+    chroma = top - low
+    stroke = (top >= _MIN_VALUE) & (chroma >= _MIN_SATURATION * np.maximum(top, 1e-9))
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    hue = np.degrees(np.arctan2(np.sqrt(3.0) * (g - b), 2 * r - g - b)) % 360.0
+    colour = np.rint(hue / (360.0 / len(PALETTE))).astype(np.int64) % len(PALETTE)
+    labels = np.full(rgb.shape[:2], -1, np.int64)
+    palette_of = []
+    disc = _disc(_MERGE_GAP_PX / 2)
+    for index in range(len(PALETTE)):  # twelve colours
+        pixels = stroke & (colour == index)
+        if not pixels.any():
+            continue
+        pieces, n = ndimage.label(ndimage.binary_dilation(pixels, disc), np.ones((3, 3), bool))
+        labels[pixels] = pieces[pixels] - 1 + len(palette_of)
+        palette_of.extend([index] * n)
+    # Pieces smaller than a stroke-width square are specks (noise, a colour fringe), not strokes.
+    sizes = np.bincount(labels[labels >= 0], minlength=len(palette_of) + 1)
+    labels[(labels >= 0) & (sizes[np.maximum(labels, 0)] < STROKE_WIDTH_PX ** 2)] = -1
+    used, labels_flat = np.unique(labels[labels >= 0], return_inverse=True)
+    out = np.full_like(labels, -1)
+    out[labels >= 0] = labels_flat
+    return out, np.asarray(palette_of, np.int64)[used]
+
+
+def _disc(radius: float) -> np.ndarray:
+    r = int(np.ceil(radius))
+    y, x = np.mgrid[-r:r + 1, -r:r + 1]
+    return x * x + y * y <= radius * radius
+
+
+def _window(shape, centre, radius):
+    """Row and column slices of the square window of `radius` around centre (u, v), clipped to the image."""
+    u, v = centre
+    r = int(np.ceil(radius))
+    r0, c0 = max(int(np.floor(v)) - r, 0), max(int(np.floor(u)) - r, 0)
+    return slice(r0, min(int(np.ceil(v)) + r + 1, shape[0])), slice(c0, min(int(np.ceil(u)) + r + 1, shape[1]))
+
+
+def _trace_nodes(labels: np.ndarray, depth01: np.ndarray):
+    """Breadth-first tracing (thesis 3.3): node pixels (K, 2) (u, v), labels (K,), BFS parents (K,), depth01 (K,).
+
+    From the lowest stroke pixel, each node probes the 8 compass directions TRACE_STEP_PX away; a probe on an
+    untraced stroke pixel makes a node at the centroid of that piece's pixels within TRACE_RADIUS_PX. A loop
+    over nodes (a few hundred), each touching a 9x9 window: the trace is sequential by nature.
+    """
+    h, w = labels.shape
+    rows, cols = np.nonzero(labels >= 0)
+    yy, xx = np.mgrid[0:h, 0:w]
+    consumed = np.zeros((h, w), bool)
+    valid_depth = depth01 < 1.0
+    compass = np.array([[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1]], np.float64)
+    probes = compass / np.linalg.norm(compass, axis=1, keepdims=True) * TRACE_STEP_PX
+    lowest = np.flatnonzero(rows == rows.max())
+    start = lowest[np.argmin(np.abs(cols[lowest] - np.median(cols[lowest])))]
+    nodes, node_label, node_parent, node_depth = [], [], [], []
+
+    def add(pixel, parent):
+        label = labels[pixel[1], pixel[0]]
+        rs, cs = _window((h, w), pixel, TRACE_RADIUS_PX)
+        near = ((xx[rs, cs] - pixel[0]) ** 2 + (yy[rs, cs] - pixel[1]) ** 2 <= TRACE_RADIUS_PX ** 2)
+        near &= labels[rs, cs] == label
+        centre = np.array([xx[rs, cs][near].mean(), yy[rs, cs][near].mean()])
+        depths = depth01[rs, cs][near & valid_depth[rs, cs]]
+        depth = float(np.median(depths)) if len(depths) else (node_depth[parent] if parent >= 0 else np.nan)
+        rs, cs = _window((h, w), centre, _CONSUMED_PX)
+        consumed[rs, cs] |= ((xx[rs, cs] - centre[0]) ** 2 + (yy[rs, cs] - centre[1]) ** 2 <= _CONSUMED_PX ** 2)
+        nodes.append(centre), node_label.append(label), node_parent.append(parent), node_depth.append(depth)
+
+    add((int(cols[start]), int(rows[start])), -1)
+    queue = deque([0])
+    while queue:
+        k = queue.popleft()
+        hits = np.rint(nodes[k] + probes).astype(np.int64)
+        inside = (hits[:, 0] >= 0) & (hits[:, 0] < w) & (hits[:, 1] >= 0) & (hits[:, 1] < h)
+        for u, v in hits[inside]:
+            if labels[v, u] >= 0 and not consumed[v, u]:
+                add((int(u), int(v)), k)
+                queue.append(len(nodes) - 1)
+    depth = np.asarray(node_depth, np.float64)
+    if np.isnan(depth).all():
+        raise SketchError("the trunk depth map has no stroke depth (every pixel under the strokes is 1 = "
+                          "background): allowed a trunk depth map that covers the strokes")
+    return (np.asarray(nodes), np.asarray(node_label, np.int64), np.asarray(node_parent, np.int64),
+            np.where(np.isnan(depth), np.nanmedian(depth), depth))
+
+
+def _branches(pixels: np.ndarray, label: np.ndarray, bfs_parent: np.ndarray) -> tuple[list[np.ndarray], list[int]]:
+    """Traced nodes into branches: node index paths, and each branch's parent node (-1 for the trunk).
+
+    Within a label a node hangs from its tracing parent when that is of the label, else from the nearest earlier
+    node of the label (a piece re-entered across a crossing). Each label's tree is split into its longest path
+    from its first node, then its side chains; chains of fewer than _MIN_BRANCH_NODES nodes (spurs of a wide
+    stroke, specks of a stray colour) are dropped, except the trunk. A branch's first node hangs from its side
+    chain's node or else from the nearest node of a branch found before it.
+    """
+    k = len(pixels)
+    inner = np.full(k, -1, np.int64)
+    for i in range(1, k):  # nodes in discovery order; parents come first
+        same = np.flatnonzero(label[:i] == label[i])
+        if not len(same):
+            continue
+        p = bfs_parent[i]
+        inner[i] = p if label[p] == label[i] else same[np.argmin(((pixels[same] - pixels[i]) ** 2).sum(axis=1))]
+    children = [[] for _ in range(k)]
+    for i in range(k):
+        if inner[i] >= 0:
+            children[inner[i]].append(i)
+    reach = np.ones(k, np.int64)  # nodes on the longest chain down from each node, itself included
+    for i in range(k - 1, -1, -1):
+        if children[i]:
+            reach[i] = 1 + max(reach[c] for c in children[i])
+    paths, starts = [], deque(np.flatnonzero(inner < 0))
+    while starts:
+        node = int(starts.popleft())
+        path = [node]
+        while children[path[-1]]:
+            kids = children[path[-1]]
+            best = max(kids, key=lambda c: reach[c])
+            starts.extend(c for c in kids if c != best)
+            path.append(best)
+        paths.append(np.asarray(path))
+    paths.sort(key=lambda p: p[0])  # discovery order of the first node: the trunk first
+    paths = paths[:1] + [p for p in paths[1:] if len(p) >= _MIN_BRANCH_NODES]
+    parents, placed = [-1], np.zeros(k, bool)
+    placed[paths[0]] = True
+    for path in paths[1:]:
+        parent = inner[path[0]]
+        if parent < 0 or not placed[parent]:
+            earlier = np.flatnonzero(placed)
+            parent = earlier[np.argmin(((pixels[earlier] - pixels[path[0]]) ** 2).sum(axis=1))]
+        parents.append(int(parent))
+        placed[path] = True
+    return paths, parents
+
+
+def trace_trunk(strokes_rgb: np.ndarray, trunk_depth: np.ndarray, camera: Camera) -> Skeleton:
+    """The 3D main skeleton of colour trunk strokes (thesis 3.3, digest 1.11), in the camera's world (metres).
+
+    strokes_rgb : (H, W, 3) uint8 (or (H, W, 4), alpha ignored), white paper, one palette colour per branch.
+    trunk_depth : (H, W) float depth01 of the strokes, 1 = no stroke (the trunk network's output).
+    Node 0 is the lowest stroke point; order = branch level (trunk 0); radius = one pixel in metres.
+    """
+    labels, _ = stroke_labels(strokes_rgb)
+    trunk_depth = _image(trunk_depth, "trunk_depth", (0,)).astype(np.float64)
+    if trunk_depth.shape != labels.shape:
+        raise SketchError(f"trunk_depth {trunk_depth.shape} and strokes {labels.shape} must share (H, W)")
+    _check_camera(camera, labels.shape)
+    if not (labels >= 0).any():
+        raise SketchError("the stroke image has no trunk stroke: draw the trunk and main branches in palette "
+                          "colours (saturated, one colour per branch, trunk first) on white")
+    pixels, label, bfs_parent, depth = _trace_nodes(labels, trunk_depth)
+    paths, branch_parent = _branches(pixels, label, bfs_parent)
+    nodes = np.concatenate(paths)
+    new_index = np.full(len(pixels), -1, np.int64)
+    new_index[nodes] = np.arange(len(nodes))
+    parent = np.concatenate([np.concatenate([[bp], path[:-1]]) for path, bp in zip(paths, branch_parent)])
+    parent = np.where(parent >= 0, new_index[np.maximum(parent, 0)], -1)
+    level = np.zeros(len(paths), np.int64)  # branch level: parent branch's + 1 (paths come parents first)
+    branch_of = np.repeat(np.arange(len(paths)), [len(p) for p in paths])
+    for b in range(1, len(paths)):
+        level[b] = level[branch_of[parent[new_index[paths[b][0]]]]] + 1
+    positions = camera.unproject(pixels[nodes], _metres(camera, depth[nodes]))
+    radius = float(camera.metres_per_pixel(_metres(camera, np.median(depth))))
+    return Skeleton(positions, parent, np.full(len(nodes), radius), np.minimum(level[branch_of], 255))
+
+
+# ------------------------------------------------------------------------------------------------ crown
+class CameraCrown(GrowthSpace):
+    """The crown between front and back depth maps seen through any camera (DepthMapCrown for any `Camera`).
+
+    front, back : (H, W) float depth01 of the camera; mask : (H, W) bool crown pixels. Points live in an output
+    frame: world = origin + points / scale (metres), so growth can run with the base at the origin and the
+    sketch's metric scale. A point is inside when it projects (nearest pixel centre) onto a mask pixel with its
+    depth01 between front and back there. Exact for perspective and orthographic cameras alike.
+    """
+
+    def __init__(self, front: np.ndarray, back: np.ndarray, mask: np.ndarray, camera: Camera,
+                 origin=(0.0, 0.0, 0.0), scale: float = 1.0):
+        self.front = _image(front, "front", (0,)).astype(np.float64)
+        self.back = _image(back, "back", (0,)).astype(np.float64)
+        self.mask = _image(mask, "mask", (0,)).astype(bool) & (self.back >= self.front)
+        if self.front.shape != self.back.shape or self.mask.shape != self.front.shape:
+            raise SketchError(f"front {self.front.shape}, back {self.back.shape} and mask {mask.shape} must "
+                              "share one shape")
+        self.camera = _check_camera(camera, self.front.shape)
+        if not self.mask.any():
+            raise SketchError("the crown has no pixel with back depth at or behind front depth")
+        if not scale > 0:
+            raise SketchError(f"scale {scale} must be > 0")
+        self.origin, self.scale = np.asarray(origin, np.float64).reshape(3), float(scale)
+        ends = np.concatenate([backproject(self.front, self.mask, camera), backproject(self.back, self.mask, camera)])
+        ends = (ends - self.origin) * self.scale
+        pad = self.scale * float(camera.metres_per_pixel(camera.far))
+        self.bounds = np.stack([ends.min(axis=0) - pad, ends.max(axis=0) + pad])
+
+    def _contains(self, points: np.ndarray) -> np.ndarray:
+        pixels, z = self.camera.project(self.origin + points / self.scale)
+        col, row = np.rint(pixels[:, 0]), np.rint(pixels[:, 1])
+        ok = (z > 0) & (col >= 0) & (col < self.camera.width) & (row >= 0) & (row < self.camera.height)
+        col, row = np.where(ok, col, 0).astype(np.int64), np.where(ok, row, 0).astype(np.int64)
+        d = (z - self.camera.near) / (self.camera.far - self.camera.near)
+        return ok & self.mask[row, col] & (d >= self.front[row, col]) & (d <= self.back[row, col])
+
+    def __repr__(self) -> str:
+        return f"CameraCrown(pixels={int(self.mask.sum())}, camera={self.camera.name!r})"
+
+
+def crown_maps(front: np.ndarray, back: np.ndarray, mask: np.ndarray, axis_px: tuple[float, float],
+               axis_depth01: float, camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The crown's (front, back, mask) from a silhouette's: the mask closed and its holes filled (a crown of
+    scattered leaves is one region), front and back filled from the nearest foreground pixel, and each pixel's
+    span widened to at least the crown revolved about the trunk axis (axis_px = (u, v) of its base,
+    axis_depth01 its depth): a row whose crown reaches R px from the axis is 2 sqrt(R^2 - x^2) px deep at x px.
+    Our choice where the thesis is silent: the thin spans of a leafy silhouette leave no room to grow."""
+    scale = max(mask.shape) / _REFERENCE_PX
+    closed = ndimage.binary_closing(np.pad(mask, 8), _disc(max(1.0, _CLOSE_PX * scale)))[8:-8, 8:-8]
+    crown = ndimage.binary_fill_holes(closed | mask)
+    _, (near_row, near_col) = ndimage.distance_transform_edt(~mask, return_indices=True)
+    front_f, back_f = front[near_row, near_col], back[near_row, near_col]
+    offset = np.abs(np.arange(mask.shape[1]) - axis_px[0])[None, :]
+    reach = np.where(crown, offset, 0.0).max(axis=1, keepdims=True)
+    span_px = 2 * np.sqrt(np.maximum(reach ** 2 - offset ** 2, 0.0))
+    per_px = float(camera.metres_per_pixel(_metres(camera, axis_depth01))) / (camera.far - camera.near)
+    half = 0.5 * span_px * per_px
+    top = 1.0 - 1e-6
+    front_c = np.clip(np.minimum(front_f, axis_depth01 - half), 0.0, top)
+    back_c = np.clip(np.maximum(back_f, axis_depth01 + half), 0.0, top)
+    return np.where(crown, front_c, 1.0), np.where(crown, back_c, 1.0), crown
+
+
+# ------------------------------------------------------------------------------------------------ field
+_NEIGHBOURS = ((0, 1, 1.0), (1, 0, 1.0), (1, 1, np.sqrt(2.0)), (1, -1, np.sqrt(2.0)))
+
+
+def geodesic_field(mask: np.ndarray, root_px: tuple[int, int], bin_px: float = _BIN_PX
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The 2D attraction field of digest 1.12: (directions (H, W, 2) image-plane (x right, z up) unit or 0,
+    geodesic distance (H, W) px, inf off the region).
+
+    Dijkstra from root_px = (u, v) over the 8-connected mask; pixels binned by distance (bin_px wide), each bin
+    split into 8-connected clusters; a cluster hangs from the cluster of its nearest pixel's predecessor, and
+    its pixels take the mean of its incoming edge and its outgoing edges between cluster centres.
+    """
+    mask = np.asarray(mask, bool).copy()
+    h, w = mask.shape
+    mask[root_px[1], root_px[0]] = True
+    index = np.full((h, w), -1, np.int64)
+    rows, cols = np.nonzero(mask)
+    index[rows, cols] = np.arange(len(rows))
+    a, b, cost = [], [], []
+    for dy, dx, length in _NEIGHBOURS:  # four offsets, each vectorized over the image
+        src = index[max(0, -dy):h - max(0, dy), max(0, -dx):w - max(0, dx)]
+        dst = index[max(0, dy):h - max(0, -dy) or None, max(0, dx):w - max(0, -dx) or None]
+        both = (src >= 0) & (dst >= 0)
+        a.append(src[both]), b.append(dst[both]), cost.append(np.full(int(both.sum()), length))
+    a, b, cost = np.concatenate(a), np.concatenate(b), np.concatenate(cost)
+    n = len(rows)
+    graph = coo_matrix((cost, (a, b)), shape=(n, n)).tocsr()
+    distance, predecessor = dijkstra(graph, directed=False, indices=int(index[root_px[1], root_px[0]]),
+                                     return_predecessors=True)
+    reached = np.isfinite(distance)
+    bins = np.where(reached, np.floor(distance / bin_px), -1).astype(np.int64)
+    same = (bins[a] == bins[b]) & reached[a]
+    _, cluster = connected_components(coo_matrix((np.ones(int(same.sum())), (a[same], b[same])), shape=(n, n)),
+                                      directed=False)
+    _, cluster = np.unique(cluster, return_inverse=True)
+    m = int(cluster.max()) + 1
+    counts = np.bincount(cluster, minlength=m)
+    centre = np.stack([np.bincount(cluster, cols, m), np.bincount(cluster, rows, m)], axis=1) / counts[:, None]
+    by_distance = np.lexsort((np.where(reached, distance, np.inf), cluster))
+    first = by_distance[np.r_[True, cluster[by_distance][1:] != cluster[by_distance][:-1]]]
+    before = predecessor[first]
+    parent = np.where(before >= 0, cluster[np.maximum(before, 0)], -1)
+    parent[~reached[first]] = -1
+    has_parent = parent >= 0
+    edge = np.zeros((m, 2))
+    edge[has_parent] = unit_vectors(np.pad(centre[has_parent] - centre[parent[has_parent]], ((0, 0), (0, 1))))[:, :2]
+    total = edge.copy()
+    links = np.bincount(parent[has_parent], minlength=m) + has_parent
+    for d in range(2):
+        total[:, d] += np.bincount(parent[has_parent], edge[has_parent, d], m)
+    mean = total / np.maximum(links, 1)[:, None]
+    flow = unit_vectors(np.pad(mean * [1.0, -1.0], ((0, 0), (0, 1))))[:, :2]  # image v down -> z up
+    directions = np.zeros((h, w, 2))
+    directions[rows, cols] = np.where(reached[:, None], flow[cluster], 0.0)
+    geodesic = np.full((h, w), np.inf)
+    geodesic[rows, cols] = distance
+    return directions, geodesic
+
+
+def _axis_extent(camera: Camera, base: np.ndarray, scale: float) -> tuple[float, float, float, float]:
+    """The image's (x0, x1, z0, z1) in the output frame on the vertical plane through the base that faces the
+    camera: the extent `revolved_field` reads a 2D field with (exact for level views, near for tilted ones)."""
+    forward = camera.world_to_camera[2, :3].copy()
+    forward[2] = 0.0
+    if np.linalg.norm(forward) < 1e-9:  # looking straight down: any vertical plane will do
+        forward = np.array([0.0, 1.0, 0.0])
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    pixel, _ = camera.project(base[None])
+    u0, v0 = pixel[0]
+    edges = np.array([[-0.5, v0], [camera.width - 0.5, v0], [u0, camera.height - 0.5], [u0, -0.5]])
+    nearby = camera.unproject(edges, np.full(4, camera.near))
+    faraway = camera.unproject(edges, np.full(4, camera.far))
+    t = ((base - nearby) @ forward) / np.where(np.abs((faraway - nearby) @ forward) > 1e-12,
+                                               (faraway - nearby) @ forward, 1e-12)
+    on_plane = nearby + t[:, None] * (faraway - nearby) - base
+    x0, x1 = on_plane[:2] @ right * scale  # image right is forward x up, as in every Camera
+    z0, z1 = on_plane[2:, 2] * scale
+    return float(x0), float(x1), float(z0), float(z1)
+
+
+# ------------------------------------------------------------------------------------------------ growth
+def _thinned(skeleton: Skeleton, spacing: float) -> Skeleton:
+    """The skeleton with nodes kept about every `spacing` metres along each branch, and always its root, branch
+    ends, junctions and branch starts; each kept node hangs from its nearest kept ancestor."""
+    parent = skeleton.parent.astype(np.int64)
+    arc = np.zeros(len(skeleton))
+    for path in skeleton.branch_paths:  # one cumulative sum per branch, from its junction
+        arc[path[1:]] = np.cumsum(skeleton.segment_lengths[path[1:]])
+    step = np.floor(arc / spacing)
+    keep = step != step[np.maximum(parent, 0)]
+    keep[skeleton.n_children != 1] = True
+    keep[skeleton.branch_starts] = True
+    keep[0] = True
+    up = np.where(keep, np.arange(len(skeleton)), parent)
+    while True:  # nearest kept ancestor by repeated gathers
+        nxt = np.where(keep[np.maximum(up, 0)] | (up < 0), up, parent[np.maximum(up, 0)])
+        if np.array_equal(nxt, up):
+            break
+        up = nxt
+    ids = np.flatnonzero(keep)
+    new = np.full(len(skeleton), -1, np.int64)
+    new[ids] = np.arange(len(ids))
+    anc = np.where(parent[ids] >= 0, up[np.maximum(parent[ids], 0)], -1)
+    return Skeleton(skeleton.positions[ids], np.where(anc >= 0, new[np.maximum(anc, 0)], -1),
+                    skeleton.radius[ids], skeleton.order[ids])
+
+
+def _colonization_params(species: str, rng: np.random.Generator) -> dict:
+    preset = get_preset(species)
+    if preset.generator != "colonization":
+        raise SketchError(f"species {species!r} is a {preset.generator} preset: allowed a colonization preset "
+                          f"(sc_*), default {DEFAULT_SPECIES!r}")
+    return validate(preset.sample(rng))
+
+
+def from_sketch(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.ndarray, camera: Camera, *,
+                species: str = DEFAULT_SPECIES, height: float | None = None,
+                rng: np.random.Generator) -> SketchReconstruction:
+    """Grow a tree that fills a sketch's crown from its traced main branches (seed 000 chapter 3).
+
+    silhouette_maps : (H, W, 3) float in [0, 1]: front depth01, front-to-back gap, mask (the renderers'
+                      "silhouette" output or the silhouette network's prediction); mask < 0.5 is background.
+    trunk_maps      : (H, W) float trunk depth01, 1 = no stroke (the "trunk_depth" output or prediction).
+    strokes         : (H, W, 3) uint8 colour trunk strokes on white (see `trace_trunk`).
+    camera          : the input view's Camera; the maps are its size.
+    species         : a colonization preset (DEFAULT_SPECIES = "sc_round_maple" unless told).
+    height          : metres from the trunk base to the crown top; default the preset's draw.
+    rng             : draws the preset's parameters, then growth; the same state gives the same bytes.
+    The tree's base is the lowest stroke point, moved to the origin; the sketch is scaled to `height`. The
+    preset's internode length is height / (crown_base + crown_height), so its IL-sized settings keep their sense.
+    Report maps: "front", "back", "crown_mask" (H, W) (the growth space's), "geodesic" (H, W) px,
+    "directions" (H, W, 2), "trunk_px" (K, 2) (u, v) of the traced main skeleton's nodes, "main_skeleton"
+    (G, 3) float32 metres, the guide grown from (the traced nodes about one internode apart: the tree's first G).
+    """
+    times: dict[str, float] = {}
+    clock = start = time.perf_counter()
+
+    def lap(name):
+        nonlocal clock
+        now = time.perf_counter()
+        times[name] = now - clock
+        clock = now
+
+    if not isinstance(rng, np.random.Generator):
+        raise SketchError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    silhouette = _image(silhouette_maps, "silhouette_maps", (3,)).astype(np.float64)
+    trunk_depth = _image(trunk_maps, "trunk_maps", (0,)).astype(np.float64)
+    _check_camera(camera, silhouette.shape[:2])
+    if height is not None and not (np.isfinite(height) and height > 0):
+        raise SketchError(f"height {height!r} must be a number of metres > 0 (or None for the preset's)")
+    params = _colonization_params(species, rng)
+    height = float(params["height"] if height is None else height)
+    params["height"] = height
+
+    mask = silhouette[..., 2] >= 0.5
+    if not mask.any():
+        raise SketchError("the silhouette is blank (no foreground pixel): allowed a sketch with a tree on it")
+    cleaned, mask = denoise_depth(silhouette[..., :2], mask)
+    front, gap = cleaned[..., 0], cleaned[..., 1]
+    back = np.minimum(front + gap, 1.0 - 1e-6)
+    lap("denoise")
+
+    main = trace_trunk(strokes, trunk_depth, camera)
+    base = main.positions[0].astype(np.float64)
+    lap("trunk")
+
+    base_px, base_depth = camera.project(base[None])
+    base_u, base_v = float(base_px[0, 0]), float(base_px[0, 1])
+    axis01 = float((base_depth[0] - camera.near) / (camera.far - camera.near))
+    front_c, back_c, crown_mask = crown_maps(front, back, mask, (base_u, base_v), axis01, camera)
+    _, _, bottom_z, top_z = _axis_extent(camera, base, 1.0)  # metres above the base, image bottom and top edges
+    top_row = int(np.flatnonzero(crown_mask.any(axis=1))[0])
+    tree_height = top_z - top_row / camera.height * (top_z - bottom_z)  # to the top edge of the crown's top row
+    if not tree_height > 0:
+        raise SketchError("the crown lies below the lowest trunk stroke: allowed strokes that start at the "
+                          "trunk base, below the crown")
+    scale = height / tree_height
+    crown = CameraCrown(front_c, back_c, crown_mask, camera, origin=base, scale=scale)
+    lap("crown")
+
+    region = crown_mask | (stroke_labels(strokes)[0] >= 0)
+    root = (int(np.clip(np.rint(base_u), 0, camera.width - 1)), int(np.clip(np.rint(base_v), 0, camera.height - 1)))
+    directions, geodesic = geodesic_field(region, root, _BIN_PX * max(camera.width, camera.height) / _REFERENCE_PX)
+    steering = MarkerSteering(attraction=revolved_field(directions, _axis_extent(camera, base, scale)))
+    lap("field")
+
+    il = height / (params["crown_base"] + params["crown_height"])
+    guide_positions = (main.positions.astype(np.float64) - base) * scale
+    guide = Skeleton(guide_positions, main.parent, main.radius * scale, main.order)
+    guide = _thinned(guide, il)
+    skeleton = grow_in_space(params, rng, space=crown, internode_length=il, guide=guide, guide_buds="all",
+                             steering=steering)
+    lap("growth")
+    mesh = build_mesh(skeleton, params)
+    lap("mesh")
+    times["total"] = time.perf_counter() - start
+    trunk_px, _ = camera.project(main.positions)
+    maps = {"front": front_c.astype(np.float32), "back": back_c.astype(np.float32), "crown_mask": crown_mask,
+            "geodesic": geodesic.astype(np.float32), "directions": directions.astype(np.float32),
+            "trunk_px": trunk_px.astype(np.float32), "main_skeleton": guide.positions.copy()}
+    return SketchReconstruction(skeleton, mesh, params, times, maps)

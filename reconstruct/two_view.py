@@ -1,0 +1,269 @@
+"""Two orthogonal sketches to a tree (seed 001, the network-free method): 2D skeletons of both drawings, the
+skeleton point cloud by equal-height matching, the lifted 3D main skeleton, twigs clipped by both crowns, mesh.
+
+In: a front and a side drawing (dark strokes on white; the front looks along +Y, the side along -X, as the
+renderers' "two-view" rig). Out: `TwoViewResult` (Skeleton in metres, Z up, base at the origin; TreeMesh; report).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from species import Skeleton, TreeMesh, build_mesh
+from trainers.preprocess import SPECK_SHARE, PreprocessError, paper_image
+
+from ._two_view_brush import skeleton_2d_from_brush, stroke_centres
+from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_height, skeleton_pixels
+from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
+from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
+                              resample_skeleton)
+
+__all__ = ["two_view", "TwoViewResult", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
+           "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
+           "lift_main_skeleton", "grow_twigs", "add_leaves", "resample_skeleton", "ink_mask", "crown_outline",
+           "is_brush_drawing", "DEFAULT_HEIGHT", "MESH_PARAMS", "TWIG_DEFAULTS", "LEAF_DEFAULTS",
+           "LIFT_DISTANCE_PX", "LINE_RADIUS_PX", "OUTLINE_MARGIN", "NODE_SPACING", "BRUSH_SHARE", "INK_LEVEL"]
+
+DEFAULT_HEIGHT = 8.0   # metres, when the caller gives none: a mid-sized garden or street tree
+INK_LEVEL = 0.5        # a pixel at least half way from paper to ink (trainers.preprocess levels) is a stroke
+# The crown outline of a view: the convex hull of its ink grown sideways by this share of the view's tree height,
+# so twigs may reach a little past the drawn branch tips, as a crown does.
+OUTLINE_MARGIN = 0.05
+NODE_SPACING = 0.02    # the lifted main skeleton keeps a node about every this share of the height
+# A drawing is in brush strokes when more than this share of its ink survives a 3x3 erosion (1-2 px pen lines
+# do not survive it).
+BRUSH_SHARE = 0.05
+# The mesh's dictionary: bark and leaf colours of the colonization templates; default tube sides.
+MESH_PARAMS = {"name": "two-view", "bark_color": [0.33, 0.25, 0.18], "leaf_color": [0.25, 0.45, 0.15]}
+_MIN_SIDE = 8
+
+
+@dataclass(frozen=True, eq=False)
+class TwoViewResult:
+    """What `two_view` returns.
+
+    skeleton : Skeleton, metres, Z up, base at the origin, with leaves.
+    mesh     : TreeMesh of that skeleton (bark tubes and leaf cards).
+    report   : dict: "timings" {stage: seconds}, "brush" (bool, the stroke kind used), "metres_per_pixel" and
+               "side_scale" (front pixels per side pixel), "front_2d" and "side_2d" (Skeleton2D; the side mapped
+               into the front's pixels), "cloud" (M, 3) and "lifted" (N, 3) pixels (front column, row, side
+               column), "main" (the main Skeleton, metres), "twig_level" (N,) uint8, "outlines" (front, side)
+               CrownOutline.
+    """
+
+    skeleton: Skeleton
+    mesh: TreeMesh
+    report: dict
+
+
+@dataclass(frozen=True)
+class _Frame:
+    """Where the tree stands in one drawing: lowest and highest ink rows, and the trunk base column."""
+
+    base_row: int
+    top_row: int
+    base_col: float
+
+    @property
+    def height_px(self) -> int:
+        return self.base_row - self.top_row
+
+
+def _checked_image(image, name: str) -> np.ndarray:
+    if not isinstance(image, np.ndarray):
+        raise TwoViewError(f"{name} is a {type(image).__name__}: allowed a numpy uint8 image array")
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+        raise TwoViewError(f"{name} has shape {image.shape}: allowed (H, W) grey or (H, W, 3) colour")
+    if image.dtype != np.uint8:
+        raise TwoViewError(f"{name} has dtype {image.dtype}: allowed uint8 (0 = black ink, 255 = white paper)")
+    if min(image.shape[:2]) < _MIN_SIDE:
+        raise TwoViewError(f"{name} is {image.shape[1]} x {image.shape[0]} px: allowed at least "
+                           f"{_MIN_SIDE} x {_MIN_SIDE}")
+    return image
+
+
+def ink_mask(image: np.ndarray, name: str = "image") -> np.ndarray:
+    """(H, W) bool stroke pixels of a drawing: (H, W) or (H, W, 3) uint8, dark strokes on light paper (or light
+    on dark), levelled by `trainers.preprocess.paper_image` so grey scans and tinted paper read alike.
+    Raises TwoViewError for a wrong shape or dtype and for a blank image."""
+    image = _checked_image(image, name)
+    try:
+        ink = paper_image(image, "sketch")[..., 0]
+    except PreprocessError as exc:
+        raise TwoViewError(f"{name}: {exc}") from exc
+    mask = ink >= INK_LEVEL
+    if not mask.any():
+        raise TwoViewError(f"{name} is blank: no stroke is darker than half way from paper to ink")
+    return mask
+
+
+def is_brush_drawing(mask: np.ndarray) -> bool:
+    """Whether a stroke mask (H, W) bool is drawn with a brush rather than a 1-pixel pen (see BRUSH_SHARE)."""
+    core = cv2.erode(mask.astype(np.uint8), np.ones((3, 3), np.uint8))
+    return bool(np.count_nonzero(core) > BRUSH_SHARE * np.count_nonzero(mask))
+
+
+def _without_specks(mask: np.ndarray) -> np.ndarray:
+    """The mask without ink pieces smaller than trainers.preprocess.SPECK_SHARE of the image (scan dust); the mask
+    as it is if only specks are left."""
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(mask.astype(np.uint8), connectivity=8)
+    big = stats[:, cv2.CC_STAT_AREA] >= max(2.0, SPECK_SHARE * mask.size)
+    big[0] = False
+    kept = big[labels]
+    return kept if kept.any() else mask
+
+
+def crown_outline(mask: np.ndarray, margin_px: float) -> np.ndarray:
+    """(H, W) bool crown outline of a view: the filled convex hull of its stroke pixels, grown by `margin_px`
+    but never above the highest or below the lowest stroke row (the drawing fixes the tree's height)."""
+    ys, xs = np.nonzero(mask)
+    hull = cv2.convexHull(np.column_stack([xs, ys]).astype(np.int32))
+    outline = np.zeros(mask.shape, np.uint8)
+    cv2.fillPoly(outline, [hull.reshape(-1, 2)], 1)
+    grow = int(round(margin_px))
+    if grow > 0:
+        outline = cv2.dilate(outline, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1)))
+        outline[:ys.min()] = 0
+        outline[ys.max() + 1:] = 0
+    return outline > 0
+
+
+def _frame(mask: np.ndarray, skeleton: Skeleton2D, name: str) -> _Frame:
+    rows = np.flatnonzero(mask.any(axis=1))
+    frame = _Frame(int(rows[-1]), int(rows[0]), float(skeleton.points[0, 0]))
+    if frame.height_px < 2:
+        raise TwoViewError(f"{name}'s strokes span {frame.height_px + 1} row(s): draw the tree from its base to "
+                           f"its top (at least 3 rows)")
+    return frame
+
+
+def _outline(given, mask: np.ndarray, frame: _Frame, name: str) -> np.ndarray:
+    if given is None:
+        return crown_outline(mask, OUTLINE_MARGIN * frame.height_px)
+    given = np.asarray(given)
+    if given.shape != mask.shape:
+        raise TwoViewError(f"{name} outline has shape {given.shape}: allowed the image's {mask.shape}")
+    given = given.astype(bool)
+    if not given.any():
+        raise TwoViewError(f"{name} outline is empty: allowed a mask that is True inside the crown")
+    return given
+
+
+def _check_height(height) -> float:
+    if height is None:
+        return DEFAULT_HEIGHT
+    if isinstance(height, bool) or not isinstance(height, (int, float, np.integer, np.floating)) \
+            or not np.isfinite(height) or not 0.0 < float(height) <= 200.0:
+        raise TwoViewError(f"height {height!r} is invalid: allowed metres in (0, 200]")
+    return float(height)
+
+
+def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None, rng: np.random.Generator,
+             brush: bool | None = None, front_outline=None, side_outline=None, twig_options: dict | None = None,
+             leaf_options: dict | None = None) -> TwoViewResult:
+    """A tree from two orthogonal drawings (seed 001, digest 2).
+
+    front, side : (H, W) grey or (H, W, 3) colour uint8 images of one size, dark strokes on light paper: the trunk
+                  and main branches seen from the front (world X to the right) and from the side (world Y to the
+                  right), Z up. Their scales may differ: each view is normalised on its trunk base (lowest ink
+                  row, the base column of its 2D skeleton's root) and its tree height (rows the ink spans).
+    height      : metres from the base to the top of the drawn tree (default DEFAULT_HEIGHT).
+    rng         : numpy Generator for the twigs and leaves; the same seed gives the same bytes.
+    brush       : True for brush strokes (radius from width; pieces may be apart), False for 1-pixel strokes
+                  (must be connected), None to tell from the drawings (`is_brush_drawing` on either view).
+    front_outline, side_outline : optional (H, W) bool crown masks in each image's pixels; default
+                  `crown_outline` of the ink (convex hull + OUTLINE_MARGIN of the tree height).
+    twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS.
+    Radii: the pipe model with exponent 2 and tips 0.002 x height; with brush strokes the main skeleton keeps
+    its drawn radii and no twig is thicker than the main branch it grows from.
+    Raises TwoViewError for images that are blank, not (H, W) / (H, W, 3) uint8, of different sizes, 1-pixel
+    strokes in several pieces, bad outlines, heights or options.
+    """
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = now - clock
+        clock = now
+
+    if not isinstance(rng, np.random.Generator):
+        raise TwoViewError(f"rng is a {type(rng).__name__}: allowed a numpy.random.Generator "
+                           f"(numpy.random.default_rng(seed))")
+    height = _check_height(height)
+    front_ink, side_ink = ink_mask(front, "front image"), ink_mask(side, "side image")
+    if front_ink.shape != side_ink.shape:
+        raise TwoViewError(f"the front image is {front_ink.shape[1]} x {front_ink.shape[0]} px and the side image "
+                           f"{side_ink.shape[1]} x {side_ink.shape[0]} px: draw both views on images of one size")
+    if brush is None:
+        brush = is_brush_drawing(front_ink) or is_brush_drawing(side_ink)
+    brush = bool(brush)
+    lap("ink")
+    if brush:
+        front_ink, side_ink = _without_specks(front_ink), _without_specks(side_ink)
+        front_2d = skeleton_2d_from_brush(front_ink, "front image")
+        side_2d = skeleton_2d_from_brush(side_ink, "side image")
+    else:
+        front_2d = skeleton_2d_from_lines(front_ink, "front image")
+        side_2d = skeleton_2d_from_lines(side_ink, "side image")
+    lap("skeleton_2d")
+    front_frame = _frame(front_ink, front_2d, "the front image")
+    side_frame = _frame(side_ink, side_2d, "the side image")
+    outlines_px = (_outline(front_outline, front_ink, front_frame, "front"),
+                   _outline(side_outline, side_ink, side_frame, "side"))
+    scale = front_frame.height_px / side_frame.height_px  # front pixels per side pixel
+    side_in_front = side_2d.transformed(scale, (side_frame.base_col, side_frame.base_row),
+                                        (front_frame.base_col, front_frame.base_row))
+    cloud = match_equal_height(front_2d, side_in_front)
+    lap("match")
+    dense = front_2d.densified(1.0)
+    lifted = lift_main_skeleton(dense, cloud)
+    lap("lift")
+    mpp = height / front_frame.height_px
+    world = np.column_stack([lifted[:, 0] - front_frame.base_col, lifted[:, 2] - front_frame.base_col,
+                             front_frame.base_row - lifted[:, 1]]) * mpp
+    root = world[0].copy()
+    world -= root
+    order = dense.branch_order[dense.branch]
+    main = resample_skeleton(world, dense.parent, order, np.maximum(dense.radius, LINE_RADIUS_PX) * mpp,
+                             NODE_SPACING * height)
+    ppm = 1.0 / mpp
+    outlines = (
+        CrownOutline(outlines_px[0], 0, (front_frame.base_col + root[0] * ppm, front_frame.base_row - root[2] * ppm),
+                     ppm),
+        CrownOutline(outlines_px[1], 1, (side_frame.base_col + root[1] * ppm / scale,
+                                         side_frame.base_row - root[2] * ppm / scale), ppm / scale),
+    )
+    lap("main_skeleton")
+    skeleton, level = grow_twigs(main, *outlines, rng, **(twig_options or {}))
+    if brush:
+        skeleton = _with_drawn_radii(skeleton, level, main.radius)
+    skeleton = add_leaves(skeleton, level, rng, **(leaf_options or {}))
+    lap("twigs")
+    mesh = build_mesh(skeleton, MESH_PARAMS)
+    lap("mesh")
+    report = {"timings": timings, "brush": brush, "metres_per_pixel": mpp, "side_scale": scale,
+              "front_2d": front_2d, "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
+              "twig_level": level, "outlines": outlines}
+    return TwoViewResult(skeleton, mesh, report)
+
+
+def _with_drawn_radii(skeleton: Skeleton, level: np.ndarray, drawn: np.ndarray) -> Skeleton:
+    """Main nodes (level 0, the first len(drawn)) take their drawn radius; a twig is capped at the drawn radius of
+    the main node it grows from."""
+    n_main = len(drawn)
+    parent = skeleton.parent.astype(np.int64)
+    anchor = np.arange(len(skeleton))
+    while True:
+        twig = anchor >= n_main
+        if not twig.any():
+            break
+        anchor[twig] = parent[anchor[twig]]
+    radius = np.minimum(skeleton.radius, drawn[anchor])
+    radius[:n_main] = drawn
+    return Skeleton(skeleton.positions, skeleton.parent, radius, skeleton.order, skeleton.leaves,
+                    skeleton.leaf_node)
