@@ -27,6 +27,7 @@ COMMAND_MODULES = [
     "farm.commands.review",
     "farm.commands.library",
     "farm.commands.train",
+    "farm.commands.reconstruct",
 ]
 
 EXIT_USER_ERROR = 2

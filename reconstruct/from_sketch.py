@@ -29,7 +29,7 @@ from species.presets import get_preset
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
-__all__ = ["SketchError", "SketchReconstruction", "CameraCrown", "from_sketch", "backproject", "denoise_depth",
+__all__ = ["SketchError", "SketchReconstruction", "CameraCrown", "from_sketch", "from_maps", "backproject", "denoise_depth",
            "trace_trunk", "stroke_labels", "geodesic_field", "crown_maps", "DEFAULT_SPECIES", "DENOISE_EPSILON",
            "TRACE_STEP_PX", "TRACE_RADIUS_PX"]
 
@@ -521,10 +521,46 @@ def _colonization_params(species: str, rng: np.random.Generator) -> dict:
     return validate(preset.sample(rng))
 
 
-def from_sketch(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.ndarray, camera: Camera, *,
-                species: str = DEFAULT_SPECIES, height: float | None = None,
-                rng: np.random.Generator) -> SketchReconstruction:
-    """Grow a tree that fills a sketch's crown from its traced main branches (seed 000 chapter 3).
+def from_sketch(sketch, strokes, *, models=None, species: str | None = None, height: float | None = None,
+                rng: np.random.Generator, photo: bool = False, silhouette_net=None, trunk_net=None,
+                sketchnet=None) -> SketchReconstruction:
+    """A tree from a drawing: the silhouette network reads `sketch` (black edges on white, any size; with
+    `photo`, a photo whose blurred Canny edges are the sketch), the trunk network `strokes` (colour trunk strokes
+    on the same page), and `from_maps` grows the tree in the drawing's view (`reconstruct.networks`).
+
+    models : a registry (its champions) or None for the shipped defaults; the *_net arguments: loaded predictors.
+    species : a colonization preset, "auto" (TreeSketchNet reads the species from the sketch, mapped by
+              `networks.SPECIES_TO_COLONIZATION`) or None (DEFAULT_SPECIES). height, rng : as `from_maps`.
+    Report maps add "sketch" (the silhouette network's input) and "trunk_depth", "strokes" (in its window);
+    timings add "networks".
+    """
+    from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
+
+    start = time.perf_counter()
+    if not isinstance(rng, np.random.Generator):
+        raise SketchError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    sketch = photo_edges(sketch) if photo else as_image(sketch, "sketch")
+    silhouette_net = silhouette_net or predictor("pix2pix-silhouette", models)
+    found = sketch_maps(sketch, strokes, silhouette_net=silhouette_net,
+                        trunk_net=trunk_net or predictor("pix2pix-trunk", models))
+    chosen = DEFAULT_SPECIES if species is None else species
+    if species == "auto":
+        chosen = colonization_species((sketchnet or predictor("sketchnet", models)).predict(sketch)["species"])
+    networks = time.perf_counter() - start
+    result = from_maps(found.silhouette, found.trunk_depth, found.strokes, found.camera, species=chosen,
+                       height=height, rng=rng)
+    result.timings["networks"] = networks
+    result.timings["total"] += networks
+    result.maps.update(sketch=silhouette_net.prepare(sketch)[0], trunk_depth=found.trunk_depth,
+                       strokes=found.strokes, silhouette=found.silhouette)
+    return result
+
+
+def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.ndarray, camera: Camera, *,
+              species: str = DEFAULT_SPECIES, height: float | None = None,
+              rng: np.random.Generator) -> SketchReconstruction:
+    """Grow a tree that fills a sketch's crown from its traced main branches (seed 000 chapter 3), given the depth
+    networks' maps (or ground-truth renders standing in for them).
 
     silhouette_maps : (H, W, 3) float in [0, 1]: front depth01, front-to-back gap, mask (the renderers'
                       "silhouette" output or the silhouette network's prediction); mask < 0.5 is background.

@@ -12,7 +12,7 @@ from species.skeleton import Skeleton
 from .camera import Camera
 from .strokes import branch_polylines, main_branches
 
-__all__ = ["sketch_tsn", "sketch_edges", "sketch_strokes", "sketch_strokes_brush", "crown_region",
+__all__ = ["sketch_tsn", "sketch_edges", "edges_of_grey", "sketch_strokes", "sketch_strokes_brush", "crown_region",
            "sketch_crown", "sketch_hand", "shaded"]
 
 SOBEL_STEP = 4.0        # 3x3 Sobel response to a 0 -> 1 step: the scale that maps an edge to 1
@@ -71,12 +71,16 @@ def shaded(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return np.where(mask > 0, grey, 255.0).astype(np.uint8)
 
 
-def sketch_edges(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Seed 000's silhouette input (digest 1.8): Gaussian blur 5x5, sigma 1.4, then Canny 50/150 of the shaded
-    render of the visible tree; edges black on white."""
-    grey = cv2.GaussianBlur(shaded(normals, mask), (5, 5), 1.4)
-    edges = cv2.Canny(grey, 50, 150)
+def edges_of_grey(grey: np.ndarray) -> np.ndarray:
+    """Seed 000's edge step (digest 1.8) on any (H, W) uint8 grey image, a render or a photo: Gaussian blur 5x5,
+    sigma 1.4, then Canny 50/150; edges black on white."""
+    edges = cv2.Canny(cv2.GaussianBlur(np.ascontiguousarray(grey, np.uint8), (5, 5), 1.4), 50, 150)
     return np.where(edges > 0, 0, 255).astype(np.uint8)
+
+
+def sketch_edges(normals: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Seed 000's silhouette input: `edges_of_grey` of the shaded render of the visible tree."""
+    return edges_of_grey(shaded(normals, mask))
 
 
 def _projected_main_segments(camera: Camera, skeleton: Skeleton):

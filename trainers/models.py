@@ -27,7 +27,7 @@ from species.errors import TreefarmError
 
 from .data import Split
 from .onnx_runtime import OnnxModel
-from .preprocess import preprocess
+from .preprocess import prepare, preprocess
 from .registry import BASELINE_SUFFIX, CHAMPION, Registry, RegistryError
 from .sketchnet_codec import CODEC_VERSION, ParameterCodec
 from .tasks import TASKS, get_task
@@ -117,11 +117,16 @@ class Predictor:
         return preprocess(image, self.input_kind, self.input_size)
 
     def predict(self, image, seed: int = 0):
-        x = self.prepare(image)[None]
-        outputs = self.model.run(x)
+        return self.predict_view(image, seed)[0]
+
+    def predict_view(self, image, seed: int = 0):
+        """`predict` with the crop of `image` the input was cut from (`trainers.preprocess.Prepared.crop`), so a
+        depth map can be placed back on the drawing, or beside another network's of the same drawing."""
+        prepared = prepare(image, self.input_kind, self.input_size)
+        outputs = self.model.run(prepared.image[None])
         if self.codec is None:
-            return np.asarray(outputs)[0]
-        return self.codec.decode_arrays(dict(outputs), seed=seed)[0]
+            return np.asarray(outputs)[0], prepared.crop
+        return self.codec.decode_arrays(dict(outputs), seed=seed)[0], prepared.crop
 
     def __repr__(self) -> str:
         return f"Predictor({self.task}, {self.source})"

@@ -21,8 +21,19 @@ from .onnx_runtime import export_onnx
 from .sketchnet_codec import ParameterCodec
 from .tasks import Task, get_task
 
-__all__ = ["TrainSettings", "TaskNetwork", "SketchNetwork", "Pix2PixNetwork", "network_for", "SettingsError",
+__all__ = ["SCHEDULES", "schedule_factor", "TrainSettings", "TaskNetwork", "SketchNetwork", "Pix2PixNetwork", "network_for", "SettingsError",
            "DEFAULT_SETTINGS"]
+
+
+SCHEDULES = ("constant", "cosine")
+
+
+def schedule_factor(schedule: str, step: int, total_steps: int) -> float:
+    """The learning rate's multiplier at `step` (0-based) of `total_steps`: 1 (constant) or the cosine from 1 at
+    the first step to 0 after the last."""
+    if schedule == "constant":
+        return 1.0
+    return 0.5 * (1.0 + np.cos(np.pi * min(step, total_steps) / max(total_steps, 1)))
 
 
 class SettingsError(TreefarmError):
@@ -37,7 +48,10 @@ class TrainSettings:
     networks together run in about 40 ms per sketch on one core, bench_inference.py). depth : TreeSketchNet's
     depth multiplier. learning_rate : None = the network's default (TreeSketchNet 1e-3: the paper's 1e-5 over
     2,000 epochs does not fit a CPU budget; pix2pix 2e-4, beta1 0.5). time_budget_s : stop after this much
-    training time, at the end of the batch that crosses it (the benchmark's fixed budget).
+    training time, at the end of the batch that crosses it (the benchmark's fixed budget). schedule : the
+    learning rate over the run's steps (epochs x batches per epoch): "constant" (the papers'), or "cosine"
+    (from the rate down to 0 by the last step; a short run ends on small steps), set from the step count, so a
+    resumed run continues the same curve.
     """
 
     epochs: int = 20
@@ -48,6 +62,7 @@ class TrainSettings:
     seed: int = 0
     time_budget_s: float | None = None
     discriminator: str = "patch"
+    schedule: str = "constant"
 
     def __post_init__(self) -> None:
         checks = [("epochs", self.epochs, 1, 100_000), ("batch_size", self.batch_size, 1, 4096),
@@ -59,6 +74,8 @@ class TrainSettings:
                             ("time_budget_s", self.time_budget_s), ("depth", self.depth)):
             if value is not None and not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise SettingsError(f"{name} = {value!r} is invalid: allowed a positive number")
+        if self.schedule not in SCHEDULES:
+            raise SettingsError(f"schedule = {self.schedule!r} is invalid: allowed one of {', '.join(SCHEDULES)}")
         if self.discriminator not in pix2pix.DISCRIMINATORS:
             raise SettingsError(f"discriminator = {self.discriminator!r} is invalid: allowed one of "
                                 f"{sorted(pix2pix.DISCRIMINATORS)}")

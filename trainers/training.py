@@ -36,7 +36,7 @@ from species.errors import TreefarmError
 
 from .curves import curves_png, read_metrics_csv, write_metrics_csv
 from .data import Split, TaskDataset, TrainingData, open_data
-from .networks import SettingsError, TaskNetwork, TrainSettings, network_for
+from .networks import SettingsError, TaskNetwork, TrainSettings, network_for, schedule_factor
 from .sketchnet_codec import ParameterCodec
 from .tasks import get_task
 
@@ -163,12 +163,17 @@ def _worker_loop(config: dict) -> None:
     started = time.perf_counter() - seconds_before  # a resumed run's clock continues where it stopped
     budget = settings.time_budget_s
     per_epoch = max(1, math.ceil(config["n_train"] / (settings.batch_size * world)))
+    base_rate = network.learning_rate()
     for epoch in range(start_epoch, settings.epochs):
         losses: list[float] = []
         for rows in shard.iter_batches(batch_size=settings.batch_size, batch_format="numpy",
                                        local_shuffle_buffer_size=config["shuffle_buffer"],
                                        local_shuffle_seed=settings.seed * 100_003 + epoch):
             batch = _augmented_batch(train_set, rows, epoch)
+            factor = schedule_factor(settings.schedule, step, per_epoch * settings.epochs)
+            for optimizer in optimizers.values():
+                for group in optimizer.param_groups:
+                    group["lr"] = base_rate * factor
             losses.append(network.train_step(optimizers, batch)["loss"])
             step += 1
             if progress is not None and rank == 0:

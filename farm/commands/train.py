@@ -55,6 +55,10 @@ def _task_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, help="batch size per worker (default 16)")
     parser.add_argument("--width", type=float,
                         help="network width: TreeSketchNet's multiplier (1 = B0), the U-Net's base channels (16)")
+    parser.add_argument("--depth", type=float, help="TreeSketchNet's depth multiplier (default 1 = B0)")
+    parser.add_argument("--learning-rate", type=float, help="default: TreeSketchNet 1e-3, pix2pix 2e-4")
+    parser.add_argument("--schedule", choices=("constant", "cosine"),
+                        help="learning rate over the run: constant (default) or cosine down to 0 by the last epoch")
     parser.add_argument("--seed", type=int, default=0, help="seed of initialisation, order and augmentation")
     parser.add_argument("--time-budget", type=float, metavar="SECONDS", help="stop training after this long")
     parser.add_argument("--workers", type=int, default=1, help="Ray Train workers (data-parallel; default 1)")
@@ -86,8 +90,8 @@ def _settings(args: argparse.Namespace, base: dict | None = None):
     from trainers.networks import TrainSettings
 
     values = dict(base or {})
-    for key, name in (("epochs", "epochs"), ("batch_size", "batch_size"), ("width", "width"),
-                      ("time_budget", "time_budget_s")):
+    for key, name in (("epochs", "epochs"), ("batch_size", "batch_size"), ("width", "width"), ("depth", "depth"),
+                      ("learning_rate", "learning_rate"), ("schedule", "schedule"), ("time_budget", "time_budget_s")):
         if getattr(args, key) is not None:
             values[name] = getattr(args, key)
     values["seed"] = args.seed

@@ -8,7 +8,7 @@ import pytest
 import species
 from renderers import PALETTE, ViewRenderer
 from renderers.camera import orthographic_camera, perspective_camera
-from reconstruct.from_sketch import (CameraCrown, SketchError, backproject, denoise_depth, from_sketch,
+from reconstruct.from_sketch import (CameraCrown, SketchError, backproject, denoise_depth, from_maps,
                                      geodesic_field, trace_trunk, TRACE_STEP_PX)
 from species.errors import TreefarmError
 
@@ -168,7 +168,7 @@ def sketch(renderer):
 def _reconstruct(sketch, seed: int, **kwargs):
     skeleton, view = sketch
     images = view.images
-    return from_sketch(images["silhouette"], images["trunk_depth"], images["trunk_strokes"], view.camera,
+    return from_maps(images["silhouette"], images["trunk_depth"], images["trunk_strokes"], view.camera,
                        height=kwargs.pop("height", skeleton.height), rng=np.random.default_rng(seed), **kwargs)
 
 
@@ -229,7 +229,7 @@ def _one_line_error(call, match: str):
 def test_blank_silhouette_is_rejected(sketch):
     _, view = sketch
     blank = np.zeros_like(view.images["silhouette"])
-    _one_line_error(lambda: from_sketch(blank, view.images["trunk_depth"], view.images["trunk_strokes"],
+    _one_line_error(lambda: from_maps(blank, view.images["trunk_depth"], view.images["trunk_strokes"],
                                         view.camera, rng=np.random.default_rng(0)), "blank")
 
 
@@ -237,22 +237,22 @@ def test_strokes_without_a_trunk_are_rejected(sketch):
     _, view = sketch
     white = np.full_like(view.images["trunk_strokes"], 255)
     white[10:20, 10:20] = 0  # black pencil is not a trunk stroke
-    _one_line_error(lambda: from_sketch(view.images["silhouette"], view.images["trunk_depth"], white,
+    _one_line_error(lambda: from_maps(view.images["silhouette"], view.images["trunk_depth"], white,
                                         view.camera, rng=np.random.default_rng(0)), "no trunk stroke")
 
 
 def test_wrong_channel_counts_sizes_and_species_are_rejected(sketch):
     _, view = sketch
     images, camera = view.images, view.camera
-    _one_line_error(lambda: from_sketch(images["silhouette"][..., :2], images["trunk_depth"],
+    _one_line_error(lambda: from_maps(images["silhouette"][..., :2], images["trunk_depth"],
                                         images["trunk_strokes"], camera, rng=np.random.default_rng(0)),
                     r"\(H, W, 3\)")
-    _one_line_error(lambda: from_sketch(images["silhouette"], images["trunk_depth"],
+    _one_line_error(lambda: from_maps(images["silhouette"], images["trunk_depth"],
                                         images["trunk_strokes"][..., :2], camera, rng=np.random.default_rng(0)),
                     "strokes")
-    _one_line_error(lambda: from_sketch(images["silhouette"][:64, :64], images["trunk_depth"][:64, :64],
+    _one_line_error(lambda: from_maps(images["silhouette"][:64, :64], images["trunk_depth"][:64, :64],
                                         images["trunk_strokes"][:64, :64], camera, rng=np.random.default_rng(0)),
                     "camera")
-    _one_line_error(lambda: from_sketch(images["silhouette"], images["trunk_depth"], images["trunk_strokes"],
+    _one_line_error(lambda: from_maps(images["silhouette"], images["trunk_depth"], images["trunk_strokes"],
                                         camera, species="black_oak", rng=np.random.default_rng(0)),
                     "colonization")

@@ -18,7 +18,7 @@ from farm.jobs import load_spec
 from farm.pipeline import run_job
 from trainers import models as trained_models
 from trainers.curves import read_metrics_csv
-from trainers.networks import SettingsError, TrainSettings
+from trainers.networks import SettingsError, TrainSettings, schedule_factor
 from trainers.registry import RegistryError, open_registry
 from trainers.tasks import TASKS
 from trainers.training import TrainingError, train
@@ -114,8 +114,9 @@ def test_bad_input_is_one_line_and_exit_2(datasets, tmp_path, args, fragment):
 # ------------------------------------------------------------------------------------------ resume
 @pytest.fixture(scope="module")
 def trunk_run(datasets, tmp_path_factory):
-    """An uninterrupted two-epoch pix2pix-trunk run."""
-    settings = TrainSettings(epochs=2, **TINY["pix2pix-trunk"])
+    """An uninterrupted two-epoch pix2pix-trunk run, its learning rate on the cosine schedule (set from the step
+    count, so a resumed run must continue the same curve)."""
+    settings = TrainSettings(epochs=2, schedule="cosine", **TINY["pix2pix-trunk"])
     return train("pix2pix-trunk", [str(datasets["pix2pix-trunk"])], settings=settings,
                  run_dir=tmp_path_factory.mktemp("trunk-run") / "run")
 
@@ -203,6 +204,16 @@ def test_a_failed_registration_leaves_nothing(trunk_run, tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         trained_models.register_result(registry, trunk_run)
     assert registry.names() == [] and registry.champion("pix2pix-trunk") is None
+
+
+def test_the_cosine_schedule_falls_from_the_rate_to_zero():
+    steps = np.arange(11)
+    factors = np.array([schedule_factor("cosine", int(s), 10) for s in steps])
+    assert factors[0] == 1.0 and abs(factors[-1]) < 1e-12 and abs(factors[5] - 0.5) < 1e-12
+    assert np.all(np.diff(factors) < 0)
+    assert {schedule_factor("constant", int(s), 10) for s in steps} == {1.0}
+    with pytest.raises(SettingsError, match="schedule"):
+        TrainSettings(schedule="linear")
 
 
 def test_settings_and_missing_models_are_refused():
