@@ -177,7 +177,7 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     front_outline, side_outline : optional (H, W) bool crown masks in each image's pixels; default
                   `crown_outline` of the ink (convex hull + OUTLINE_MARGIN of the tree height).
     twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS.
-    Radii: the pipe model with exponent 2 and tips 0.002 x height; with brush strokes the main skeleton keeps
+    Radii: the pipe model with exponent 2.5 (TWIG_DEFAULTS) and tips 0.002 x height; with brush strokes the main skeleton keeps
     its drawn radii and no twig is thicker than the main branch it grows from.
     Raises TwoViewError for images that are blank, not (H, W) / (H, W, 3) uint8, of different sizes, 1-pixel
     strokes in several pieces, bad outlines, heights or options.
