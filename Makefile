@@ -54,12 +54,13 @@ bench: env
 	$(PY) benchmarks/bench_weber_penn.py
 
 # The default models shipped in models/: the shipped data specs generated (once) into out/train-full, each
-# network trained for bench_train.py's fixed budget with seed 0, exported as model folders.
+# network trained on bench_train.py's budget recipe (BUDGET_SETTINGS: fixed epochs, seed 0; no time limit, so the
+# same steps on any machine), exported as model folders.
 TRAIN_TASKS := sketchnet pix2pix-silhouette pix2pix-trunk
 models: env
 	for task in $(TRAIN_TASKS); do test -f out/train-full/$$task/manifest.json || \
 		$(VENV)/bin/farm generate trainers/specs/$$task.yaml --out out/train-full/$$task --quiet || exit 1; done
-	$(PY) benchmarks/bench_train.py --data-root out/train-full --skip-throughput --export-models models
+	$(PY) benchmarks/bench_train.py --data-root out/train-full --skip-throughput --budget 0 --export-models models
 
 clean:
 	rm -rf $(VENV) $(BLENDER_VENV) node_modules out

@@ -62,7 +62,7 @@ _VERDICTS_SQL = "SELECT tree_id, reviewer, verdict, time_ms FROM verdicts"
 
 # Background value per channel of each target map (what a view shows where there is no tree), filled in where a
 # crop or a jitter reaches past the rendered image.
-_BACKGROUND = {"silhouette": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
+TARGET_BACKGROUND = {"silhouette": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
 _PIX2PIX_TASK = {"pix2pix-silhouette": "silhouette", "pix2pix-trunk": "trunk"}
 
 # Augmentation ranges (module docstring).
@@ -506,7 +506,7 @@ class TaskDataset(torch.utils.data.Dataset):
             cut = {style: apply_crop(raw, prepared.crop, task.input_size, 255)}
             for output in task.targets:
                 cut[output] = apply_crop(_hwc(self._item(s, output, row)[output]), prepared.crop,
-                                         task.input_size, _BACKGROUND[output])
+                                         task.input_size, TARGET_BACKGROUND[output])
             cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
             _, target, mask = targets_from_views(_PIX2PIX_TASK[task.name], cut)
             out["target"], out["mask"] = target.numpy(), mask.numpy()
@@ -523,7 +523,7 @@ class TaskDataset(torch.utils.data.Dataset):
         out = dict(plain)
         targets = []
         if "target" in plain:
-            targets = [(plain["target"], _BACKGROUND[self.data.task.targets[0]]), (plain["mask"], (0.0,))]
+            targets = [(plain["target"], TARGET_BACKGROUND[self.data.task.targets[0]]), (plain["mask"], (0.0,))]
         out["input"], warped = augment(plain["input"], rng, targets)
         if warped:
             out["target"], out["mask"] = warped

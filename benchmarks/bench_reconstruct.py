@@ -1,0 +1,477 @@
+"""Quality and speed of the three sketch reconstructions on held-out trees, beside the papers' figures.
+
+Trees: grown here from each method's dataset spec (its species; the tree seeds of a bench-own job seed, never a
+training spec's, so the shipped models never saw them), rendered as the spec renders them:
+- params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`, the Weber-Penn generator grows the
+  dictionary. Parameter head scores (1 - RMSE) x 100 with the model's codec, species accuracy, height and crown
+  errors, and the rotation sweep: the network on each view of rig `orbit:N:10` (paper: 72 views, HDD ~0.03).
+- sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
+  networks (`reconstruct.from_sketch`); their foreground depth error against the GT `silhouette` / `trunk_depth`
+  (cut to the network's crop as training cut them), the traced main skeleton against the GT main branches; a
+  second column grows from the GT maps (`reconstruct.from_maps`), the networks' share of the error.
+- two-view (seed 001): the `two-view:shared` front and side `sketch_strokes` (1-px lines) and
+  `sketch_strokes_brush` into `reconstruct.two_view`.
+Every method is scored with the same geometry metrics (`reconstruct.metrics`): silhouette IoU in the input view(s)
+and in unseen views (orbit azimuths 45 deg apart that no input looked along), node and surface Hausdorff / Chamfer
+over the GT height, node Hausdorff in the unit orthographic cube, skeleton F1 AUC, height and crown errors. The
+baseline column is another tree of the true preset (a prior that knows the species), the floor a reconstruction
+must beat.
+
+Alignment: every tree stands with its base at the origin, Z up, in metres. The sketch-depth reconstruction is
+grown in the drawing's frame (`reconstruct.networks.drawing_camera`: looking along +Y like the front view, base
+at the lowest stroke point) scaled to `height` = the GT `Skeleton.height` (nodes and leaves: the top of the
+silhouette the drawing shows). The two-view drawings show only the main branches, so their `height` is the top of
+the GT main branches (what the strokes span); its X and Y are the front and side image axes, world X and Y.
+
+Speed: seconds per stage per tree, networks included (ONNX Runtime runs single-threaded). For one core run
+    OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/bench_reconstruct.py
+Beside seed 000's Table 3.1 (i7-7700HQ + GTX 1080 Ti: trunk 0.069-0.083 s, silhouette 0.058-0.072 s, growth
+1.07-1.53 s) and seed 001 (7 s for a peach tree on a 2 GHz dual core); target: each method under 2 s per tree.
+Writes a contact sheet (input, GT and reconstruction in the input view and in an unseen view) to --out.
+
+Run: .venv/bin/python benchmarks/bench_reconstruct.py [--trees 12] [--methods params,sketch-depth,two-view]
+     [--sweep-trees 3] [--sweep-views 72] [--surface-samples 100000] [--sheet-trees 3] [--out out/bench_reconstruct]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import reconstruct  # noqa: E402
+import species  # noqa: E402
+from farm.jobs import load_spec  # noqa: E402
+from farm.table import format_table  # noqa: E402
+from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
+from reconstruct import metrics  # noqa: E402
+from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
+from reconstruct.networks import predictor  # noqa: E402
+from renderers import RenderedView, ViewRenderer, main_branches, viewable, write_contact_sheet  # noqa: E402
+from renderers.impostor import closed_silhouette  # noqa: E402
+from species.errors import TreefarmError  # noqa: E402
+from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views  # noqa: E402
+from trainers.data import TARGET_BACKGROUND  # noqa: E402
+from trainers.preprocess import apply_crop  # noqa: E402
+
+METHODS = ("params", "sketch-depth", "two-view")
+# Each method's dataset spec: its species and its render.
+SPECS = {"params": ROOT / "trainers/specs/sketchnet.yaml",
+         "sketch-depth": ROOT / "trainers/specs/pix2pix-silhouette.yaml",
+         "two-view": ROOT / "reconstruct/specs/two-view.yaml"}
+TRAINING_SPECS = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
+# Bench-own job seeds: tree i of a method grows from tree_seed(seed, i); checked against the training specs'.
+BENCH_SEEDS = {"params": 2304, "sketch-depth": 2300, "two-view": 2301}
+TARGET_S = 2.0
+BASELINE = "baseline: same preset"
+# Unseen views: azimuths of rig "orbit:8:0" (45 deg apart, level) that no input view looked along (or opposite).
+UNSEEN_RIG = "orbit:8:0"
+SEEN_AZIMUTHS = {"params": (0, 180), "sketch-depth": (0, 180), "two-view": (0, 90, 180, 270)}
+
+# Silhouettes of twigs and leaf cards overlap only where two trees agree to the pixel; the crown IoU compares the
+# outlines, closed over gaps up to about twice this many pixels (at 256 px: the crown, not its twigs).
+CROWN_CLOSING_PX = 6
+
+# The papers' figures beside each metric (seeds-digest section 5); "" where none is published.
+PAPER = {
+    "depth error, silhouette network": "0.041 (thesis, 4 days GTX 1080 Ti)",
+    "depth error, trunk network": "0.032 (thesis)",
+    "main skeleton, unit-cube Hausdorff": "0.098 (thesis, trunk nodes, units n.g.)",
+    "nodes, unit-cube Hausdorff": "~0.03 (TSN rotation test, one tree)",
+    "rotation sweep, unit-cube Hausdorff": "~0.03 (TSN, 72 views, one unseen tree)",
+    "surface Hausdorff / height": "TSN HDD: EfficientNet-B7 lowest, values n.g.",
+    "species accuracy": "n.g. (bench_train target >= 0.95)",
+    "score_overall": "n.g. (TSN tables are images)",
+}
+# Figures published for one method only (TreeSketchNet's HDD is not the others' reference).
+PAPER_METHOD = {"nodes, unit-cube Hausdorff": "params", "surface Hausdorff / height": "params"}
+STAGE_PAPER = {
+    ("sketch-depth", "trunk recovery (trunk net + trace)"): "0.069-0.083 s (GPU)",
+    ("sketch-depth", "silhouette recovery (silhouette net + denoise + crown)"): "0.058-0.072 s (GPU)",
+    ("sketch-depth", "growth (field + growth)"): "1.07-1.53 s (i7-7700HQ)",
+    ("two-view", "total"): "7 s peach, <= 30 s (2 GHz dual core)",
+}
+
+
+@dataclass
+class Truth:
+    """One held-out tree: its preset, dictionary, skeleton and mesh, and its views in the method's rig."""
+
+    preset: str
+    seed: int
+    params: dict
+    skeleton: species.Skeleton
+    mesh: species.TreeMesh
+    views: list[RenderedView]
+
+    @property
+    def main_nodes(self) -> np.ndarray:
+        return main_branch_nodes(self.skeleton)
+
+
+def main_branch_nodes(skeleton: species.Skeleton) -> np.ndarray:
+    """(K, 3) float32 metres: the nodes of a tree's main branches (`renderers.main_branches`: what the strokes
+    draw), the set a traced or lifted main skeleton is compared with."""
+    paths = skeleton.branch_paths
+    return skeleton.positions[np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))]
+
+
+def grow_truth(renderer: ViewRenderer, preset: str, seed: int, rig: str, size: int, outputs) -> Truth:
+    """A tree as `farm generate` makes it from (preset, tree seed): sample, rebuild, render the rig."""
+    sample_rng, render_rng = stage_rngs(seed)
+    params = species.sample(preset, sample_rng)
+    skeleton, mesh = species.rebuild(params)
+    renderer.size = int(size)
+    return Truth(preset, seed, params, skeleton, mesh, renderer.render(mesh, skeleton, rig, outputs, render_rng))
+
+
+def spread(names: list[str], n: int) -> list[str]:
+    """n presets spread evenly over `names` (both generators of a mixed list), cycling when n > len(names)."""
+    if n <= len(names):
+        return [names[int(i)] for i in np.round(np.linspace(0, len(names) - 1, n))]
+    return [names[i % len(names)] for i in range(n)]
+
+
+def check_seeds() -> None:
+    taken = {load_spec(ROOT / f"trainers/specs/{name}.yaml").seed: name for name in TRAINING_SPECS}
+    taken[load_spec(SPECS["two-view"]).seed] = "two-view"
+    for method, seed in BENCH_SEEDS.items():
+        if seed in taken:
+            raise SystemExit(f"bench seed {seed} of {method} is the {taken[seed]} spec's: pick another")
+
+
+# ------------------------------------------------------------------------------------------------ scoring
+class Scorer:
+    """Geometry metrics of reconstructions of one GT tree, its GT silhouettes rendered once."""
+
+    def __init__(self, renderer: ViewRenderer, truth: Truth, input_cameras, method: str, surface_samples: int):
+        self.renderer, self.truth, self.surface_samples = renderer, truth, surface_samples
+        orbit = renderer.cameras(truth.mesh, UNSEEN_RIG, np.random.default_rng(0))
+        step = 360 // len(orbit)
+        self.cameras = {"input": list(input_cameras),
+                        "unseen": [c for i, c in enumerate(orbit) if i * step not in SEEN_AZIMUTHS[method]]}
+        self.masks = {k: renderer.silhouette_masks(truth.mesh, cams) for k, cams in self.cameras.items()}
+        self.crowns = {k: _crowns(m) for k, m in self.masks.items()}
+
+    def __call__(self, skeleton: species.Skeleton, mesh: species.TreeMesh, main_nodes=None) -> dict[str, float]:
+        truth, height = self.truth.skeleton, self.truth.skeleton.height
+        row = {}
+        for kind, cameras in self.cameras.items():
+            masks = self.renderer.silhouette_masks(mesh, cameras)
+            views = f"{kind} view{'s' if len(cameras) > 1 else ''}"
+            row[f"silhouette IoU, {views}"] = metrics.silhouette_iou(masks, self.masks[kind])
+            row[f"crown IoU, {views}"] = metrics.silhouette_iou(_crowns(masks), self.crowns[kind])
+        nodes = metrics.node_distances(skeleton, truth, height)
+        row.update({"node Hausdorff / height": nodes.hausdorff, "node Hausdorff95 / height": nodes.hausdorff_95,
+                    "node Chamfer / height": nodes.chamfer,
+                    "nodes, unit-cube Hausdorff": metrics.unit_cube_hausdorff(skeleton, truth)})
+        if self.surface_samples:
+            surface = metrics.surface_distances(mesh, self.truth.mesh, height, self.surface_samples,
+                                                np.random.default_rng(0))
+            row.update({"surface Hausdorff / height": surface.hausdorff, "surface Chamfer / height": surface.chamfer})
+        row["skeleton F1 AUC"] = metrics.skeleton_precision_recall(skeleton, truth).auc
+        errors = metrics.height_crown_errors(skeleton, truth)
+        row.update({"height rel. error": errors["height_rel_error"],
+                    "crown radius rel. error": errors["crown_radius_rel_error"]})
+        if main_nodes is not None:
+            row["main skeleton, unit-cube Hausdorff"] = metrics.unit_cube_hausdorff(main_nodes, self.truth.main_nodes,
+                                                                                    box=truth.bounds)
+        return row
+
+
+def _crowns(masks: np.ndarray) -> np.ndarray:
+    """(V, H, W) bool crown outlines of silhouette masks: gaps up to ~2 x CROWN_CLOSING_PX closed."""
+    return np.stack([closed_silhouette(m, CROWN_CLOSING_PX) for m in masks])
+
+
+def baseline_tree(truth: Truth, job_seed: int, index: int, n_trees: int):
+    """Another tree of the true preset (a tree seed outside the bench's plan): the prior a reconstruction beats."""
+    params = species.sample(truth.preset, stage_rngs(tree_seed(job_seed, n_trees + index))[0])
+    skeleton, mesh = species.rebuild(params)
+    return params, skeleton, mesh, main_branch_nodes(skeleton)
+
+
+def render_depth(renderer: ViewRenderer, mesh, skeleton, camera) -> np.ndarray:
+    """(H, W, 3) uint8 shaded depth of a tree in a camera, for the contact sheet (black where nothing is)."""
+    if mesh.n_faces == 0:
+        return np.zeros((camera.height, camera.width, 3), np.uint8)
+    view = renderer.render_cameras(mesh, skeleton, [camera], ["depth"], np.random.default_rng(0))[0]
+    return viewable("depth", view.images["depth"])
+
+
+def sheet_cells(renderer, scorer: Scorer, inputs: dict, skeleton, mesh) -> list:
+    truth, front, unseen = scorer.truth, scorer.cameras["input"][0], scorer.cameras["unseen"][0]
+    return [*inputs.items(), ("GT, input view", render_depth(renderer, truth.mesh, truth.skeleton, front)),
+            ("reconstruction", render_depth(renderer, mesh, skeleton, front)),
+            (f"GT, {unseen.name}", render_depth(renderer, truth.mesh, truth.skeleton, unseen)),
+            ("reconstruction", render_depth(renderer, mesh, skeleton, unseen))]
+
+
+# ------------------------------------------------------------------------------------------------ methods
+class Run:
+    """What one method collects: per-variant metric rows, per-stage seconds, failures, contact sheet rows."""
+
+    def __init__(self, method: str):
+        self.method = method
+        self.rows: dict[str, list[dict]] = {}
+        self.stages: dict[str, list[float]] = {}
+        self.failed: dict[str, list[str]] = {}
+        self.sheet: list = []
+        self.pooled: dict[str, dict[str, float | str]] = {}  # metric pooled over trees -> {variant: value}
+
+    def add(self, variant: str, row: dict) -> None:
+        self.rows.setdefault(variant, []).append(row)
+
+    def time(self, timings: dict) -> None:
+        for stage, seconds in timings.items():
+            self.stages.setdefault(stage, []).append(float(seconds))
+
+    def fail(self, variant: str, truth: Truth, error: TreefarmError) -> None:
+        self.failed.setdefault(variant, []).append(f"{truth.preset} seed {truth.seed}: {error}")
+
+
+def run_params(renderer, args, run: Run) -> None:
+    net = predictor("sketchnet", args.models)
+    spec = load_spec(SPECS["params"])
+    presets = spread(list(spec.species), args.trees)
+    predicted, true, baseline = [], [], []
+    for i, preset in enumerate(presets):
+        truth = grow_truth(renderer, preset, tree_seed(BENCH_SEEDS["params"], i), spec.render.rig, net.input_size,
+                           ["sketch_tsn"])
+        front = truth.views[0]
+        scorer = Scorer(renderer, truth, [front.camera], "params", args.surface_samples)
+        result = reconstruct.from_params(front.images["sketch_tsn"], net=net)
+        run.time(result.timings)
+        row = scorer(result.skeleton, result.mesh)
+        row["species accuracy"] = float(result.params.get("species") == truth.params["species"])
+        run.add("network", row)
+        predicted.append(result.params)
+        true.append(truth.params)
+        b_params, b_skeleton, b_mesh, _ = baseline_tree(truth, BENCH_SEEDS["params"], i, args.trees)
+        run.add(BASELINE, {**scorer(b_skeleton, b_mesh), "species accuracy": 1.0})
+        baseline.append(b_params)
+        if i < args.sheet_trees:
+            run.sheet.append((f"params {preset}", sheet_cells(renderer, scorer, {"sketch_tsn": front.images["sketch_tsn"]},
+                                                              result.skeleton, result.mesh)))
+        print(f"  params {i + 1}/{len(presets)} {preset}: {result.timings['total']:.2f} s", flush=True)
+    for variant, guesses in (("network", predicted), (BASELINE, baseline)):
+        for name, value in metrics.parameter_scores(net.codec, guesses, true).items():
+            run.pooled.setdefault(f"{name} (pooled)", {})[variant] = float(value)
+    sweep(renderer, net, args, presets, run)
+
+
+def sweep(renderer, net, args, presets: list[str], run: Run) -> None:
+    """TreeSketchNet's rotation test: the unit-cube Hausdorff of the tree read from each view of orbit:N:10."""
+    rig = f"orbit:{args.sweep_views}:10"
+    per_tree = []
+    for i, preset in enumerate(presets[:args.sweep_trees]):
+        truth = grow_truth(renderer, preset, tree_seed(BENCH_SEEDS["params"], i), rig, net.input_size, ["sketch_tsn"])
+        distances = [metrics.unit_cube_hausdorff(reconstruct.from_params(v.images["sketch_tsn"], net=net).skeleton,
+                                                 truth.skeleton) for v in truth.views]
+        per_tree.append(distances)
+        print(f"  sweep {i + 1}/{args.sweep_trees} {preset}: {len(distances)} views, mean {np.mean(distances):.3f}",
+              flush=True)
+    if per_tree:
+        everything = np.concatenate(per_tree)
+        for name, value in (("rotation sweep, unit-cube Hausdorff", float(everything.mean())),
+                            ("  worst view", float(everything.max())), ("  best view", float(everything.min())),
+                            ("  trees x views", f"{len(per_tree)} x {args.sweep_views} ({rig})")):
+            run.pooled[name] = {"network": value}
+
+
+def depth_error(net, task_name: str, view: RenderedView) -> tuple[float, float]:
+    """(foreground depth error of a pix2pix network on one view, its seconds): the target cut to the network's
+    crop of its input as training cut it, scored on the task's depth channels and mask rule."""
+    task = PIX2PIX_TASKS[task_name]
+    start = time.perf_counter()
+    prediction, crop = net.predict_view(view.images[task.input_output])
+    seconds = time.perf_counter() - start
+    size = net.input_size
+    cut = {task.input_output: apply_crop(view.images[task.input_output], crop, size, 255),
+           task.target_output: apply_crop(view.images[task.target_output], crop, size, TARGET_BACKGROUND[task.target_output])}
+    cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
+    _, target, mask = targets_from_views(task, cut)
+    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds
+
+
+def run_sketch_depth(renderer, args, run: Run) -> None:
+    silhouette_net = predictor("pix2pix-silhouette", args.models)
+    trunk_net = predictor("pix2pix-trunk", args.models)
+    spec = load_spec(SPECS["sketch-depth"])
+    presets = spread(list(spec.species), args.trees)
+    outputs = ["sketch_edges", "trunk_strokes", "silhouette", "trunk_depth"]
+    for i, preset in enumerate(presets):
+        seed = tree_seed(BENCH_SEEDS["sketch-depth"], i)
+        truth = grow_truth(renderer, preset, seed, spec.render.rig, spec.render.size, outputs)
+        front = truth.views[0]
+        scorer = Scorer(renderer, truth, [front.camera], "sketch-depth", args.surface_samples)
+        sil_error, sil_s = depth_error(silhouette_net, "silhouette", front)
+        trunk_error, trunk_s = depth_error(trunk_net, "trunk", front)
+        height = truth.skeleton.height
+        try:
+            result = reconstruct.from_sketch(front.images["sketch_edges"], front.images["trunk_strokes"],
+                                             silhouette_net=silhouette_net, trunk_net=trunk_net, species=args.species,
+                                             height=height, rng=np.random.default_rng(seed))
+        except TreefarmError as error:
+            run.fail("networks", truth, error)
+        else:
+            t = result.timings
+            run.time({"silhouette network": sil_s, "trunk network": trunk_s, **t,
+                      "trunk recovery (trunk net + trace)": trunk_s + t["trunk"],
+                      "silhouette recovery (silhouette net + denoise + crown)": sil_s + t["denoise"] + t["crown"],
+                      "growth (field + growth)": t["field"] + t["growth"]})
+            run.add("networks", {"depth error, silhouette network": sil_error, "depth error, trunk network": trunk_error,
+                                 **scorer(result.skeleton, result.mesh, result.maps["main_skeleton"])})
+            if i < args.sheet_trees:
+                inputs = {"sketch_edges": front.images["sketch_edges"], "trunk_strokes": front.images["trunk_strokes"]}
+                run.sheet.append((f"sketch-depth {preset}",
+                                  sheet_cells(renderer, scorer, inputs, result.skeleton, result.mesh)))
+        try:
+            oracle = reconstruct.from_maps(front.images["silhouette"], front.images["trunk_depth"],
+                                           front.images["trunk_strokes"], front.camera,
+                                           species=args.species or DEFAULT_SPECIES,
+                                           height=height, rng=np.random.default_rng(seed))
+            run.add("GT maps", scorer(oracle.skeleton, oracle.mesh, oracle.maps["main_skeleton"]))
+        except TreefarmError as error:
+            run.fail("GT maps", truth, error)
+        _, b_skeleton, b_mesh, b_main = baseline_tree(truth, BENCH_SEEDS["sketch-depth"], i, args.trees)
+        run.add(BASELINE, scorer(b_skeleton, b_mesh, b_main))
+        print(f"  sketch-depth {i + 1}/{len(presets)} {preset}", flush=True)
+
+
+def run_two_view(renderer, args, run: Run) -> None:
+    spec = load_spec(SPECS["two-view"])
+    presets = spread(list(spec.species), args.trees)
+    for i, preset in enumerate(presets):
+        seed = tree_seed(BENCH_SEEDS["two-view"], i)
+        truth = grow_truth(renderer, preset, seed, spec.render.rig, spec.render.size, spec.render.outputs)
+        front, side = truth.views
+        scorer = Scorer(renderer, truth, [front.camera, side.camera], "two-view", args.surface_samples)
+        drawn_height = float(truth.main_nodes[:, 2].max())
+        for variant, output in (("1-px lines", "sketch_strokes"), ("brush", "sketch_strokes_brush")):
+            start = time.perf_counter()
+            try:
+                result = reconstruct.two_view(front.images[output], side.images[output], height=drawn_height,
+                                              rng=np.random.default_rng(seed), brush=variant == "brush")
+            except TreefarmError as error:
+                run.fail(variant, truth, error)
+                continue
+            total = time.perf_counter() - start
+            if variant == "1-px lines":
+                run.time({**result.report["timings"], "total": total})
+            else:
+                run.time({"total, brush": total})
+            run.add(variant, scorer(result.skeleton, result.mesh, result.report["main"].positions))
+            if i < args.sheet_trees and variant == "1-px lines":
+                inputs = {"front": front.images[output], "side": side.images[output]}
+                run.sheet.append((f"two-view {preset}", sheet_cells(renderer, scorer, inputs, result.skeleton,
+                                                                    result.mesh)))
+        _, b_skeleton, b_mesh, b_main = baseline_tree(truth, BENCH_SEEDS["two-view"], i, args.trees)
+        run.add(BASELINE, scorer(b_skeleton, b_mesh, b_main))
+        print(f"  two-view {i + 1}/{len(presets)} {preset}", flush=True)
+
+
+RUNNERS = {"params": run_params, "sketch-depth": run_sketch_depth, "two-view": run_two_view}
+
+
+# ------------------------------------------------------------------------------------------------ tables
+def metric_table(run: Run) -> str:
+    variants = list(run.rows)
+    names: list[str] = []
+    for rows in run.rows.values():
+        for row in rows:
+            names += [k for k in row if k not in names]
+    table = []
+    for name in names:
+        cells = []
+        for variant in variants:
+            values = [r[name] for r in run.rows[variant] if name in r and np.isfinite(r[name])]
+            cells.append(float(np.mean(values)) if values else "-")
+        paper = PAPER.get(name, "") if PAPER_METHOD.get(name, run.method) == run.method else ""
+        table.append([name, *[f"{c:.3f}" if isinstance(c, float) else c for c in cells], paper])
+    for name, by_variant in run.pooled.items():
+        cells = [by_variant.get(v, "") for v in variants]
+        table.append([name, *[f"{c:.3f}" if isinstance(c, float) else c for c in cells],
+                      PAPER.get(name.removesuffix(" (pooled)"), "")])
+    counts = [f"{len(run.rows[v])} trees" for v in variants]
+    return format_table(["metric (mean over trees)", *[f"{v} ({c})" for v, c in zip(variants, counts)], "paper"],
+                        table)
+
+
+def stage_table(run: Run) -> str:
+    rows = []
+    for stage, seconds in run.stages.items():
+        target = ""
+        if stage.startswith("total"):
+            target = "yes" if np.mean(seconds) < TARGET_S else "no"
+        rows.append([stage, f"{np.mean(seconds):.3f}", f"{np.max(seconds):.3f}", target,
+                     STAGE_PAPER.get((run.method, stage), "")])
+    return format_table(["stage", "mean s", "max s", f"< {TARGET_S:.0f} s", "paper"], rows)
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{cpu}; {cores} core(s) available; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}"
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--trees", type=int, default=12, help="held-out trees per method")
+    parser.add_argument("--methods", default=",".join(METHODS), help="comma separated: " + ", ".join(METHODS))
+    parser.add_argument("--sweep-trees", type=int, default=3, help="trees of the params rotation sweep")
+    parser.add_argument("--sweep-views", type=int, default=72, help="views of the sweep (rig orbit:N:10)")
+    parser.add_argument("--surface-samples", type=int, default=metrics.SURFACE_SAMPLES,
+                        help="surface samples per mesh (0: skip the surface distances)")
+    parser.add_argument("--sheet-trees", type=int, default=3, help="trees per method on the contact sheet")
+    parser.add_argument("--species", default=None, help="sketch-depth growth preset (default the method's)")
+    parser.add_argument("--models", default=None, help="model registry URI (default: the shipped models/)")
+    parser.add_argument("--out", type=Path, default=ROOT / "out" / "bench_reconstruct")
+    args = parser.parse_args(argv)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown or args.trees < 1 or not 1 <= args.sweep_views <= 360:
+        parser.error(f"methods {unknown} unknown (allowed {', '.join(METHODS)}), or --trees < 1, or --sweep-views "
+                     f"outside [1, 360]")
+    check_seeds()
+    print(f"machine: {machine()}", flush=True)
+    renderer = ViewRenderer(256)
+    runs = []
+    try:
+        for method in methods:
+            run = Run(method)
+            RUNNERS[method](renderer, args, run)
+            runs.append(run)
+    finally:
+        renderer.close()
+    sheet = []
+    for run in runs:
+        print(f"\n{run.method}: quality on held-out trees (job seed {BENCH_SEEDS[run.method]})")
+        print(metric_table(run))
+        for variant, messages in run.failed.items():
+            print(f"  {variant}: {len(messages)} failed, first: {messages[0]}")
+        print(f"\n{run.method}: seconds per tree and stage")
+        print(stage_table(run))
+        sheet += run.sheet
+    if sheet:
+        path = write_contact_sheet(args.out / "reconstructions.png", sheet)
+        print(f"\ncontact sheet: {path}")
+
+
+if __name__ == "__main__":
+    main()
