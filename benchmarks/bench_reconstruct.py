@@ -292,11 +292,13 @@ def depth_error(net, task_name: str, view: RenderedView) -> tuple[float, float]:
     crop of its input as training cut it, scored on the task's depth channels and mask rule."""
     task = PIX2PIX_TASKS[task_name]
     start = time.perf_counter()
-    prediction, crop = net.predict_view(view.images[task.input_output])
+    prediction, prepared = net.predict_view(view.images[task.input_output])
+    crop = prepared.crop
     seconds = time.perf_counter() - start
     size = net.input_size
     cut = {task.input_output: apply_crop(view.images[task.input_output], crop, size, 255),
-           task.target_output: apply_crop(view.images[task.target_output], crop, size, TARGET_BACKGROUND[task.target_output])}
+           task.target_output: apply_crop(view.images[task.target_output], crop, size,
+                                          TARGET_BACKGROUND[task.target_output])}
     cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
     _, target, mask = targets_from_views(task, cut)
     return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds

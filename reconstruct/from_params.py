@@ -44,9 +44,9 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0) -> ParamsRecons
     start = time.perf_counter()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)
-    params = net.predict(image, seed=int(seed))
+    params, prepared = net.predict_view(image, seed=int(seed))
     network = time.perf_counter() - start
     skeleton, mesh = species.rebuild(params)
     total = time.perf_counter() - start
     return ParamsReconstruction(params, skeleton, mesh, {"network": network, "grow_mesh": total - network,
-                                                         "total": total}, {"input": net.prepare(image)[0]})
+                                                         "total": total}, {"input": prepared.image[0]})

@@ -551,7 +551,7 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
                        height=height, rng=rng)
     result.timings["networks"] = networks
     result.timings["total"] += networks
-    result.maps.update(sketch=silhouette_net.prepare(sketch)[0], trunk_depth=found.trunk_depth,
+    result.maps.update(sketch=found.sketch_input[0], trunk_depth=found.trunk_depth,
                        strokes=found.strokes, silhouette=found.silhouette)
     return result
 

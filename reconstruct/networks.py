@@ -21,8 +21,8 @@ from renderers.sketch import edges_of_grey
 from species.errors import TreefarmError
 from trainers.preprocess import Crop, apply_crop
 
-__all__ = ["SketchMaps", "sketch_maps", "drawing_camera", "photo_edges", "predictor", "SPECIES_TO_COLONIZATION", "InputImageError",
-           "colonization_species", "as_image"]
+__all__ = ["SketchMaps", "sketch_maps", "drawing_camera", "photo_edges", "predictor", "SPECIES_TO_COLONIZATION",
+           "InputImageError", "colonization_species", "as_image"]
 
 # TreeSketchNet's species (the Weber-Penn presets) -> the colonization preset of the nearest crown habit.
 SPECIES_TO_COLONIZATION = {
@@ -93,6 +93,7 @@ class SketchMaps:
     silhouette : (S, S, 3) float32 front depth01, gap, mask.  trunk_depth : (S, S) float32, 1 = no stroke.
     strokes    : (S, S, 3) uint8 the colour strokes cut to the same window.  camera : `drawing_camera(S)`.
     crop       : the window on the source page (source pixels).
+    sketch_input : (1, S, S) float32 the silhouette network's input (ink 1 on 0).
     """
 
     silhouette: np.ndarray
@@ -100,6 +101,7 @@ class SketchMaps:
     strokes: np.ndarray
     camera: Camera
     crop: Crop
+    sketch_input: np.ndarray
 
 
 def _into_window(image: np.ndarray, own: Crop, window: Crop, size: int, fill, interpolation: int) -> np.ndarray:
@@ -124,10 +126,12 @@ def sketch_maps(sketch, strokes, *, models=None, silhouette_net=None, trunk_net=
     if trunk_net.input_size != size:
         raise InputImageError(f"the trunk network's input size ({trunk_net.input_size} px) differs from the "
                               f"silhouette network's ({size} px): allowed models of one size")
-    silhouette, window = silhouette_net.predict_view(sketch)
-    trunk, trunk_crop = trunk_net.predict_view(strokes)
-    trunk = _into_window(np.asarray(trunk[0], np.float32), trunk_crop, window, size, 1.0, cv2.INTER_NEAREST)
+    silhouette, sketch_input = silhouette_net.predict_view(sketch)
+    trunk, trunk_input = trunk_net.predict_view(strokes)
+    window = sketch_input.crop
+    trunk = _into_window(np.asarray(trunk[0], np.float32), trunk_input.crop, window, size, 1.0, cv2.INTER_NEAREST)
     rgb = strokes[..., :3] if strokes.dtype == np.uint8 else np.clip(strokes[..., :3] * 255.0, 0, 255).astype(np.uint8)
     cut = apply_crop(rgb, window, size, 255, cv2.INTER_LINEAR)
     maps = np.moveaxis(np.asarray(silhouette, np.float32), 0, 2)
-    return SketchMaps(np.ascontiguousarray(maps), trunk.astype(np.float32), cut, drawing_camera(size), window)
+    return SketchMaps(np.ascontiguousarray(maps), trunk.astype(np.float32), cut, drawing_camera(size), window,
+                      sketch_input.image)

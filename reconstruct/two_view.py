@@ -58,6 +58,11 @@ class TwoViewResult:
     mesh: TreeMesh
     report: dict
 
+    @property
+    def timings(self) -> dict[str, float]:
+        """Seconds per stage (`report["timings"]`), as the other methods' results give them."""
+        return self.report["timings"]
+
 
 @dataclass(frozen=True)
 class _Frame:

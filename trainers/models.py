@@ -120,13 +120,14 @@ class Predictor:
         return self.predict_view(image, seed)[0]
 
     def predict_view(self, image, seed: int = 0):
-        """`predict` with the crop of `image` the input was cut from (`trainers.preprocess.Prepared.crop`), so a
-        depth map can be placed back on the drawing, or beside another network's of the same drawing."""
+        """`predict` with the network's input (`trainers.preprocess.Prepared`: the image and the crop of `image`
+        it was cut from), so a depth map can be placed back on the drawing, or beside another network's of the
+        same drawing, and the input shown without preprocessing the drawing again."""
         prepared = prepare(image, self.input_kind, self.input_size)
         outputs = self.model.run(prepared.image[None])
         if self.codec is None:
-            return np.asarray(outputs)[0], prepared.crop
-        return self.codec.decode_arrays(dict(outputs), seed=seed)[0], prepared.crop
+            return np.asarray(outputs)[0], prepared
+        return self.codec.decode_arrays(dict(outputs), seed=seed)[0], prepared
 
     def __repr__(self) -> str:
         return f"Predictor({self.task}, {self.source})"

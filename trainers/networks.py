@@ -21,8 +21,8 @@ from .onnx_runtime import export_onnx
 from .sketchnet_codec import ParameterCodec
 from .tasks import Task, get_task
 
-__all__ = ["SCHEDULES", "schedule_factor", "TrainSettings", "TaskNetwork", "SketchNetwork", "Pix2PixNetwork", "network_for", "SettingsError",
-           "DEFAULT_SETTINGS"]
+__all__ = ["SCHEDULES", "schedule_factor", "TrainSettings", "TaskNetwork", "SketchNetwork", "Pix2PixNetwork",
+           "network_for", "SettingsError", "DEFAULT_SETTINGS"]
 
 
 SCHEDULES = ("constant", "cosine")

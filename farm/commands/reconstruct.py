@@ -117,6 +117,7 @@ def _models(args):
 def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
+    import reconstruct
     from farm.commands.tree import write_tree
 
     method = _method(args)
@@ -127,14 +128,10 @@ def run(args: argparse.Namespace) -> int:
     models = _models(args)
     rng = np.random.default_rng(args.seed)
     if method == "params":
-        import reconstruct
-
         image = read_image(args.inputs[0])
         result = reconstruct.from_params(image, models=models, seed=args.seed)
         panels = [("input", result.maps["input"])]
     elif method == "sketch-depth":
-        import reconstruct
-
         image = read_image(args.inputs[0])
         strokes = read_image(args.strokes)
         result = reconstruct.from_sketch(image, strokes, models=models, species=args.species, height=args.height,
@@ -142,8 +139,6 @@ def run(args: argparse.Namespace) -> int:
         panels = [("input", result.maps["sketch"]), ("front depth", result.maps["front"]),
                   ("trunk depth", result.maps["trunk_depth"]), ("strokes", result.maps["strokes"])]
     else:
-        import reconstruct
-
         front, side = read_image(args.front), read_image(args.side)
         result = reconstruct.two_view(front, side, height=args.height, rng=rng)
         panels = [("front", front), ("side", side)]
@@ -159,8 +154,7 @@ def run(args: argparse.Namespace) -> int:
         with user_path(args.report, "write"):
             write_report(args.report, panels, result.skeleton, mesh, title=f"{method}: {Path(out).name}")
     skeleton = result.skeleton
-    timings = getattr(result, "timings", None) or result.report.get("timings", {})
-    stages = ", ".join(f"{k} {v:.2f}" for k, v in timings.items() if k != "total")
+    stages = ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items() if k != "total")
     print(f"{method}: {skeleton.n_nodes} nodes, height {skeleton.height:.2f} m, crown {skeleton.crown_radius:.2f} m, "
           f"{mesh.n_faces} faces -> {files[0]} ({time.perf_counter() - started:.2f} s; {stages})")
     return 0

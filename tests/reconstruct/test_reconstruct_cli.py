@@ -54,10 +54,7 @@ class _InkNet:
     def predict_view(self, image, seed: int = 0):
         prepared = prepare(image, self.input_kind, self.input_size)
         ink = prepared.image.max(axis=0, keepdims=True)
-        return np.repeat(1.0 - ink if self.invert else ink, self.channels, axis=0), prepared.crop
-
-    def prepare(self, image):
-        return prepare(image, self.input_kind, self.input_size).image
+        return np.repeat(1.0 - ink if self.invert else ink, self.channels, axis=0), prepared
 
 
 def test_both_networks_outputs_land_in_the_sketch_window():
