@@ -6,7 +6,7 @@ training spec's, so the shipped models never saw them), rendered as the spec ren
   dictionary. Parameter head scores (1 - RMSE) x 100 with the model's codec, species accuracy, height and crown
   errors, and the rotation sweep: the network on each view of rig `orbit:N:10` (paper: 72 views, HDD ~0.03).
 - sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
-  networks (`reconstruct.from_sketch`); their foreground depth error against the GT `silhouette` / `trunk_depth`
+  networks (`reconstruct.from_sketch`); their foreground depth error against the GT `silhouette_envelope` / `trunk_depth`
   (cut to the network's crop as training cut them), the traced main skeleton against the GT main branches; a
   second column grows from the GT maps (`reconstruct.from_maps`), the networks' share of the error.
 - two-view (seed 001): the `two-view:shared` front and side `sketch_strokes` (1-px lines) and
@@ -17,7 +17,8 @@ over the GT height, node Hausdorff in the unit orthographic cube, skeleton F1 AU
 baseline column is another tree of the true preset (a prior that knows the species), the floor a reconstruction
 must beat.
 
-Alignment: every tree stands with its base at the origin, Z up, in metres. The sketch-depth reconstruction is
+Alignment: every tree stands with its base at the origin, Z up, in metres. The params tree is grown at the GT
+height (`from_params(height=...)`; the network's own size guess has its row). The sketch-depth reconstruction is
 grown in the drawing's frame (`reconstruct.networks.drawing_camera`: looking along +Y like the front view, base
 at the lowest stroke point) scaled to `height` = the GT `Skeleton.height` (nodes and leaves: the top of the
 silhouette the drawing shows). The two-view drawings show only the main branches, so their `height` is the top of
@@ -248,15 +249,22 @@ def run_params(renderer, args, run: Run) -> None:
                            ["sketch_tsn"])
         front = truth.views[0]
         scorer = Scorer(renderer, truth, [front.camera], "params", args.surface_samples)
-        result = reconstruct.from_params(front.images["sketch_tsn"], net=net)
+        # Like the other methods, the tree is grown at the true height (a sketch has no scale); the network's
+        # own guess of the size is scored on its own row.
+        guessed = reconstruct.from_params(front.images["sketch_tsn"], net=net)
+        result = reconstruct.from_params(front.images["sketch_tsn"], net=net, height=truth.skeleton.height)
         run.time(result.timings)
         row = scorer(result.skeleton, result.mesh)
         row["species accuracy"] = float(result.params.get("species") == truth.params["species"])
+        row["height rel. error, size guessed"] = metrics.height_crown_errors(guessed.skeleton,
+                                                                             truth.skeleton)["height_rel_error"]
         run.add("network", row)
         predicted.append(result.params)
         true.append(truth.params)
         b_params, b_skeleton, b_mesh, _ = baseline_tree(truth, BENCH_SEEDS["params"], i, args.trees)
-        run.add(BASELINE, {**scorer(b_skeleton, b_mesh), "species accuracy": 1.0})
+        run.add(BASELINE, {**scorer(b_skeleton, b_mesh), "species accuracy": 1.0,
+                           "height rel. error, size guessed": metrics.height_crown_errors(
+                               b_skeleton, truth.skeleton)["height_rel_error"]})
         baseline.append(b_params)
         if i < args.sheet_trees:
             run.sheet.append((f"params {preset}", sheet_cells(renderer, scorer, {"sketch_tsn": front.images["sketch_tsn"]},
@@ -309,7 +317,7 @@ def run_sketch_depth(renderer, args, run: Run) -> None:
     trunk_net = predictor("pix2pix-trunk", args.models)
     spec = load_spec(SPECS["sketch-depth"])
     presets = spread(list(spec.species), args.trees)
-    outputs = ["sketch_edges", "trunk_strokes", "silhouette", "trunk_depth"]
+    outputs = ["sketch_edges", "trunk_strokes", "silhouette_envelope", "trunk_depth"]
     for i, preset in enumerate(presets):
         seed = tree_seed(BENCH_SEEDS["sketch-depth"], i)
         truth = grow_truth(renderer, preset, seed, spec.render.rig, spec.render.size, outputs)
@@ -337,7 +345,7 @@ def run_sketch_depth(renderer, args, run: Run) -> None:
                 run.sheet.append((f"sketch-depth {preset}",
                                   sheet_cells(renderer, scorer, inputs, result.skeleton, result.mesh)))
         try:
-            oracle = reconstruct.from_maps(front.images["silhouette"], front.images["trunk_depth"],
+            oracle = reconstruct.from_maps(front.images["silhouette_envelope"], front.images["trunk_depth"],
                                            front.images["trunk_strokes"], front.camera,
                                            species=args.species or DEFAULT_SPECIES,
                                            height=height, rng=np.random.default_rng(seed))

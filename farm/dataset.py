@@ -24,7 +24,8 @@ __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "trees_schema", "views_s
 SCHEMA_VERSION = 1
 TABLES = ("trees", "views")
 # Renderer outputs that are float maps, stored as 16-bit PNG with `<name>_scale` and `<name>_offset` columns.
-FLOAT_OUTPUTS = frozenset({"depth", "depth01", "silhouette", "depth_back", "trunk_depth"})
+FLOAT_OUTPUTS = frozenset({"depth", "depth01", "silhouette", "silhouette_envelope", "depth_back",
+                           "trunk_depth"})
 # The trees-table columns a Skeleton is stored in, flattened row-major: (N, 3) positions, (M, 4, 4) leaves.
 SKELETON_COLUMNS = ("positions", "parent", "radius", "order", "leaves", "leaf_node")
 # Fixed writer options: part files are compared byte for byte across runs.

@@ -4,7 +4,7 @@ Methods: `from_sketch` (seed 000: depth-guided growth from a silhouette sketch a
 depth networks; `from_maps` from their maps), `from_params` (seed 004: TreeSketchNet's dictionary grown by the
 Weber-Penn generator), `two_view` (seed 001: two orthogonal drawings, no network); `reconstruct.metrics` scores a
 reconstruction against its ground truth. Each method returns the `Skeleton`, the `TreeMesh` and a report of stage
-timings and intermediate maps. The submodules keep their names: `from reconstruct.from_sketch import trace_trunk`.
+timings and intermediate maps. The submodules keep their names: `from reconstruct.trunk_tracing import trace_trunk`.
 """
 from .from_params import ParamsReconstruction, from_params
 from .from_sketch import SketchError, SketchReconstruction, from_maps, from_sketch

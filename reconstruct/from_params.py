@@ -14,12 +14,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import species
+from species.errors import TreefarmError
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 from .networks import as_image, predictor
 
-__all__ = ["ParamsReconstruction", "from_params"]
+__all__ = ["ParamsReconstruction", "ParamsError", "from_params", "scaled_to_height"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -34,19 +35,47 @@ class ParamsReconstruction:
     maps: dict[str, np.ndarray] = field(default_factory=dict)
 
 
-def from_params(sketch, *, models=None, net=None, seed: int = 0) -> ParamsReconstruction:
+_HEIGHT_TOLERANCE = 0.01  # relative: a second rescale when the first leaves the tree further off (leaves, tips)
+
+
+class ParamsError(TreefarmError):
+    """A parameters-from-sketch request that cannot be met (a height that is not a positive number of metres)."""
+
+
+def scaled_to_height(params: dict, height: float) -> tuple[dict, Skeleton, TreeMesh]:
+    """The dictionary with its tree scale (`scale` + `scaleV`, realized draws) set so the tree grows `height`
+    metres tall, and that tree. Weber-Penn lengths are proportional to the tree scale; leaves are not, so a
+    second step corrects what the first leaves over _HEIGHT_TOLERANCE."""
+    skeleton, mesh = species.rebuild(params)
+    for _ in range(2):
+        if abs(skeleton.height - height) <= _HEIGHT_TOLERANCE * height:
+            break
+        tree_scale = params["scale"] + params.get("scaleV", 0.0)
+        params = {**params, "scale": tree_scale * height / skeleton.height - params.get("scaleV", 0.0)}
+        skeleton, mesh = species.rebuild(params)
+    return params, skeleton, mesh
+
+
+def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None) -> ParamsReconstruction:
     """Read a Sapling dictionary from `sketch` and grow it.
 
     sketch : (H, W) grey, (H, W, 3) or (H, W, 4) image, dark strokes on light paper, any size.
     models : a registry URI or folder (its champion), or None for the shipped default; net : a loaded predictor.
     seed   : the dictionary's `seed` (Weber-Penn's split and variation draws), so one sketch can give variants.
+    height : metres; the dictionary's scale is set so the tree is this tall (`scaled_to_height`). A sketch is
+             drawn at no scale, so without it the size is the network's guess from the tree's species and shape.
     """
+    if height is not None and not (isinstance(height, (int, float)) and np.isfinite(height) and height > 0):
+        raise ParamsError(f"height {height!r} must be a number of metres > 0 (or None for the network's guess)")
     start = time.perf_counter()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)
     params, prepared = net.predict_view(image, seed=int(seed))
     network = time.perf_counter() - start
-    skeleton, mesh = species.rebuild(params)
+    if height is None:
+        skeleton, mesh = species.rebuild(params)
+    else:
+        params, skeleton, mesh = scaled_to_height(params, float(height))
     total = time.perf_counter() - start
     return ParamsReconstruction(params, skeleton, mesh, {"network": network, "grow_mesh": total - network,
                                                          "total": total}, {"input": prepared.image[0]})

@@ -18,7 +18,8 @@ from species.meshing.textures import linear_to_srgb
 from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import LEAVES, DepthRenderer, PartDepths, combine_parts, normals_from_depth, single_sample_renderer_class
+from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, normals_from_depth,
+                   single_sample_renderer_class)
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
@@ -210,16 +211,9 @@ def switch_camera(points: np.ndarray, azimuth_deg: float, screen_px: int) -> Cam
 
 
 def closed_silhouette(coverage: np.ndarray, radius_px: int = SILHOUETTE_CLOSING_PX) -> np.ndarray:
-    """(H, W) bool: a coverage mask with gaps narrower than about 2 radius_px pixels closed (dilate, then erode,
-    with a (2r+1)-pixel ellipse): the outline a viewer sees of a crown of sub-pixel leaves."""
-    import cv2
-
-    if radius_px <= 0:
-        return np.asarray(coverage, bool)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius_px + 1, 2 * radius_px + 1))
-    pad = radius_px + 1  # so the closing is not clipped at the image border
-    padded = np.pad(np.asarray(coverage, np.uint8), pad)
-    return cv2.morphologyEx(padded, cv2.MORPH_CLOSE, kernel)[pad:-pad, pad:-pad] > 0
+    """(H, W) bool: a coverage mask with gaps narrower than about 2 radius_px pixels closed (`maps.closed_mask`):
+    the outline a viewer sees of a crown of sub-pixel leaves."""
+    return closed_mask(coverage, radius_px)
 
 
 def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:

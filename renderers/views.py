@@ -16,7 +16,7 @@ from species.tree_mesh import TreeMesh
 
 from . import sketch
 from .camera import Camera, CameraError, make_rig, parse_rig
-from .maps import DepthRenderer, combine_parts, normals_from_depth, silhouette_map
+from .maps import DepthRenderer, combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
 __all__ = ["ViewRenderer", "RenderedView", "OUTPUTS", "DEFAULT_OUTPUTS", "OutputError", "check_outputs"]
@@ -78,6 +78,7 @@ OUTPUTS: dict[str, Callable[[_ViewFrame], np.ndarray]] = {
     "order": lambda f: f.visible[2],
     "normals": lambda f: f.normals,
     "silhouette": lambda f: silhouette_map(f.camera, f.visible[0], f.back),
+    "silhouette_envelope": lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back),
     "depth_back": lambda f: f.back,
     "trunk_strokes": lambda f: f.trunk[0],
     "trunk_depth": lambda f: f.trunk[1],

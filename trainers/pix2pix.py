@@ -381,9 +381,11 @@ class Pix2PixTask:
 
 
 PIX2PIX_TASKS: dict[str, Pix2PixTask] = {
-    # Edge sketch -> the renderers' "silhouette": front depth01 (1 background), gap, mask (what
-    # DepthMapCrown.from_silhouette reads; thresholded at 0.5, so learnt everywhere).
-    "silhouette": Pix2PixTask("silhouette", "sketch_edges", "silhouette", 1, 3, ("front", "gap", "mask"),
+    # Edge sketch -> the renderers' "silhouette_envelope": the closed crown's smooth front depth01 (1 background),
+    # gap and mask (what DepthMapCrown.from_silhouette reads; thresholded at 0.5, so learnt everywhere). The per-leaf
+    # "silhouette" is not in an edge sketch: trained on it, the network got 9 % below the mean-depth baseline, and
+    # a blur oracle of the true depth at 4 px only 33 % (docs/training.md).
+    "silhouette": Pix2PixTask("silhouette", "sketch_edges", "silhouette_envelope", 1, 3, ("front", "gap", "mask"),
                               depth_channels=(0, 1), dense_channels=(2,), mask_channel=2,
                               data_spec="pix2pix-silhouette"),
     # Colour strokes -> trunk depth01 (1 = no stroke); foreground = under a stroke.
@@ -427,7 +429,7 @@ def targets_from_views(task: str | Pix2PixTask, item: Mapping) -> tuple[torch.Te
     """(input (C_in, H, W) float32 in [0, 1], target (C_out, H, W) float32 in [0, 1], mask (1, H, W) float32 0/1)
     from one decoded view: a `ViewsDataset` item (or any mapping of output name -> (C, H, W) tensor or array).
 
-    silhouette: sketch_edges (uint8, black on white) -> silhouette (front, gap, mask); mask = silhouette mask.
+    silhouette: sketch_edges (uint8, black on white) -> silhouette_envelope (front, gap, mask); mask = its mask.
     trunk: trunk_strokes (uint8 RGB on white) -> trunk_depth; mask = trunk_depth < 1.
     """
     task = get_task(task)

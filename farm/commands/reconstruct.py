@@ -129,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
     rng = np.random.default_rng(args.seed)
     if method == "params":
         image = read_image(args.inputs[0])
-        result = reconstruct.from_params(image, models=models, seed=args.seed)
+        result = reconstruct.from_params(image, models=models, seed=args.seed, height=args.height)
         panels = [("input", result.maps["input"])]
     elif method == "sketch-depth":
         image = read_image(args.inputs[0])

@@ -201,7 +201,7 @@ def viewable_png(output: str, png: bytes, scale: float | None, offset: float | N
         if foreground.any():
             near, far = float(image[foreground].min()), float(image[foreground].max())
             shown[foreground] = 255.0 - 200.0 * (image[foreground] - near) / max(far - near, 1e-9)
-    elif output == "silhouette":
+    elif output in ("silhouette", "silhouette_envelope"):
         shown = image.astype(np.float64) * 255.0
     else:  # depth01, trunk_depth: 1 means far / background
         shown = (1.0 - image.astype(np.float64)) * 255.0

@@ -3,6 +3,7 @@ and bad input: one line, exit status 2, nothing written."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import cv2
@@ -15,6 +16,7 @@ from farm.cli import main
 from gltf_validator import assert_valid_glb
 from renderers import ViewRenderer
 from reconstruct import InputImageError, from_params
+from reconstruct.from_params import ParamsError
 from reconstruct.networks import sketch_maps
 from trainers.preprocess import prepare
 
@@ -97,6 +99,26 @@ def test_params_method_writes_a_valid_glb_and_a_dictionary_farm_tree_rebuilds(dr
     assert (tmp_path / "again" / "tree.glb").read_bytes() == out.read_bytes()
     width, height = Image.open(report).size
     assert width > 4 * height
+
+
+def test_params_with_a_height_grows_that_tall_and_its_dictionary_rebuilds_the_same_tree(drawings, tmp_path, capsys):
+    image = np.asarray(Image.open(drawings["tsn"]))
+    guessed = from_params(image)
+    for height in (0.5 * guessed.skeleton.height, 2.0 * guessed.skeleton.height):
+        result = from_params(image, height=height)
+        assert abs(result.skeleton.height - height) <= 0.02 * height
+        assert result.params["species"] == guessed.params["species"]
+        assert {k: v for k, v in result.params.items() if k != "scale"} == {
+            k: v for k, v in guessed.params.items() if k != "scale"}  # only the scale changes
+    out, dictionary = tmp_path / "tall.glb", tmp_path / "tall.json"
+    assert main(["reconstruct", str(drawings["tsn"]), "--height", "7.5", "--out", str(out), "--params-out",
+                 str(dictionary)]) == 0
+    printed = re.search(r"height ([0-9.]+) m", capsys.readouterr().out)
+    assert printed and abs(float(printed.group(1)) - 7.5) <= 0.02 * 7.5
+    assert main(["tree", "--params", str(dictionary), "--out", str(tmp_path / "again")]) == 0
+    assert (tmp_path / "again" / "tall.glb").read_bytes() == out.read_bytes()
+    with pytest.raises(ParamsError, match="height -1"):
+        from_params(image, height=-1)
 
 
 def test_sketch_depth_and_two_view_methods_write_valid_glbs(drawings, tmp_path, capsys):

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 from scipy.spatial import cKDTree
 
 RIGS = ("tsn4", "two-view")
@@ -90,6 +91,44 @@ def test_silhouette_packs_front_gap_and_mask(all_outputs):
     np.testing.assert_array_equal(sil[..., 2], mask.astype(np.float32))
     np.testing.assert_allclose(sil[..., 0], depth01)
     assert np.all(sil[..., 0][~mask] == 1) and np.all(sil[..., 1][~mask] == 0)
+
+
+def test_envelope_is_the_closed_crown_with_smooth_depth_near_the_visible_depth(all_outputs):
+    for view in all_outputs["two-view"]:
+        sil, env = view.images["silhouette"], view.images["silhouette_envelope"]
+        fg, crown = sil[..., 2] > 0.5, env[..., 2] > 0.5
+        assert env.dtype == np.float32 and env.shape == sil.shape and env.min() >= 0 and env.max() <= 1
+        assert np.all(crown[fg]) and crown.sum() > fg.sum()  # the leaves' gaps are closed
+        np.testing.assert_array_equal(ndimage.binary_fill_holes(crown), crown)
+        assert np.all(env[..., 0][~crown] == 1) and np.all(env[..., 1][~crown] == 0)
+        front_leaf, front_env = sil[..., 0], env[..., 0]
+        assert abs(front_env[fg].mean() - front_leaf[fg].mean()) < 0.05
+        # Pixel-to-pixel change inside the crown: the envelope varies far less than the per-leaf depth.
+        inner = ndimage.binary_erosion(fg, iterations=2)
+        rough_leaf = np.abs(np.diff(front_leaf, axis=1))[inner[:, 1:] & inner[:, :-1]].mean()
+        rough_env = np.abs(np.diff(front_env, axis=1))[inner[:, 1:] & inner[:, :-1]].mean()
+        assert rough_env < 0.35 * rough_leaf
+
+
+def test_envelope_of_a_plane_is_the_plane_and_fills_a_hole_between_its_sides():
+    from renderers.camera import orthographic_camera
+    from renderers.maps import ENVELOPE_SIGMA_256, envelope_silhouette_map
+
+    camera = orthographic_camera(np.array([[-1.0, -1, 0], [1, 1, 2]]), 0.0, 0.0, 128)
+    v, u = np.mgrid[0:128, 0:128]
+    disc = (u - 64) ** 2 + (v - 64) ** 2 < 50 ** 2
+    ring = disc & ((u - 64) ** 2 + (v - 64) ** 2 > 12 ** 2)
+    near = camera.near + (camera.far - camera.near) * (0.2 + 0.004 * u)  # depth01 = 0.2 + 0.004 u
+    front = np.where(ring, near, 0.0).astype(np.float32)
+    back = np.where(ring, near + 0.3 * (camera.far - camera.near), 0.0).astype(np.float32)
+    env = envelope_silhouette_map(camera, front, back)
+    np.testing.assert_array_equal(env[..., 2] > 0.5, disc)  # the hole is filled
+    # Normalised convolution reproduces a linear surface exactly away from the region's edges.
+    far_from_edges = ndimage.distance_transform_edt(ring) > 3 * ENVELOPE_SIGMA_256 / 2
+    np.testing.assert_allclose(env[..., 0][far_from_edges], (0.2 + 0.004 * u)[far_from_edges], atol=2e-3)
+    np.testing.assert_allclose(env[..., 1][disc], 0.3, atol=2e-3)
+    hole = disc & ~ring
+    assert np.all((env[..., 0][hole] > 0.2 + 0.004 * 40) & (env[..., 0][hole] < 0.2 + 0.004 * 88))
 
 
 def test_depth01_spans_near_to_far_with_background_one(all_outputs):

@@ -79,3 +79,29 @@ def test_trunk_strokes_are_deterministic(tree, all_outputs):
     again = trunk_strokes(view.camera, skeleton)
     np.testing.assert_array_equal(again[0], view.images["trunk_strokes"])
     np.testing.assert_array_equal(again[1], view.images["trunk_depth"])
+
+
+def test_a_tree_and_its_mirror_through_the_image_plane_draw_the_same_strokes_at_depth_one_minus(tree, all_outputs):
+    """Why a network cannot tell the depth of an orthographic stroke drawing (docs/training.md): mirrored through
+    the plane of the view's box centre, a tree draws the same pixels in the same camera, at trunk depth 1 - d; only
+    where strokes overlap does the colour on top change (the nearer stroke wins), the one depth cue left. A tree's
+    mirror is about as likely a tree, so the best guess of a stroke pixel's depth is close to 0.5."""
+    from species.skeleton import Skeleton
+
+    mesh, skeleton = tree
+    view = all_outputs["two-view"][0]
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    to_camera = view.camera.world_to_camera[:3, :3]
+    axis = to_camera[2]  # the viewing direction in world axes
+    centre = 0.5 * (points.min(axis=0) + points.max(axis=0))
+    assert np.abs(axis).max() > 1 - 1e-9  # the front view looks along a world axis: the box mirrors onto itself
+    offset = (skeleton.positions - centre) @ axis
+    mirrored = Skeleton(skeleton.positions - 2 * offset[:, None] * axis[None, :], skeleton.parent, skeleton.radius,
+                        skeleton.order)
+    strokes, depth = trunk_strokes(view.camera, mirrored)
+    drawn = view.images["trunk_depth"] < 1
+    np.testing.assert_array_equal(depth < 1, drawn)
+    same = np.all(strokes == view.images["trunk_strokes"], axis=-1) & drawn
+    assert same.sum() >= 0.6 * drawn.sum()  # 32 branches in 160 px: a quarter of the stroke pixels overlap
+    residual = np.abs(depth[same] - (1.0 - view.images["trunk_depth"][same]))
+    assert np.median(residual) < 0.01 and np.quantile(residual, 0.8) < 0.02

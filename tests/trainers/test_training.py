@@ -83,6 +83,19 @@ def test_farm_train_trains_registers_and_lists(datasets, tmp_path):
                            text=True, timeout=120)
     assert fresh.returncode == 0 and fresh.stdout.strip() == "ok", fresh.stderr[-2000:]
 
+    # farm retrain as a scheduled job runs it: a challenger from the champion, the report, the registry updated.
+    retrained = subprocess.run(FARM + ["retrain", "pix2pix-trunk", "--data", str(datasets["pix2pix-trunk"]),
+                                       "--epochs", "1", "--models", str(registry), "--quiet",
+                                       "--report", str(tmp_path / "report")],
+                               cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=600)
+    assert retrained.returncode == 0, retrained.stderr[-3000:]
+    report = json.loads((tmp_path / "report" / "retrain-report.json").read_text())
+    assert report["champion_version"] == 1 and isinstance(report["promoted"], bool)
+    assert (tmp_path / "report" / "retrain-report.md").read_text().startswith("# Retraining pix2pix-trunk")
+    after = open_registry(registry)
+    assert after.latest("pix2pix-trunk").version == 2
+    assert after.champion("pix2pix-trunk").version == (2 if report["promoted"] else 1)
+
 
 def test_print_data_spec_is_the_shipped_spec():
     run = subprocess.run(FARM + ["train", "sketchnet", "--print-data-spec"], capture_output=True, text=True,
