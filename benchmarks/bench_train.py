@@ -136,6 +136,7 @@ def main() -> None:
                         help="training seconds per network; 0: no time limit, the recipe's epochs only (make models)")
     parser.add_argument("--throughput-seconds", type=float, default=40.0)
     parser.add_argument("--skip-throughput", action="store_true")
+    parser.add_argument("--skip-quality", action="store_true", help="only the throughput table")
     parser.add_argument("--export-models", type=Path, help="write the trained networks as model folders here")
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "bench_train")
     args = parser.parse_args()
@@ -155,8 +156,10 @@ def main() -> None:
             print(f"\ntraining throughput, {os.cpu_count()} cores, {args.throughput_seconds:.0f} s per setting "
                   f"(start-up included)")
             print(format_table(["network", "workers", "threads each", "samples", "samples/s", "vs 1x1"], rows))
-        reports = [quality(task, [str(args.data_root / task)], args.budget, args.work, args.export_models)
-                   for task in tasks]
+        reports = [] if args.skip_quality else [
+            quality(task, [str(args.data_root / task)], args.budget, args.work, args.export_models) for task in tasks]
+    if not reports:
+        return
     rows = [row for report in reports for row in quality_rows(report)]
     print(f"\nheld-out quality after {args.budget:.0f} s of training per network (one worker, every core)")
     print(format_table(["network", "metric", "model", "baseline", "trained"], rows))
