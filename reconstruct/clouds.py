@@ -1,0 +1,175 @@
+"""Point clouds in (issue 24's first stage): `.xyz`/`.txt`/`.csv` text, `.ply`, `.las`/`.laz`, or an (N, 3) array, with
+any declared up axis, turned into the frame the skeleton code works in: Z up, metres, float32, near the origin.
+
+Georeferenced scans carry coordinates in the millions of metres, where float32 keeps only decimetres; so the cloud is
+read in float64, rotated to Z up, and recentred (the box centre in X and Y, the lowest point in Z) before anything
+becomes float32, and the offset is kept to put results back in the scan's frame. Bad input (a missing or unknown
+file, non-numeric or non-finite rows, too few points, no vertical extent, an unknown up axis) is a `CloudError`
+whose one line names the value and what is allowed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from species.errors import TreefarmError
+
+__all__ = ["PointCloud", "CloudError", "read_cloud", "to_z_up", "UP_AXES", "CLOUD_SUFFIXES", "MIN_POINTS"]
+
+CLOUD_SUFFIXES = (".xyz", ".txt", ".csv", ".pts", ".ply", ".las", ".laz")
+MIN_POINTS = 100            # fewer cannot describe a trunk and branches
+MIN_HEIGHT_M = 0.05         # a cloud flatter than this has no vertical extent to grow a tree along
+# Rotations taking the declared up axis to +Z, each a proper rotation (determinant +1), so a scan is never mirrored.
+UP_AXES = {
+    "z": np.eye(3),
+    "-z": np.diag([1.0, -1.0, -1.0]),
+    "y": np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]),
+    "-y": np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]),
+    "x": np.array([[0.0, 1, 0], [0, 0, 1], [1, 0, 0]]),
+    "-x": np.array([[0.0, -1, 0], [0, 0, 1], [-1, 0, 0]]),
+}
+
+
+class CloudError(TreefarmError):
+    """A point cloud that cannot be read or cannot be a tree; the message names the value and what is allowed."""
+
+
+@dataclass(frozen=True, eq=False)
+class PointCloud:
+    """A cloud in the working frame.
+
+    points : (N, 3) float32 metres, Z up, the box centre at X = Y = 0 and the lowest point at Z = 0.
+    offset : (3,) float64, what was subtracted after the rotation to Z up: scan frame = up_rotation.T @ (points +
+             offset), computed in float64.
+    up     : the declared up axis of the source ("z", "-y", ...); up_rotation : (3, 3) float64 taking it to +Z.
+    colours: (N, 3) uint8 or None. source : the file's path, or "array".
+    """
+
+    points: np.ndarray
+    offset: np.ndarray
+    up: str
+    up_rotation: np.ndarray
+    colours: np.ndarray | None
+    source: str
+
+    @property
+    def height(self) -> float:
+        """Metres from the lowest to the highest point."""
+        return float(self.points[:, 2].max())
+
+    def to_scan_frame(self, points: np.ndarray) -> np.ndarray:
+        """(M, 3) float64: working-frame points (a skeleton's, a mesh's) back in the source's frame."""
+        return (np.asarray(points, np.float64) + self.offset) @ self.up_rotation
+
+
+def to_z_up(points: np.ndarray, up: str) -> np.ndarray:
+    """(N, 3) float64 points with the declared up axis turned to +Z (see UP_AXES)."""
+    if up not in UP_AXES:
+        raise CloudError(f"up axis {up!r} is unknown: allowed {', '.join(UP_AXES)}")
+    return np.asarray(points, np.float64) @ UP_AXES[up].T
+
+
+def _text_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    import pandas as pd
+
+    with path.open("r", errors="replace") as handle:
+        first = handle.readline()
+    separator = "," if "," in first else (";" if ";" in first else r"\s+")
+    try:
+        table = pd.read_csv(path, sep=separator, header=None, comment="#", engine="c", dtype=str,
+                            skip_blank_lines=True)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        raise CloudError(f"{path} is not a text point cloud ({str(exc).splitlines()[0]}): allowed rows of x y z "
+                         f"[r g b ...] numbers") from None
+    if table.shape[1] < 3:
+        raise CloudError(f"{path} has {table.shape[1]} column(s): allowed rows of at least x y z")
+    numbers = table.apply(pd.to_numeric, errors="coerce")
+    bad = numbers.iloc[:, :3].isna().to_numpy() & table.iloc[:, :3].notna().to_numpy()
+    missing = table.iloc[:, :3].isna().to_numpy()
+    if bad.any() or missing.any():
+        row = int(np.flatnonzero((bad | missing).any(axis=1))[0])
+        raise CloudError(f"{path} row {row + 1} is {' '.join(map(str, table.iloc[row, :3].tolist()))!r}: allowed "
+                         f"three numbers x y z per row")
+    colours = None
+    if table.shape[1] >= 6:
+        rgb = numbers.iloc[:, 3:6].to_numpy(np.float64)
+        if np.isfinite(rgb).all() and rgb.min() >= 0 and rgb.max() <= 255 and np.all(rgb == np.round(rgb)):
+            colours = rgb.astype(np.uint8)
+    return numbers.iloc[:, :3].to_numpy(np.float64), colours
+
+
+def _ply_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    import trimesh
+
+    try:
+        loaded = trimesh.load(path, process=False)
+    except Exception as exc:  # noqa: BLE001 - trimesh raises many types for a broken file
+        raise CloudError(f"{path} is not a readable PLY ({type(exc).__name__}: {exc}): allowed a PLY of vertices") \
+            from None
+    vertices = np.asarray(getattr(loaded, "vertices", np.empty((0, 3))), np.float64)
+    colours = getattr(loaded, "colors", None)
+    if colours is None and hasattr(loaded, "visual") and getattr(loaded.visual, "kind", None) == "vertex":
+        colours = loaded.visual.vertex_colors
+    colours = None if colours is None or len(colours) != len(vertices) else np.asarray(colours)[:, :3].astype(np.uint8)
+    return vertices, colours
+
+
+def _las_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    import laspy
+
+    try:
+        las = laspy.read(path)
+    except Exception as exc:  # noqa: BLE001 - laspy's errors for a broken or LAZ-without-backend file
+        raise CloudError(f"{path} is not a readable LAS/LAZ file ({type(exc).__name__}: {exc})") from None
+    points = np.column_stack([np.asarray(las.x, np.float64), np.asarray(las.y, np.float64),
+                              np.asarray(las.z, np.float64)])
+    colours = None
+    if {"red", "green", "blue"} <= set(las.point_format.dimension_names):
+        rgb = np.column_stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)]).astype(np.float64)
+        colours = (rgb / 257.0 if rgb.max(initial=0) > 255 else rgb).round().astype(np.uint8)
+    return points, colours
+
+
+_READERS = {".xyz": _text_points, ".txt": _text_points, ".csv": _text_points, ".pts": _text_points,
+            ".ply": _ply_points, ".las": _las_points, ".laz": _las_points}
+
+
+def read_cloud(source, up: str = "z") -> PointCloud:
+    """The cloud in `source` (a path with a suffix in CLOUD_SUFFIXES, or an (N, 3) array of metres) in the
+    working frame. up : the source's up axis (UP_AXES; default "z")."""
+    if up not in UP_AXES:
+        raise CloudError(f"up axis {up!r} is unknown: allowed {', '.join(UP_AXES)}")
+    colours = None
+    if isinstance(source, (str, Path)):
+        path = Path(source)
+        suffix = path.suffix.lower()
+        if suffix not in _READERS:
+            raise CloudError(f"{path} is not a point cloud file: allowed suffixes {', '.join(CLOUD_SUFFIXES)}")
+        if not path.is_file():
+            raise CloudError(f"point cloud {path} does not exist")
+        raw, colours = _READERS[suffix](path)
+        name = str(path)
+    else:
+        raw = np.asarray(source)
+        name = "array"
+        if raw.dtype == object or not np.issubdtype(raw.dtype, np.number):
+            raise CloudError(f"the cloud array has dtype {raw.dtype}: allowed numbers, shape (N, 3)")
+        if raw.ndim != 2 or raw.shape[1] != 3:
+            raise CloudError(f"the cloud array has shape {raw.shape}: allowed (N, 3)")
+        raw = raw.astype(np.float64)
+    finite = np.isfinite(raw).all(axis=1)
+    if not finite.all():
+        raise CloudError(f"{name} has {int((~finite).sum())} point(s) with NaN or infinite coordinates (first: point "
+                         f"{int(np.flatnonzero(~finite)[0]) + 1}): allowed finite numbers")
+    if len(raw) < MIN_POINTS:
+        raise CloudError(f"{name} has {len(raw)} points: allowed at least {MIN_POINTS} for a tree")
+    upright = to_z_up(raw, up)
+    low, high = upright.min(axis=0), upright.max(axis=0)
+    if high[2] - low[2] < MIN_HEIGHT_M:
+        raise CloudError(f"{name} spans {high[2] - low[2]:.3g} m along its up axis {up!r}: allowed at least "
+                         f"{MIN_HEIGHT_M} m (is --up right?)")
+    offset = np.array([0.5 * (low[0] + high[0]), 0.5 * (low[1] + high[1]), low[2]])
+    points = (upright - offset).astype(np.float32)
+    return PointCloud(points, offset, up, UP_AXES[up].copy(), colours, name)
