@@ -30,6 +30,7 @@ from farm.pipeline import run_job  # noqa: E402
 from farm.table import format_table  # noqa: E402
 from trainers.data import Split, TaskDataset, open_data  # noqa: E402
 from trainers.models import load  # noqa: E402
+from trainers.networks import Pix2PixNetwork  # noqa: E402
 from trainers.pix2pix import masked_depth_error  # noqa: E402
 from trainers.tasks import TASKS  # noqa: E402
 from trainers.training import evaluation_batches  # noqa: E402
@@ -56,15 +57,14 @@ def scores(data_dir: Path) -> tuple[list[list], int]:
     started = time.perf_counter()
     predicted = np.concatenate([predictor.model.run(inputs[i:i + 16]) for i in range(0, len(inputs), 16)])
     per_view_ms = 1000 * (time.perf_counter() - started) / len(inputs)
-    mean_depth = float((target * mask).sum() / mask.sum())
-    baseline = masked_depth_error(np.full_like(target, mean_depth), target, mask)
-    rows = [["mean-depth baseline (this set's own mean, %.3f)" % mean_depth, f"{baseline:.4f}", "1.00"],
-            ["constant 0.5 (the mirror-symmetric optimum)", f"{masked_depth_error(np.full_like(target, 0.5), target, mask):.4f}",
-             None],
-            [f"shipped model ({per_view_ms:.0f} ms per view)", f"{masked_depth_error(predicted, target, mask):.4f}", None],
-            ["the issue's target: 30 % below the baseline", f"{0.7 * baseline:.4f}", "0.70"]]
-    for row in rows[1:3]:
-        row[2] = f"{float(row[1]) / baseline:.2f}"
+    mean_depth = float(Pix2PixNetwork.mean_depth(batches)[0])
+    errors = {f"mean-depth baseline (this set's own mean, {mean_depth:.3f})": np.full_like(target, mean_depth),
+              "constant 0.5 (the mirror-symmetric optimum)": np.full_like(target, 0.5),
+              f"shipped model ({per_view_ms:.0f} ms per view)": predicted}
+    errors = {name: masked_depth_error(guess, target, mask) for name, guess in errors.items()}
+    baseline = next(iter(errors.values()))
+    rows = [[name, f"{error:.4f}", f"{error / baseline:.2f}"] for name, error in errors.items()]
+    rows.append(["the issue's target: 30 % below the baseline", f"{0.7 * baseline:.4f}", "0.70"])
     return rows, len(inputs)
 
 

@@ -6,8 +6,8 @@ training spec's, so the shipped models never saw them), rendered as the spec ren
   dictionary. Parameter head scores (1 - RMSE) x 100 with the model's codec, species accuracy, height and crown
   errors, and the rotation sweep: the network on each view of rig `orbit:N:10` (paper: 72 views, HDD ~0.03).
 - sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
-  networks (`reconstruct.from_sketch`); their foreground depth error against the GT `silhouette_envelope` / `trunk_depth`
-  (cut to the network's crop as training cut them), the traced main skeleton against the GT main branches; a
+  networks (`reconstruct.from_sketch`); their foreground depth error against the GT `silhouette_envelope` /
+  `trunk_depth` (cut to the network's crop as training cut them), the traced main skeleton against the GT main branches; a
   second column grows from the GT maps (`reconstruct.from_maps`), the networks' share of the error.
 - two-view (seed 001): the `two-view:shared` front and side `sketch_strokes` (1-px lines) and
   `sketch_strokes_brush` into `reconstruct.two_view`.

@@ -75,7 +75,7 @@ def throughput(task: str, data: list[str], seconds: float, work: Path) -> list[l
 def grown_errors(result, limit: int = 400) -> dict:
     """TreeSketchNet's dictionaries grown (`trainers.sketchnet.grown_tree_errors`, one fixed seed for both): height
     and crown radius of the trees of its predictions on the held-out views (at most `limit`), and of the
-    mean-parameter baseline's, against the true trees'."""
+    mean-parameter baseline's, against the true trees', as {"test"|"baseline": {"grown_<error>": value}}."""
     network = result.network
     test_set = TaskDataset(result.data, result.split, "test")
     records = [test_set.plain_record(i) for i in range(min(len(test_set), limit))]
@@ -85,7 +85,7 @@ def grown_errors(result, limit: int = 400) -> dict:
     true = [{**json.loads(r["params_json"]), "species": r["species"]} for r in records]
     model = grown_tree_errors(network.codec.decode_batch(joined), true)
     baseline = grown_tree_errors(network.codec.decode_arrays(network.codec.baseline_outputs(len(true))), true)
-    return {side: {key: errors[key] for key in ("height_rel_error", "crown_radius_rel_error", "n")}
+    return {side: {f"grown_{key}": errors[key] for key in ("height_rel_error", "crown_radius_rel_error")}
             for side, errors in (("test", model), ("baseline", baseline))}
 
 
@@ -97,8 +97,7 @@ def quality(task: str, data: list[str], budget: float, work: Path, export: Path 
            "test": result.test_metrics, "baseline": result.baseline_metrics, "data": result.summary}
     if task == "sketchnet":
         grown = grown_errors(result)
-        out["test"] = {**out["test"], **{f"grown_{k}": v for k, v in grown["test"].items() if k != "n"}}
-        out["baseline"] = {**out["baseline"], **{f"grown_{k}": v for k, v in grown["baseline"].items() if k != "n"}}
+        out["test"], out["baseline"] = {**out["test"], **grown["test"]}, {**out["baseline"], **grown["baseline"]}
     if export is not None:
         folder = export / task
         with tempfile.TemporaryDirectory() as staging:

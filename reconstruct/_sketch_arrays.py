@@ -35,6 +35,13 @@ def check_camera(camera, shape: tuple[int, int]) -> Camera:
     return camera
 
 
+def check_height(height, default: str) -> None:
+    """A SketchError unless `height` is None or a finite number of metres > 0; `default` names what None means."""
+    if height is not None and not (isinstance(height, (int, float, np.number)) and np.isfinite(height)
+                                   and height > 0):
+        raise SketchError(f"height {height!r} must be a number of metres > 0 (or None for {default})")
+
+
 def metres(camera: Camera, depth01: np.ndarray) -> np.ndarray:
     return camera.near + np.asarray(depth01, np.float64) * (camera.far - camera.near)
 

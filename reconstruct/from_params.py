@@ -14,13 +14,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import species
-from species.errors import TreefarmError
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
+from ._sketch_arrays import check_height
 from .networks import as_image, predictor
 
-__all__ = ["ParamsReconstruction", "ParamsError", "from_params", "scaled_to_height"]
+__all__ = ["ParamsReconstruction", "from_params", "scaled_to_height"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -36,10 +36,6 @@ class ParamsReconstruction:
 
 
 _HEIGHT_TOLERANCE = 0.01  # relative: a second rescale when the first leaves the tree further off (leaves, tips)
-
-
-class ParamsError(TreefarmError):
-    """A parameters-from-sketch request that cannot be met (a height that is not a positive number of metres)."""
 
 
 def scaled_to_height(params: dict, height: float) -> tuple[dict, Skeleton, TreeMesh]:
@@ -65,8 +61,7 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
     height : metres; the dictionary's scale is set so the tree is this tall (`scaled_to_height`). A sketch is
              drawn at no scale, so without it the size is the network's guess from the tree's species and shape.
     """
-    if height is not None and not (isinstance(height, (int, float)) and np.isfinite(height) and height > 0):
-        raise ParamsError(f"height {height!r} must be a number of metres > 0 (or None for the network's guess)")
+    check_height(height, "the network's guess")
     start = time.perf_counter()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)

@@ -27,7 +27,7 @@ from species.presets import get_preset
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
-from ._sketch_arrays import SketchError, check_camera, disc, image_array, metres
+from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
 from .trunk_tracing import stroke_labels, trace_trunk
 
 __all__ = ["SketchError", "SketchReconstruction", "CameraCrown", "from_sketch", "from_maps", "backproject", "denoise_depth",
@@ -374,8 +374,7 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     silhouette = image_array(silhouette_maps, "silhouette_maps", (3,)).astype(np.float64)
     trunk_depth = image_array(trunk_maps, "trunk_maps", (0,)).astype(np.float64)
     check_camera(camera, silhouette.shape[:2])
-    if height is not None and not (np.isfinite(height) and height > 0):
-        raise SketchError(f"height {height!r} must be a number of metres > 0 (or None for the preset's)")
+    check_height(height, "the preset's")
     params = _colonization_params(species, rng)
     height = float(params["height"] if height is None else height)
     params["height"] = height

@@ -7,7 +7,8 @@ W) bool`, `Camera`, `make_rig`/`RIGS` (rig "two-view:shared": front and side at 
 "depth" (H, W) float32 metres, 0 background; "depth01" (H, W) float32 in [0, 1], 1 background/far;
 "mask" (H, W) uint8 0 background / 1 bark / 2 leaves; "order" (H, W) uint8 branch order + 1 on bark, 0 elsewhere;
 "normals" (H, W, 3) uint8 camera-frame normals; "silhouette" (H, W, 3) float32 (front depth01, front-to-back gap,
-mask); "silhouette_envelope" the same of the closed crown with smooth front and back; "depth_back" (H, W) float32 metres of the farthest surface; "trunk_strokes" (H, W, 3) uint8;
+mask); "silhouette_envelope" the same of the closed crown with smooth front and back; "depth_back" (H, W)
+float32 metres of the farthest surface; "trunk_strokes" (H, W, 3) uint8;
 "trunk_depth" (H, W) float32 in [0, 1], 1 = no stroke; "sketch_*" (H, W) uint8, black lines on white.
 """
 from __future__ import annotations

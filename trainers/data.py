@@ -62,7 +62,7 @@ _VERDICTS_SQL = "SELECT tree_id, reviewer, verdict, time_ms FROM verdicts"
 
 # Background value per channel of each target map (what a view shows where there is no tree), filled in where a
 # crop or a jitter reaches past the rendered image.
-TARGET_BACKGROUND = {"silhouette": (1.0, 0.0, 0.0), "silhouette_envelope": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
+TARGET_BACKGROUND = {"silhouette_envelope": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
 _PIX2PIX_TASK = {"pix2pix-silhouette": "silhouette", "pix2pix-trunk": "trunk"}
 
 # Augmentation ranges (module docstring).

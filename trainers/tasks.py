@@ -110,8 +110,8 @@ TASKS: dict[str, Task] = {
     "sketchnet": Task("sketchnet", inputs=("sketch_tsn",), styles=("sketch_hand",), targets=(),
                       input_kind="sketch", input_size=224, spec_name="sketchnet", model_name="sketchnet"),
     # Seed 000's cGANs (digest 1.8-1.9): orthographic pairs at 256 px.
-    "pix2pix-silhouette": Task("pix2pix-silhouette", inputs=("sketch_edges",), styles=(), targets=("silhouette_envelope",),
-                               input_kind="sketch", input_size=256, spec_name="pix2pix-silhouette",
+    "pix2pix-silhouette": Task("pix2pix-silhouette", inputs=("sketch_edges",), styles=(),
+                               targets=("silhouette_envelope",), input_kind="sketch", input_size=256, spec_name="pix2pix-silhouette",
                                model_name="pix2pix-silhouette", rigs=("two-view",)),
     "pix2pix-trunk": Task("pix2pix-trunk", inputs=("trunk_strokes",), styles=(), targets=("trunk_depth",),
                           input_kind="strokes", input_size=256, spec_name="pix2pix-trunk",

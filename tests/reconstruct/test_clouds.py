@@ -18,7 +18,8 @@ def tree1():
 
 def test_the_real_cloud_reads_upright_at_the_origin_with_its_offset(tree1):
     cloud = read_cloud(TREE1)
-    assert cloud.points.dtype == np.float32 and cloud.points.shape == (len(tree1), 3) and cloud.offset.dtype == np.float64
+    assert cloud.points.dtype == np.float32 and cloud.points.shape == (len(tree1), 3)
+    assert cloud.offset.dtype == np.float64
     assert cloud.points[:, 2].min() == 0.0
     np.testing.assert_allclose(cloud.height, np.ptp(tree1[:, 2]), rtol=1e-6)
     np.testing.assert_allclose(cloud.points.min(axis=0)[:2], -cloud.points.max(axis=0)[:2], atol=1e-5)

@@ -16,7 +16,7 @@ from farm.cli import main
 from gltf_validator import assert_valid_glb
 from renderers import ViewRenderer
 from reconstruct import InputImageError, from_params
-from reconstruct.from_params import ParamsError
+from reconstruct.from_sketch import SketchError
 from reconstruct.networks import sketch_maps
 from trainers.preprocess import prepare
 
@@ -117,7 +117,7 @@ def test_params_with_a_height_grows_that_tall_and_its_dictionary_rebuilds_the_sa
     assert printed and abs(float(printed.group(1)) - 7.5) <= 0.02 * 7.5
     assert main(["tree", "--params", str(dictionary), "--out", str(tmp_path / "again")]) == 0
     assert (tmp_path / "again" / "tall.glb").read_bytes() == out.read_bytes()
-    with pytest.raises(ParamsError, match="height -1"):
+    with pytest.raises(SketchError, match="height -1"):
         from_params(image, height=-1)
 
 

@@ -191,8 +191,9 @@ def test_silhouette_views_become_ink_input_and_the_silhouette_with_its_mask():
     fg = np.zeros((8, 8), bool)
     fg[2:6, 1:7] = True
     silhouette = np.stack([np.where(fg, 0.4, 1.0), np.where(fg, 0.1, 0.0), fg], -1).astype(np.float32)
-    x, target, mask = targets_from_views("silhouette", {"sketch_edges": _stored("sketch_edges", edges),
-                                                        "silhouette_envelope": _stored("silhouette_envelope", silhouette)})
+    views = {"sketch_edges": _stored("sketch_edges", edges),
+             "silhouette_envelope": _stored("silhouette_envelope", silhouette)}
+    x, target, mask = targets_from_views("silhouette", views)
     assert x.shape == (1, 8, 8) and target.shape == (3, 8, 8) and mask.shape == (1, 8, 8)
     assert torch.equal(x[0] == 1.0, torch.from_numpy(edges == 0)) and float(x.min()) == 0.0
     assert torch.equal(mask[0].bool(), torch.from_numpy(fg))
