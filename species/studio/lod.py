@@ -163,7 +163,7 @@ def _with_structure(skeleton: Skeleton, chosen: np.ndarray, drop: np.ndarray) ->
     return keep
 
 
-def _node_keys(skeleton: Skeleton) -> np.ndarray:
+def branch_node_keys(skeleton: Skeleton) -> np.ndarray:
     """(N,) float64 metres, each node's Douglas-Peucker key along its own branch (see `simplification_keys`);
     a branch's path starts at its junction on the parent, so the junction bounds the first chord."""
     paths = skeleton.branch_paths
@@ -285,7 +285,7 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
     until the budget is spent. The error of a choice is the area of the dropped branches plus, per kept
     branch, its length x the largest offset its dropped nodes had (at most its width: a thin line moved off
     costs its own width); the tolerance with the least error wins (the finest on ties). keys: (N,) float64
-    metres, `_node_keys(skeleton)`.
+    metres, `branch_node_keys(skeleton)`.
     """
     starts = skeleton.branch_starts
     sides, coned = _branch_sides(skeleton, sides_by_order, metres_per_px)
@@ -343,7 +343,7 @@ class TreeLods:
 
     @cached_property
     def node_keys(self) -> np.ndarray:
-        return _node_keys(self.skeleton)
+        return branch_node_keys(self.skeleton)
 
     @cached_property
     def leaf_cards(self) -> LeafCards:

@@ -1,0 +1,625 @@
+"""Point cloud to skeleton, after AdTree's method (Du et al. 2019, "AdTree: Accurate, Detailed, and Automatic
+Modelling of Laser-Scanned Trees"), in vectorised numpy and scipy.
+
+In: a `PointCloud` (reconstruct.clouds: Z up, metres, base near the origin) or an (N, 3) array. Out: a `Skeleton`
+(parent[i] < i, renumbered breadth-first, orders by `branch_orders`) with radii, and what was measured on the way.
+
+The stages, each a function below:
+1. duplicate removal (points closer than 1 mm become one), and a voxel grid above `max_points`;
+2. the trunk's initial radius from the lowest 2 % of the points (a circle fit);
+3. trunk centralisation: slice by slice up the trunk, the points on the fitted circle move to its centre, so the
+   paths of step 5 climb the trunk's axis instead of spiralling round its bark;
+4. the graph, edges weighted by squared length (a chain of short hops beats one long jump, so paths follow the
+   wood and not the gaps between branches): by default the 16 nearest neighbours of each point, its pieces
+   joined by their shortest links; AdTree's 3D Delaunay triangulation on request (`graph="delaunay"`), which
+   fits a little closer and costs three times as long (benchmarks/bench_reconstruct_cloud.py);
+5. the shortest-path tree from the lowest point (Dijkstra), and each point's path length along it;
+6. merging of adjacent vertices: points in the same band of path length that touch become one skeleton vertex at
+   their centroid (the band is a few point spacings wide, so a branch's cross-section is one vertex); then
+   vertices closer than three bands at about the same path length join (the two flanks of a thick branch);
+7. pruning of small subtrees: a side subtree whose reach (longest path to a tip) is below 0.019 of the tree's
+   reach goes;
+8. merging of near-parallel siblings (their directions within 20 degrees): the weaker joins the stronger; and
+   a side branch running beside its parent branch (90 % of it within 1.5 bands) is taken for the other flank
+   of a thick limb and joins it (a thick limb sampled densely still keeps some such twigs);
+9. removal of collinear single-child vertices (Douglas-Peucker along each branch at a share of the spacing);
+10. the trunk cylinder fit (nonlinear least squares on the centralised trunk's original points) and radii by
+    the power law r = r_trunk (reach / trunk reach) ^ 1.1, never wider than the parent;
+11. Hermite smoothing: a cubic Hermite point inserted in every segment where the branch turns by more than 15
+    degrees, so the tube bends smoothly without a dense skeleton.
+
+AdTree's paper gives the pruning ratio (0.019) and the power law's exponent (1.1); the other constants are ours,
+chosen on `tree1.xyz` and the synthetic clouds of `benchmarks/bench_reconstruct_cloud.py`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import sparse
+from scipy.optimize import least_squares
+from scipy.sparse.csgraph import connected_components, dijkstra
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from species.geometry.topology import depth_levels, node_depths
+from species.geometry.vectors import row_norms
+from species.lsystem.lstring_io import branch_orders
+from species.skeleton import Skeleton
+from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_maximum
+
+from .clouds import CloudError, PointCloud, read_cloud
+
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT"]
+
+GRAPHS = ("delaunay", "knn")
+PRUNE_RATIO = 0.019        # AdTree: side subtrees shorter than this share of the tree's reach are removed
+RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
+DUPLICATE_M = 1e-3         # points closer than this are one point
+
+
+@dataclass(frozen=True)
+class SkeletonSettings:
+    """The constants of `cloud_skeleton`; the defaults are the documented ones.
+
+    max_points        : above this many (after duplicates go) the cloud is thinned on a voxel grid.
+    graph             : "knn" (`knn` nearest neighbours, pieces joined) or "delaunay" (AdTree's, slower).
+    band_spacings     : width of a path-length band in median point spacings (stage 6).
+    link_spacings     : points closer than this many spacings and in one band are one vertex.
+    merge_bands       : stage 6b's distance, in bands.
+    prune_ratio       : stage 7's share of the tree's reach.
+    sibling_angle_deg : stage 8's angle.
+    collinear_share   : stage 9's Douglas-Peucker tolerance, as a share of the band width.
+    radius_exponent   : stage 10's power law.
+    min_radius_m      : the thinnest branch radius written.
+    hermite_angle_deg : stage 11's turning angle above which a segment gets a Hermite midpoint.
+    """
+
+    max_points: int = 200_000
+    graph: str = "knn"
+    knn: int = 16
+    trunk_base_share: float = 0.02
+    band_spacings: float = 4.0
+    link_spacings: float = 2.5
+    merge_bands: float = 0.0
+    flank_bands: float = 1.5
+    prune_ratio: float = PRUNE_RATIO
+    sibling_angle_deg: float = 20.0
+    collinear_share: float = 0.25
+    radius_exponent: float = RADIUS_EXPONENT
+    min_radius_m: float = 0.002
+    hermite_angle_deg: float = 15.0
+
+    def __post_init__(self) -> None:
+        if self.graph not in GRAPHS:
+            raise CloudError(f"graph {self.graph!r} is not known: allowed {', '.join(GRAPHS)}")
+        checks = {"max_points": (self.max_points, 1000), "knn": (self.knn, 3)}
+        for name, (value, least) in checks.items():
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
+        for name in ("trunk_base_share", "band_spacings", "link_spacings", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
+                     "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
+                raise CloudError(f"{name} = {value!r}: allowed a finite number >= 0")
+        if not 0 < self.trunk_base_share < 0.5:
+            raise CloudError(f"trunk_base_share = {self.trunk_base_share!r}: allowed a share in (0, 0.5)")
+
+
+@dataclass(frozen=True, eq=False)
+class CloudSkeleton:
+    """What `cloud_skeleton` made and measured.
+
+    skeleton      : the tree in the cloud's working frame (Z up, metres, the lowest point at Z = 0).
+    trunk_radius  : metres, the fitted trunk cylinder's radius; trunk_axis : (2, 3) a point on the axis at the
+                    base and the axis's unit direction.
+    spacing       : metres, the median nearest-neighbour distance of the points used.
+    n_points      : points given; n_used : points after duplicates and thinning; n_reached : points the
+                    shortest-path tree reached (the others lie in pieces the graph could not join).
+    timings       : seconds per stage.
+    """
+
+    skeleton: Skeleton
+    trunk_radius: float
+    trunk_axis: np.ndarray
+    spacing: float
+    n_points: int
+    n_used: int
+    n_reached: int
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+# ------------------------------------------------------------------------------------------------ stage 1
+def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
+    """(M, 3) float64: the points with duplicates (closer than DUPLICATE_M, on a 1 mm grid) merged, thinned on
+    a voxel grid (one point per voxel, the first in file order) when more than `max_points` remain."""
+    points = points[_first_per_cell(points, DUPLICATE_M)]
+    if len(points) <= max_points:
+        return points
+    extent = np.ptp(points, axis=0)
+    voxel = float(np.cbrt(np.prod(np.maximum(extent, 1e-3)) / max_points))
+    while True:
+        first = _first_per_cell(points, voxel)
+        if len(first) <= max_points:
+            return points[first]
+        voxel *= 1.25
+
+
+def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
+    """Ascending indices of the first point in each occupied cell of a grid of side `cell` (one int64 key per
+    cell: a 1-D unique is several times faster than a row-wise one)."""
+    keys = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+    span = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, first = np.unique(flat, return_index=True)
+    return np.sort(first)
+
+
+# ------------------------------------------------------------------------------------------------ stages 2, 3
+def fit_circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
+    """Centre (2,) and radius of the least-squares circle through 2D points (the algebraic fit: linear, exact for
+    points on a circle, and good on an arc, as a scan of one side of a trunk gives)."""
+    a = np.column_stack([2.0 * xy, np.ones(len(xy))])
+    b = np.einsum("ij,ij->i", xy, xy)
+    (cx, cy, c), *_ = np.linalg.lstsq(a, b, rcond=None)
+    return np.array([cx, cy]), float(np.sqrt(max(c + cx * cx + cy * cy, 0.0)))
+
+
+def _planar_norms(xy: np.ndarray) -> np.ndarray:
+    return np.hypot(xy[..., 0], xy[..., 1])
+
+
+def centralise_trunk(points: np.ndarray, base_share: float, spacing: float,
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Stages 2 and 3. Returns (points with the trunk's moved onto its axis, trunk mask, (K, 3) axis centres of
+    the slices, initial radius). Slices one band high climb while their points still fit one circle no wider
+    than twice the base radius; the climb stops at the first fork or where the trunk disappears into the crown."""
+    z = points[:, 2]
+    low = z <= np.quantile(z, base_share)
+    centre, radius0 = fit_circle(points[low, :2])
+    spread = np.median(_planar_norms(points[low, :2] - np.median(points[low, :2], axis=0)))
+    if not np.isfinite(radius0) or radius0 > 4 * max(spread, spacing):  # too few or collinear points: no arc
+        centre, radius0 = np.median(points[low, :2], axis=0), float(spread)
+    radius0 = max(radius0, spacing)
+    height = max(2.0 * radius0, 4.0 * spacing)
+    trunk = np.zeros(len(points), bool)
+    centres, radius, bottom, top = [], radius0, float(z.min()), float(z.max())
+    order = np.argsort(z, kind="stable")
+    sorted_z = z[order]
+    while bottom < top:
+        lo, hi = np.searchsorted(sorted_z, [bottom, bottom + height])
+        index = order[lo:hi]
+        near = index[_planar_norms(points[index, :2] - centre) <= 2.0 * radius + 2 * spacing]
+        if len(near) < 6:
+            break
+        new_centre, new_radius = fit_circle(points[near, :2])
+        if not np.isfinite(new_radius) or new_radius > 2.0 * radius0 or _planar_norms(new_centre - centre) > 2 * radius:
+            break
+        centre, radius = new_centre, max(new_radius, spacing)
+        on = near[_planar_norms(points[near, :2] - centre) <= 1.5 * radius + spacing]
+        trunk[on] = True
+        centres.append([centre[0], centre[1], bottom + height / 2])
+        bottom += height
+    moved = points.copy()
+    if centres:
+        axis = np.asarray(centres)
+        slice_of = np.clip(np.searchsorted(axis[:, 2], points[trunk, 2]), 0, len(axis) - 1)
+        # A tenth of the offset stays, so the centralised points do not fall into one degenerate line.
+        moved[trunk, :2] = axis[slice_of, :2] + 0.1 * (points[trunk, :2] - axis[slice_of, :2])
+    else:
+        axis = np.array([[centre[0], centre[1], float(z.min())]])
+    return moved, trunk, axis, radius0
+
+
+# ------------------------------------------------------------------------------------------------ stage 4
+def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
+    """(E, 2) int64 unique undirected edges (i < j): the 3D Delaunay triangulation's, or the k-NN graph's with
+    its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way."""
+    n = len(points)
+    if graph == "delaunay":
+        try:
+            simplices = Delaunay(points, qhull_options="QJ Qbb").simplices
+        except QhullError as error:
+            raise CloudError(f"the cloud's points are degenerate (all on a plane or a line?): {error}".splitlines()[0]
+                             ) from None
+        return _unique_edges(simplices[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]].reshape(-1, 2), n)
+    tree = cKDTree(points)
+    _, index = tree.query(points, k=min(knn + 1, n))
+    edges = _unique_edges(np.column_stack([np.repeat(np.arange(n), index.shape[1] - 1), index[:, 1:].ravel()]), n)
+    while True:
+        count, label = connected_components(_adjacency(edges, n), directed=False)
+        if count == 1:
+            return edges
+        edges = _unique_edges(np.concatenate([edges, _bridges(points, tree, label, count)]), n)
+
+
+_BRIDGE_NEIGHBOURS = 32  # neighbours searched for a link out of a piece of the k-NN graph
+
+
+def _unique_edges(pairs: np.ndarray, n: int) -> np.ndarray:
+    pairs = np.sort(pairs.astype(np.int64), axis=1)
+    flat = np.unique(pairs[:, 0] * n + pairs[:, 1])
+    flat = flat[flat // n != flat % n]
+    return np.column_stack([flat // n, flat % n])
+
+
+def _adjacency(edges: np.ndarray, n: int) -> sparse.coo_matrix:
+    return sparse.coo_matrix((np.ones(len(edges), np.int8), (edges[:, 0], edges[:, 1])), shape=(n, n))
+
+
+def _bridges(points: np.ndarray, tree: cKDTree, label: np.ndarray, count: int) -> np.ndarray:
+    """(B, 2) the shortest link from each piece but the largest to another (a Boruvka step): among the nearest
+    neighbours of a piece's points, the first in another piece; a piece that sees no other searches the rest."""
+    largest = np.argmax(np.bincount(label, minlength=count))
+    query = np.flatnonzero(label != largest)
+    _, index = tree.query(points[query], k=min(_BRIDGE_NEIGHBOURS, len(points)))
+    label_query = label[query]
+    other = label[index] != label_query[:, None]
+    has = other.any(axis=1)
+    first = np.argmax(other, axis=1)
+    source = query[has]
+    target = index[has, first[has]]
+    length = row_norms(points[source] - points[target])
+    ranked = np.lexsort((length, label[source]))
+    best = ranked[np.r_[True, label[source][ranked][1:] != label[source][ranked][:-1]]] if len(ranked) else ranked
+    links = [np.column_stack([source[best], target[best]])]
+    for piece in np.setdiff1d(np.arange(count), np.r_[largest, label[source[best]]]):  # far pieces: rare, one search each
+        inside = np.flatnonzero(label == piece)
+        outside = np.flatnonzero(label != piece)
+        distance, nearest = cKDTree(points[outside]).query(points[inside])
+        at = int(np.argmin(distance))
+        links.append(np.array([[inside[at], outside[nearest[at]]]]))
+    return np.concatenate(links)
+
+
+# ------------------------------------------------------------------------------------------------ stage 5
+def path_sums(step: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(N,) the sum of `step` over each node and all its ancestors (parent -1 at roots), by pointer jumping:
+    each pass doubles the hops summed, so log2(depth) vectorised passes."""
+    total, ancestor = np.asarray(step, np.float64).copy(), np.asarray(parent, np.int64).copy()
+    while True:
+        has = np.flatnonzero(ancestor >= 0)
+        if not len(has):
+            return total
+        total[has] += total[ancestor[has]]
+        ancestor[has] = ancestor[ancestor[has]]
+
+
+def shortest_path_tree(points: np.ndarray, edges: np.ndarray, root: int) -> tuple[np.ndarray, np.ndarray]:
+    """(predecessor (N,) int64, -1 at the root and at unreached points; path length (N,) metres along the tree,
+    inf where unreached). Edge weights are squared lengths."""
+    n = len(points)
+    length = row_norms(points[edges[:, 1]] - points[edges[:, 0]])
+    weights = sparse.coo_matrix((np.maximum(length, 1e-9) ** 2, (edges[:, 0], edges[:, 1])), shape=(n, n)).tocsr()
+    _, predecessor = dijkstra(weights, directed=False, indices=root, return_predecessors=True)
+    predecessor = np.where(predecessor < 0, -1, predecessor).astype(np.int64)
+    reached = predecessor >= 0
+    reached[root] = True
+    step = np.zeros(n)
+    step[predecessor >= 0] = row_norms(points[predecessor >= 0] - points[predecessor[predecessor >= 0]])
+    return predecessor, np.where(reached, path_sums(step, predecessor), np.inf)
+
+
+# ------------------------------------------------------------------------------------------------ stage 6
+def merge_bands(points: np.ndarray, edges: np.ndarray, predecessor: np.ndarray, path_length: np.ndarray,
+                band: float, link: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices from touching points of one path-length band. Returns (positions (K, 3) centroids, parent (K,)
+    int64 with -1 at the root, points (K,) per vertex, path length (K,) of each vertex's first point); vertices
+    are sorted by that path length, so every parent comes before its children."""
+    reached = np.isfinite(path_length)
+    n = len(points)
+    bands = np.where(reached, np.floor(np.where(reached, path_length, 0.0) / band), -1.0)
+    a, b = edges[:, 0], edges[:, 1]
+    length = row_norms(points[a] - points[b])
+    joined = reached[a] & reached[b] & (bands[a] == bands[b]) & (length <= link)
+    tree_edge = np.flatnonzero(predecessor >= 0)
+    same = bands[tree_edge] == bands[predecessor[tree_edge]]
+    rows = np.concatenate([a[joined], tree_edge[same]])
+    cols = np.concatenate([b[joined], predecessor[tree_edge[same]]])
+    graph = sparse.coo_matrix((np.ones(len(rows), np.int8), (rows, cols)), shape=(n, n))
+    _, component = connected_components(graph, directed=False)
+    used = np.flatnonzero(reached)
+    first_order = used[np.lexsort((path_length[used], component[used]))]
+    first = first_order[np.r_[True, component[first_order][1:] != component[first_order][:-1]]]
+    # Number vertices by their first point's path length: a parent's first point is nearer the root.
+    first = first[np.argsort(path_length[first], kind="stable")]
+    vertex_of_component = np.full(component.max() + 1, -1, np.int64)
+    vertex_of_component[component[first]] = np.arange(len(first))
+    label = np.where(reached, vertex_of_component[component], -1)
+    counts = np.bincount(label[used], minlength=len(first)).astype(np.float64)
+    positions = np.column_stack([np.bincount(label[used], points[used, k], len(first)) for k in range(3)])
+    positions /= counts[:, None]
+    parent = np.where(predecessor[first] >= 0, label[np.maximum(predecessor[first], 0)], -1)
+    return positions, parent, counts, path_length[first]
+
+
+def merge_close_vertices(positions: np.ndarray, parent: np.ndarray, weight: np.ndarray, along: np.ndarray,
+                         distance: float, band: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stage 6b: vertices closer than `distance` whose path lengths differ by less than two bands become one
+    (their weighted centroid). A thick branch's bark is reached round both sides, and the bands cut its two
+    flanks into parallel chains; this joins them. Returns (positions, parent, weight), parents first."""
+    pairs = cKDTree(positions).query_pairs(distance, output_type="ndarray")
+    pairs = pairs[np.abs(along[pairs[:, 0]] - along[pairs[:, 1]]) < 2 * band]
+    n = len(positions)
+    _, component = connected_components(_adjacency(pairs, n), directed=False)
+    ranked = np.lexsort((along, component))
+    first = ranked[np.r_[True, component[ranked][1:] != component[ranked][:-1]]]
+    first = first[np.argsort(along[first], kind="stable")]
+    vertex_of = np.full(component.max() + 1, -1, np.int64)
+    vertex_of[component[first]] = np.arange(len(first))
+    label = vertex_of[component]
+    total = np.bincount(label, weight, len(first))
+    merged = np.column_stack([np.bincount(label, weight * positions[:, k], len(first)) for k in range(3)])
+    merged /= total[:, None]
+    new_parent = np.where(parent[first] >= 0, label[np.maximum(parent[first], 0)], -1)
+    return merged, new_parent, total
+
+
+# ------------------------------------------------------------------------------------------------ stages 7-9
+def _edge_lengths(positions: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    length = np.zeros(len(parent))
+    has = parent >= 0
+    length[has] = row_norms(positions[has] - positions[parent[has]])
+    return length
+
+
+def _reach(positions: np.ndarray, parent: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(path length from the root, reach: the longest path from each vertex down to a tip), metres."""
+    along = path_sums(_edge_lengths(positions, parent), parent)
+    return along, subtree_maximum(along, parent) - along
+
+
+def _dominant_child(parent: np.ndarray, strength: np.ndarray) -> np.ndarray:
+    """(N,) bool: the child of greatest strength among its siblings (the first on ties); False at the root."""
+    child = np.flatnonzero(parent >= 0)
+    ranked = child[np.lexsort((child, -strength[child], parent[child]))]
+    dominant = np.zeros(len(parent), bool)
+    dominant[ranked[np.r_[True, parent[ranked][1:] != parent[ranked][:-1]]]] = True
+    return dominant
+
+
+def _spread_down(flag: np.ndarray, parent: np.ndarray) -> np.ndarray:
+    """(N,) bool: flagged, or below a flagged vertex."""
+    flag = flag.copy()
+    for level in depth_levels(node_depths(parent)):
+        flag[level] |= flag[parent[level]]
+    return flag
+
+
+def _keep(positions: np.ndarray, parent: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The kept vertices, each re-parented to its nearest kept ancestor (the root is kept)."""
+    keep = keep.copy()
+    keep[0] = True
+    anchor = nearest_kept_ancestor(parent, keep)
+    index = np.flatnonzero(keep)
+    new = np.full(len(parent), -1, np.int64)
+    new[index] = np.arange(len(index))
+    new_parent = np.where(parent[index] >= 0, new[anchor[np.maximum(parent[index], 0)]], -1)
+    return positions[index], new_parent
+
+
+def breadth_first(positions: np.ndarray, parent: np.ndarray, *values: np.ndarray):
+    """Renumber a tree breadth-first (by depth, then by path length): parent[i] < i afterwards."""
+    depth = node_depths(parent)
+    along = path_sums(_edge_lengths(positions, parent), parent)
+    order = np.lexsort((along, depth))
+    new = np.empty(len(order), np.int64)
+    new[order] = np.arange(len(order))
+    new_parent = np.where(parent[order] >= 0, new[np.maximum(parent[order], 0)], -1)
+    return (positions[order], new_parent) + tuple(v[order] for v in values)
+
+
+def prune_small_subtrees(positions: np.ndarray, parent: np.ndarray, ratio: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 7: a side subtree (not its parent's longest-reaching child) whose reach, its first edge included,
+    is below `ratio` x the tree's reach is removed with everything on it."""
+    _, reach = _reach(positions, parent)
+    reach_in = reach + _edge_lengths(positions, parent)
+    side = (parent >= 0) & ~_dominant_child(parent, reach_in)
+    drop = _spread_down(side & (reach_in < ratio * reach[0]), parent)
+    return _keep(positions, parent, ~drop)
+
+
+def merge_parallel_siblings(positions: np.ndarray, parent: np.ndarray, angle_deg: float,
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 8: a side child whose direction from the parent lies within `angle_deg` of the strongest sibling's
+    is merged into it: its children hang from the strongest sibling and it goes."""
+    _, reach = _reach(positions, parent)
+    dominant = _dominant_child(parent, reach + _edge_lengths(positions, parent))
+    child = np.flatnonzero(parent >= 0)
+    direction = np.zeros_like(positions)
+    offset = positions[child] - positions[parent[child]]
+    direction[child] = offset / np.maximum(row_norms(offset), 1e-12)[:, None]
+    strongest = np.full(len(parent), -1, np.int64)
+    strongest[parent[dominant]] = np.flatnonzero(dominant)
+    side = child[~dominant[child]]
+    partner = strongest[parent[side]]
+    merge = side[np.einsum("ij,ij->i", direction[side], direction[partner]) >= np.cos(np.radians(angle_deg))]
+    if not len(merge):
+        return positions, parent
+    into = np.arange(len(parent))
+    into[merge] = strongest[parent[merge]]
+    new_parent = np.where(parent >= 0, into[np.maximum(parent, 0)], -1)
+    keep = np.ones(len(parent), bool)
+    keep[merge] = False
+    index = np.flatnonzero(keep)
+    new = np.full(len(parent), -1, np.int64)
+    new[index] = np.arange(len(index))
+    kept_parent = np.where(new_parent[index] >= 0, new[np.maximum(new_parent[index], 0)], -1)
+    return breadth_first(positions[index], kept_parent)
+
+
+def merge_flank_branches(positions: np.ndarray, parent: np.ndarray, distance: float, share: float = 0.9,
+                         passes: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 8b: a side branch that runs beside its parent branch (at least `share` of its vertices within
+    `distance` of it) is the other flank of a thick limb, reached round the bark: it goes, and what grew on it
+    hangs from the parent branch's nearest vertex. A branch under one that goes waits for the next pass, so a
+    vertex is only ever re-hung on a branch that stays."""
+    for _ in range(passes):
+        skeleton = Skeleton(positions, parent, np.ones(len(parent), np.float32), np.zeros(len(parent), np.uint8))
+        branch = skeleton.branch_id.astype(np.int64)
+        starts = skeleton.branch_starts
+        branch_parent = np.where(parent[starts] >= 0, branch[np.maximum(parent[starts], 0)], -1)
+        k = min(16, len(positions))
+        gap, near = cKDTree(positions).query(positions, k=k)
+        target = branch_parent[branch]                                          # (N,) the parent branch
+        on_parent = branch[near] == target[:, None]
+        partner = np.where(on_parent.any(axis=1), near[np.arange(len(near)), np.argmax(on_parent, axis=1)], -1)
+        beside = np.where(on_parent.any(axis=1), gap[np.arange(len(gap)), np.argmax(on_parent, axis=1)], np.inf)
+        close = np.bincount(branch, beside <= distance, len(starts)) / np.bincount(branch, minlength=len(starts))
+        flagged = (close >= share) & (branch_parent >= 0)
+        above = _spread_down(flagged, branch_parent)
+        has_flagged_ancestor = np.where(branch_parent >= 0, above[np.maximum(branch_parent, 0)], False)
+        remove = flagged & ~has_flagged_ancestor
+        if not remove.any():
+            return positions, parent
+        gone = remove[branch]
+        hung = (parent >= 0) & ~gone & gone[np.maximum(parent, 0)]
+        new_parent = parent.copy()
+        new_parent[hung] = partner[parent[hung]]
+        new_parent[hung & (new_parent < 0)] = parent[parent[hung & (new_parent < 0)]]  # no partner: its junction
+        keep = ~gone
+        index = np.flatnonzero(keep)
+        renumber = np.full(len(parent), -1, np.int64)
+        renumber[index] = np.arange(len(index))
+        positions, parent = breadth_first(positions[index], np.where(new_parent[index] >= 0,
+                                                                     renumber[np.maximum(new_parent[index], 0)], -1))
+    return positions, parent
+
+
+def drop_collinear(positions: np.ndarray, parent: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Stage 9: single-child vertices whose Douglas-Peucker key along their branch is within `tolerance` metres
+    (they lie that close to the chord the simplified branch keeps) go; tips and junctions stay."""
+    skeleton = Skeleton(positions, parent, np.ones(len(parent), np.float32), np.zeros(len(parent), np.uint8))
+    keep = (branch_node_keys(skeleton) > tolerance) | (skeleton.n_children != 1)
+    return _keep(positions, parent, keep)
+
+
+# ------------------------------------------------------------------------------------------------ stage 10
+def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: float) -> tuple[float, np.ndarray]:
+    """Radius and (2, 3) axis (a point at the base, unit direction) of the cylinder fitted by nonlinear least
+    squares (soft-L1 loss, so branch stubs on the bark do not pull it) to the trunk's points. The start is the
+    slice centres' line and the base circle's radius."""
+    base = axis_centres[0]
+    if len(axis_centres) >= 2:
+        slope, *_ = np.linalg.lstsq(np.column_stack([axis_centres[:, 2] - base[2], np.ones(len(axis_centres))]),
+                                    axis_centres[:, :2], rcond=None)
+        tilt, start = slope[0], slope[1]
+    else:
+        tilt, start = np.zeros(2), base[:2]
+    if len(points) < 8:
+        direction = np.array([tilt[0], tilt[1], 1.0])
+        return radius0, np.array([[start[0], start[1], base[2]], direction / row_norms(direction[None])[0]])
+    z0 = base[2]
+
+    def residual(x):
+        d = np.array([x[2], x[3], 1.0])
+        d /= np.sqrt(d @ d)
+        rel = points - np.array([x[0], x[1], z0])
+        return row_norms(rel - np.outer(rel @ d, d)) - x[4]
+
+    fit = least_squares(residual, [start[0], start[1], tilt[0], tilt[1], radius0], loss="soft_l1",
+                        f_scale=max(0.2 * radius0, 1e-3), max_nfev=50)
+    x = fit.x
+    direction = np.array([x[2], x[3], 1.0])
+    radius = float(abs(x[4])) if np.isfinite(x[4]) and 0.25 * radius0 < abs(x[4]) < 4 * radius0 else radius0
+    return radius, np.array([[x[0], x[1], z0], direction / row_norms(direction[None])[0]])
+
+
+def power_law_radii(positions: np.ndarray, parent: np.ndarray, trunk_radius: float, exponent: float,
+                    min_radius: float) -> np.ndarray:
+    """Stage 10's radii: trunk radius x (reach / root reach) ^ exponent, at least `min_radius`, never wider
+    than the parent."""
+    _, reach = _reach(positions, parent)
+    radius = np.maximum(trunk_radius * (reach / max(reach[0], 1e-9)) ** exponent, min_radius)
+    for level in depth_levels(node_depths(parent)):
+        radius[level] = np.minimum(radius[level], radius[parent[level]])
+    return radius
+
+
+# ------------------------------------------------------------------------------------------------ stage 11
+def hermite_midpoints(positions: np.ndarray, parent: np.ndarray, radius: np.ndarray, angle_deg: float):
+    """Stage 11: a cubic Hermite (Catmull-Rom) midpoint in every segment whose branch turns by more than
+    `angle_deg` at either end. Returns (positions, parent, radius), renumbered breadth-first."""
+    skeleton = Skeleton(positions, parent, np.maximum(radius, 1e-6), np.zeros(len(parent), np.uint8))
+    node = np.flatnonzero(parent >= 0)
+    start = parent[node]
+    before = np.where(parent[start] >= 0, parent[np.maximum(start, 0)], start)
+    after = np.where(skeleton.continuation[node] >= 0, skeleton.continuation[node], node)
+    p0, p1 = positions[start], positions[node]
+    m0 = np.where((before == start)[:, None], p1 - p0, (p1 - positions[before]) / 2)
+    m1 = np.where((after == node)[:, None], p1 - p0, (positions[after] - p0) / 2)
+    chord = p1 - p0
+    cos = np.cos(np.radians(angle_deg))
+
+    def unit(v):
+        return v / np.maximum(row_norms(v), 1e-12)[:, None]
+
+    bent = (np.einsum("ij,ij->i", unit(m0), unit(chord)) < cos) | (np.einsum("ij,ij->i", unit(m1), unit(chord)) < cos)
+    if not bent.any():
+        return positions, parent, radius
+    mid = 0.5 * (p0 + p1) + 0.125 * (m0 - m1)
+    chosen = node[bent]
+    new_ids = len(parent) + np.arange(len(chosen))
+    positions = np.concatenate([positions, mid[bent]])
+    new_parent = np.concatenate([parent, parent[chosen]])
+    new_parent[chosen] = new_ids
+    radius = np.concatenate([radius, 0.5 * (radius[chosen] + radius[parent[chosen]])])
+    return breadth_first(positions, new_parent, radius)
+
+
+# ------------------------------------------------------------------------------------------------ all stages
+def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str = "z") -> CloudSkeleton:
+    """The skeleton of a tree's point cloud (stages 1-11 of the module's docstring).
+
+    cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
+    settings : the constants (SkeletonSettings()).
+    Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
+    """
+    settings = SkeletonSettings() if settings is None else settings
+    if not isinstance(settings, SkeletonSettings):
+        raise CloudError(f"settings is a {type(settings).__name__}: allowed a SkeletonSettings")
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+
+    def lap(name: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[name] = now - clock
+        clock = now
+
+    if not isinstance(cloud, PointCloud):
+        cloud = read_cloud(cloud, up=up)
+    points = unique_points(cloud.points.astype(np.float64), settings.max_points)
+    if len(points) < 20:
+        raise CloudError(f"{cloud.source} has {len(points)} distinct points: allowed at least 20")
+    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    lap("duplicates")
+    moved, trunk, axis_centres, radius0 = centralise_trunk(points, settings.trunk_base_share, spacing)
+    lap("trunk")
+    edges = graph_edges(moved, settings.graph, settings.knn)
+    lap("graph")
+    root = int(np.argmin(np.where(trunk, moved[:, 2], np.inf))) if trunk.any() else int(np.argmin(moved[:, 2]))
+    predecessor, along = shortest_path_tree(moved, edges, root)
+    lap("shortest_paths")
+    band = settings.band_spacings * spacing
+    positions, parent, weight, first_along = merge_bands(moved, edges, predecessor, along, band,
+                                                         settings.link_spacings * spacing)
+    if settings.merge_bands > 0:
+        positions, parent, _ = merge_close_vertices(positions, parent, weight, first_along,
+                                                    settings.merge_bands * band, band)
+    lap("merge_vertices")
+    positions, parent = prune_small_subtrees(positions, parent, settings.prune_ratio)
+    positions, parent = merge_parallel_siblings(positions, parent, settings.sibling_angle_deg)
+    positions, parent = merge_flank_branches(positions, parent, settings.flank_bands * band)
+    positions, parent = prune_small_subtrees(positions, parent, settings.prune_ratio)
+    positions, parent = drop_collinear(positions, parent, settings.collinear_share * band)
+    lap("simplify")
+    trunk_radius, trunk_axis = fit_trunk_cylinder(points[trunk], axis_centres, radius0)
+    radius = power_law_radii(positions, parent, trunk_radius, settings.radius_exponent, settings.min_radius_m)
+    lap("radii")
+    positions, parent, radius = hermite_midpoints(positions, parent, radius, settings.hermite_angle_deg)
+    skeleton = Skeleton(positions.astype(np.float32), parent, radius.astype(np.float32),
+                        branch_orders(positions, parent))
+    lap("smooth")
+    return CloudSkeleton(skeleton, trunk_radius, trunk_axis, spacing, len(cloud.points), len(points),
+                         int(np.isfinite(along).sum()), timings)
