@@ -23,8 +23,8 @@ from trainers.sketchnet_codec import REGRESSION_HEADS, ParameterCodec
 
 __all__ = ["MetricError", "PointSetDistances", "SkeletonMatch", "RADIUS_MULTIPLES", "DENSIFY_DIVISIONS",
            "SURFACE_SAMPLES", "foreground_depth_error", "node_distances", "unit_cube_hausdorff", "surface_distances",
-           "point_set_distances", "skeleton_precision_recall", "silhouette_iou", "parameter_scores",
-           "height_crown_errors"]
+           "point_set_distances", "skeleton_precision_recall", "bark_distances", "cloud_fit", "FIT_TOLERANCE_M",
+           "silhouette_iou", "parameter_scores", "height_crown_errors"]
 
 # The radius multiples t at which skeleton precision, recall and F1 are taken: 0, 0.01, ..., 1 (101 values); the
 # area under the F1 curve is the trapezoid rule over them.
@@ -319,6 +319,27 @@ def skeleton_precision_recall(predicted: Skeleton, true: Skeleton, spacing: floa
     total = precision + recall
     f1 = np.divide(2 * precision * recall, total, out=np.zeros_like(total), where=total > 0)
     return SkeletonMatch(RADIUS_MULTIPLES.copy(), precision, recall, f1, float(np.trapezoid(f1, RADIUS_MULTIPLES)))
+
+
+FIT_TOLERANCE_M = 0.10  # issue 24's bar: the bark within 10 cm of the cloud's points
+
+
+def bark_distances(skeleton: Skeleton, points, spacing: float = 0.01) -> np.ndarray:
+    """(P,) metres from each point to the skeleton's bark: |distance to the nearest segment's axis - the radius
+    interpolated there| (a point inside a tube counts by how far it is from the wall). Segments are densified
+    every `spacing` metres to find the nearest (see `_nearest_on_segments`)."""
+    query = _points(points, "points")
+    dense = _densified(skeleton, _positive(spacing, "spacing"), "skeleton")
+    distance, radius = _nearest_on_segments(query, dense)
+    return np.abs(distance - radius)
+
+
+def cloud_fit(skeleton: Skeleton, points, tolerance: float = FIT_TOLERANCE_M) -> dict[str, float]:
+    """How well a reconstruction's bark covers a cloud: the share of points within `tolerance` metres of it, and
+    the median and 90th-percentile distances in metres (AdTree's measure of fit)."""
+    distance = bark_distances(skeleton, points)
+    return {"within": float((distance <= _positive(tolerance, "tolerance")).mean()),
+            "median_m": float(np.median(distance)), "p90_m": float(np.percentile(distance, 90))}
 
 
 # ------------------------------------------------------------------------------------------------ silhouettes

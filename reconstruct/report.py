@@ -17,7 +17,7 @@ from renderers.sketch import shaded
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
-__all__ = ["write_report", "skeleton_drawing", "palette_legend"]
+__all__ = ["write_report", "skeleton_drawing", "cloud_drawing", "palette_legend"]
 
 _CELL = 256
 
@@ -85,3 +85,20 @@ def palette_legend(swatch: int = 48) -> np.ndarray:
                     cv2.LINE_AA)
         rows.append(row)
     return np.concatenate(rows)
+
+
+def cloud_drawing(points: np.ndarray, axis: int, size: int = _CELL) -> np.ndarray:
+    """(size, size, 3) uint8: a point cloud projected on the plane of `axis` (0 = x, 1 = y) and z, one grey dot
+    per point, framed as `skeleton_drawing` frames a skeleton of the same extent."""
+    image = np.full((size, size, 3), 255, np.uint8)
+    if len(points) == 0:
+        return image
+    uv = np.asarray(points, np.float64)[:, [axis, 2]]
+    low, high = uv.min(axis=0), uv.max(axis=0)
+    scale = 0.9 * size / max(float((high - low).max()), 1e-9)
+    centre = (low + high) / 2
+    px = np.rint(np.column_stack([size / 2 + (uv[:, 0] - centre[0]) * scale,
+                                  size / 2 - (uv[:, 1] - centre[1]) * scale])).astype(np.int64)
+    px = np.clip(px, 0, size - 1)
+    image[px[:, 1], px[:, 0]] = (110, 110, 110)
+    return image

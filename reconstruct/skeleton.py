@@ -23,8 +23,9 @@ The stages, each a function below:
    a side branch running beside its parent branch (90 % of it within 1.5 bands) is taken for the other flank
    of a thick limb and joins it (a thick limb sampled densely still keeps some such twigs);
 9. removal of collinear single-child vertices (Douglas-Peucker along each branch at a share of the spacing);
-10. the trunk cylinder fit (nonlinear least squares on the centralised trunk's original points) and radii by
-    the power law r = r_trunk (reach / trunk reach) ^ 1.1, never wider than the parent;
+10. the trunk cylinder fit (nonlinear least squares on the centralised trunk's original points), its radius on
+    the trunk, and above it radii by the power law r = r_trunk (reach / reach at the trunk's top) ^ 1.1, never
+    wider than the parent;
 11. Hermite smoothing: a cubic Hermite point inserted in every segment where the branch turns by more than 15
     degrees, so the tube bends smoothly without a dense skeleton.
 
@@ -75,7 +76,7 @@ class SkeletonSettings:
     hermite_angle_deg : stage 11's turning angle above which a segment gets a Hermite midpoint.
     """
 
-    max_points: int = 200_000
+    max_points: int = 50_000
     graph: str = "knn"
     knn: int = 16
     trunk_base_share: float = 0.02
@@ -137,12 +138,14 @@ def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
     if len(points) <= max_points:
         return points
     extent = np.ptp(points, axis=0)
-    voxel = float(np.cbrt(np.prod(np.maximum(extent, 1e-3)) / max_points))
+    # A scan samples surfaces, so the count falls with the voxel's area: start from the box's volume (a bound)
+    # shrunk, then step by the square root of the excess until the cap is met (two or three passes).
+    voxel = float(np.cbrt(np.prod(np.maximum(extent, 1e-3)) / max_points)) / 8
     while True:
         first = _first_per_cell(points, voxel)
         if len(first) <= max_points:
             return points[first]
-        voxel *= 1.25
+        voxel *= max(np.sqrt(len(first) / max_points), 1.05)
 
 
 def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
@@ -238,8 +241,8 @@ _BRIDGE_NEIGHBOURS = 32  # neighbours searched for a link out of a piece of the 
 
 def _unique_edges(pairs: np.ndarray, n: int) -> np.ndarray:
     pairs = np.sort(pairs.astype(np.int64), axis=1)
-    flat = np.unique(pairs[:, 0] * n + pairs[:, 1])
-    flat = flat[flat // n != flat % n]
+    flat = np.sort(pairs[:, 0] * n + pairs[:, 1])   # a sort and a neighbour test: numpy's hashing unique is slower
+    flat = flat[np.r_[True, flat[1:] != flat[:-1]] & (flat // n != flat % n)]
     return np.column_stack([flat // n, flat % n])
 
 
@@ -525,12 +528,17 @@ def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: fl
     return radius, np.array([[x[0], x[1], z0], direction / row_norms(direction[None])[0]])
 
 
-def power_law_radii(positions: np.ndarray, parent: np.ndarray, trunk_radius: float, exponent: float,
-                    min_radius: float) -> np.ndarray:
-    """Stage 10's radii: trunk radius x (reach / root reach) ^ exponent, at least `min_radius`, never wider
-    than the parent."""
+def power_law_radii(positions: np.ndarray, parent: np.ndarray, trunk_radius: float, trunk_top: float,
+                    exponent: float, min_radius: float) -> np.ndarray:
+    """Stage 10's radii: the fitted trunk radius on the trunk (the longest-reaching path from the root, up to the
+    top of the centralised trunk, `trunk_top` metres), and above and beside it trunk radius x (reach / reach at
+    the trunk's top) ^ exponent, at least `min_radius`, never wider than the parent."""
     _, reach = _reach(positions, parent)
-    radius = np.maximum(trunk_radius * (reach / max(reach[0], 1e-9)) ** exponent, min_radius)
+    main = ~_spread_down((parent >= 0) & ~_dominant_child(parent, reach + _edge_lengths(positions, parent)), parent)
+    trunk = main & (positions[:, 2] <= trunk_top)
+    reference = reach[trunk].min() if trunk.any() else reach[0]
+    radius = np.maximum(trunk_radius * (reach / max(reference, 1e-9)) ** exponent, min_radius)
+    radius[trunk] = trunk_radius
     for level in depth_levels(node_depths(parent)):
         radius[level] = np.minimum(radius[level], radius[parent[level]])
     return radius
@@ -615,7 +623,10 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     positions, parent = drop_collinear(positions, parent, settings.collinear_share * band)
     lap("simplify")
     trunk_radius, trunk_axis = fit_trunk_cylinder(points[trunk], axis_centres, radius0)
-    radius = power_law_radii(positions, parent, trunk_radius, settings.radius_exponent, settings.min_radius_m)
+    # Slice centres sit half a slice above their bottoms, and the first bottom is the lowest point, Z = 0.
+    trunk_top = float(axis_centres[-1, 2] + axis_centres[0, 2]) if len(axis_centres) > 1 else 0.0
+    radius = power_law_radii(positions, parent, trunk_radius, trunk_top, settings.radius_exponent,
+                             settings.min_radius_m)
     lap("radii")
     positions, parent, radius = hermite_midpoints(positions, parent, radius, settings.hermite_angle_deg)
     skeleton = Skeleton(positions.astype(np.float32), parent, radius.astype(np.float32),

@@ -261,6 +261,31 @@ class Skeleton:
         """(max_order + 1,) int64, number of branches of each order."""
         return np.bincount(self.order[self.branch_starts], minlength=int(self.order.max()) + 1)
 
+    # ------------------------------------------------------------- editing
+    def subset(self, keep) -> "Skeleton":
+        """The skeleton of the nodes where `keep` ((N,) bool) is True, renumbered in index order (so still
+        parent[i] < i). The first kept node becomes the root; every other kept node's parent must be kept.
+        Leaves hanging on dropped nodes are dropped; positions, radii and orders are kept as they are."""
+        keep = np.asarray(keep)
+        if keep.dtype != bool or keep.shape != (len(self),):
+            raise SkeletonError(f"keep must be a ({len(self)},) bool mask; got {keep.dtype} of shape {keep.shape}")
+        nodes = np.flatnonzero(keep)
+        if len(nodes) == 0:
+            raise SkeletonError("keep selects no node: a skeleton needs at least one (the root)")
+        new_index = np.full(len(self), -1, np.int64)
+        new_index[nodes] = np.arange(len(nodes))
+        parent = new_index[self.parent[nodes]]
+        parent[0] = -1
+        orphans = np.flatnonzero(parent[1:] < 0)
+        if len(orphans):
+            node = int(nodes[orphans[0] + 1])
+            raise SkeletonError(f"keep drops node {self.parent[node]} but keeps its child {node}: allowed masks "
+                                "that keep the parent of every kept node but the first")
+        kept_leaves = keep[self.leaf_node]
+        return Skeleton(positions=self.positions[nodes], parent=parent, radius=self.radius[nodes],
+                        order=self.order[nodes], leaves=self.leaves[kept_leaves],
+                        leaf_node=new_index[self.leaf_node[kept_leaves]])
+
     # ---------------------------------------------------------------- I/O
     def save(self, path: str | Path) -> None:
         """Write the arrays to an uncompressed `.npz` file."""

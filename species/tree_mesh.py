@@ -130,15 +130,19 @@ class TreeMesh:
         """(2, 3) float32, min and max corner over bark and leaves."""
         return np.stack(column_bounds(np.concatenate([self.bark.vertices, self.leaves.vertices])))
 
-    def export(self, file_format: str) -> Any:
-        """The tree written in `file_format` (a `MESH_WRITERS` name)."""
+    def export(self, file_format: str, **options) -> Any:
+        """The tree written in `file_format` (a `MESH_WRITERS` name); `options` go to that writer."""
         if file_format not in MESH_WRITERS:
             raise MeshError(f"mesh file format {file_format!r} is unknown: allowed {', '.join(sorted(MESH_WRITERS))}")
-        return MESH_WRITERS[file_format](self)
+        return MESH_WRITERS[file_format](self, **options)
 
-    def to_glb(self) -> bytes:
-        """A binary glTF 2.0 file: Y up, two named meshes (bark, leaves) with textured PBR materials."""
-        return self.export("glb")
+    def to_glb(self, transform=None, extras: dict | None = None) -> bytes:
+        """A binary glTF 2.0 file: Y up, two named meshes (bark, leaves) with textured PBR materials.
+
+        transform : optional (4, 4) Z-up matrix placing the tree in a world frame (the root node's matrix);
+        extras : optional JSON-able dict kept on the root node (`species.meshing.tree_mesh_to_glb`).
+        """
+        return self.export("glb", transform=transform, extras=extras)
 
     def to_obj(self) -> dict[str, bytes]:
         """OBJ text, its MTL and the texture PNGs, by file name (`<name>.obj`, `<name>.mtl`, ...)."""

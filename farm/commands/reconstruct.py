@@ -1,11 +1,14 @@
-"""`farm reconstruct`: a tree from drawings (and, with issue 24, point clouds and photos), written as GLB or OBJ.
+"""`farm reconstruct`: a tree from drawings, point clouds or photos, written as GLB (or OBJ for drawings).
 
   farm reconstruct SKETCH.png --out tree.glb                          parameters from one sketch (TreeSketchNet)
   farm reconstruct SKETCH.png --strokes STROKES.png --out tree.glb    depth-guided growth (seed 000)
   farm reconstruct --front FRONT.png --side SIDE.png --out tree.glb   two orthogonal drawings (seed 001)
+  farm reconstruct CLOUD.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv b.csv]   a scan (AdTree, seed 003)
+  farm reconstruct PHOTOS/ --method photos --out tree.glb [--height M]                 photos, SfM (seed 003)
+  farm reconstruct A.laz B.laz SCANS/ --out TREES/                    a batch on Ray: one GLB each, summary.csv
 
---method params|sketch-depth|two-view is inferred from the inputs when omitted: one image -> params, an image with
---strokes -> sketch-depth, --front and --side -> two-view. A photo instead of a sketch (sketch-depth): --photo, its
+--method is inferred from the inputs when omitted: one image -> params, an image with --strokes -> sketch-depth,
+--front and --side -> two-view, cloud files -> cloud, a folder of images -> photos. A photo instead of a sketch (sketch-depth): --photo, its
 blurred Canny edges become the silhouette sketch. --models: a model registry (its champions); by default the models
 shipped in models/. --params-out writes the dictionary (params method), which `farm tree --params` rebuilds byte
 for byte when both files share a stem. --report writes a PNG of the input, the maps, the skeleton and the result.
@@ -23,16 +26,16 @@ import numpy as np
 
 from species.errors import user_path
 
-from farm.commands import CommandLineError
+from farm.commands import CommandLineError, reconstruct_cloud
 
 METHODS = ("params", "sketch-depth", "two-view", "cloud", "photos")
-_LATER = {"cloud": "point clouds", "photos": "photo sets (SfM)"}
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("reconstruct", help="reconstruct a tree from sketches (GLB/OBJ)",
                                    description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("inputs", nargs="*", metavar="INPUT", help="the sketch (params, sketch-depth)")
+    parser.add_argument("inputs", nargs="*", metavar="INPUT",
+                        help="the sketch (params, sketch-depth), cloud files or photo folders (cloud, photos)")
     parser.add_argument("--method", choices=METHODS, help="default: inferred from the inputs")
     parser.add_argument("--strokes", help="colour trunk strokes drawn over the sketch (sketch-depth)")
     parser.add_argument("--photo", action="store_true",
@@ -48,7 +51,9 @@ def register(subparsers) -> None:
     parser.add_argument("--params-out", help="write the parameter dictionary here (params method)")
     parser.add_argument("--format", choices=("glb", "obj"), default=None, help="default: from --out's suffix")
     parser.add_argument("--report", help="write a PNG: input, maps, skeleton and result side by side")
-    parser.add_argument("--out", required=True, help="the tree file (FILE.glb, or FILE.obj with its MTL)")
+    parser.add_argument("--out", required=True,
+                        help="the tree file (FILE.glb, or FILE.obj with its MTL), or a folder for a batch")
+    reconstruct_cloud.add_arguments(parser)
     parser.set_defaults(run=run)
 
 
@@ -70,9 +75,14 @@ def read_image(path: str) -> np.ndarray:
 def _method(args: argparse.Namespace) -> str:
     two_view = args.front is not None or args.side is not None
     method = args.method or ("two-view" if two_view else "sketch-depth" if args.strokes or args.photo else "params")
-    if method in _LATER:
-        raise CommandLineError(f"--method {method} (reconstruction from {_LATER[method]}) is not built yet: "
-                               "allowed params, sketch-depth, two-view")
+    if method in ("cloud", "photos"):
+        raise CommandLineError(f"--method {method} takes {'cloud files' if method == 'cloud' else 'photo folders'} "
+                               "as INPUT (got none that exist)")
+    cloud_only = [flag for flag, value in (("--skeleton-ply", args.skeleton_ply), ("--qsm-csv", args.qsm_csv),
+                                           ("--workers", args.workers), ("--address", args.address)) if value]
+    if cloud_only or args.up != "z" or args.frame != "base":
+        raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are cloud and photos options, not "
+                               f"{method}'s")
     if method == "two-view":
         if args.front is None or args.side is None or args.inputs:
             raise CommandLineError("--method two-view takes --front FRONT.png and --side SIDE.png (no INPUT)")
@@ -120,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
     import reconstruct
     from farm.commands.tree import write_tree
 
+    clouds = reconstruct_cloud.cloud_inputs(args)
+    if clouds is not None:
+        if args.height is not None and not (np.isfinite(args.height) and args.height > 0):
+            raise CommandLineError(f"--height {args.height} is invalid: allowed a number of metres > 0")
+        if args.seed < 0:
+            raise CommandLineError(f"--seed {args.seed} is invalid: allowed an integer >= 0")
+        return reconstruct_cloud.run(args, *clouds)
     method = _method(args)
     out, fmt = _output(args)
     if args.seed < 0:

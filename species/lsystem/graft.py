@@ -1,4 +1,5 @@
-"""Grafting (thesis 003 Algorithms 5, 7, 8): a side anchor on a node, a subtree attached there, radii smoothed.
+"""Grafting (thesis 003 Algorithms 5, 7, 8): a side anchor on a node, a subtree attached there, radii smoothed;
+and the subtree under a node, as a mask or as a Skeleton of its own (what a graft copies).
 
 In: Skeletons, node indices, a camera position. Out: new Skeletons (inputs are never changed).
 """
@@ -11,7 +12,7 @@ from ..geometry.radii import pipe_model_radii
 from ..geometry.topology import depth_levels
 from ..skeleton import Skeleton
 
-__all__ = ["side_anchor", "graft", "smooth_radius", "pipe_smooth_radius", "subtree_mask"]
+__all__ = ["side_anchor", "graft", "smooth_radius", "pipe_smooth_radius", "subtree_mask", "extract_subtree"]
 
 # Algorithm 5's constants: the anchor leans 0.3 toward the parent direction, is 0.6 of the first child's
 # edge long, and 0.8 of the node's radius thick. Algorithm 7 smooths with ratio 0.8.
@@ -90,6 +91,16 @@ def subtree_mask(skeleton: Skeleton, start: int) -> np.ndarray:
     for idx in depth_levels(skeleton.depth, first=int(skeleton.depth[start]) + 1):
         mask[idx] = mask[skeleton.parent[idx]]
     return mask
+
+
+def extract_subtree(skeleton: Skeleton, start: int) -> Skeleton:
+    """The subtree under `start` as a Skeleton of its own: `start` becomes node 0 (at its own position, not
+    moved), the nodes are renumbered in index order (parent[i] < i), leaves hanging on its nodes come along, and
+    orders are shifted down by start's order (clipped at 0) so the subtree's root is order 0."""
+    subtree = skeleton.subset(subtree_mask(skeleton, start))
+    order = np.maximum(subtree.order.astype(np.int64) - int(skeleton.order[start]), 0)
+    return Skeleton(positions=subtree.positions, parent=subtree.parent, radius=subtree.radius, order=order,
+                    leaves=subtree.leaves, leaf_node=subtree.leaf_node)
 
 
 def _with_radius(skeleton: Skeleton, radius: np.ndarray) -> Skeleton:

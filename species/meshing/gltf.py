@@ -16,8 +16,8 @@ from ..geometry.vectors import column_bounds
 from .textures import bark_png, leaf_png
 from ..tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["tree_mesh_to_glb", "GlbBuffer", "GlbWriter", "read_glb_json", "read_glb_chunks", "read_accessor",
-           "z_up_to_y_up", "Z_UP_TO_Y_UP", "GlbError", "ARRAY_BUFFER", "ELEMENT_ARRAY_BUFFER", "REPEAT",
+__all__ = ["tree_mesh_to_glb", "node_matrix", "GlbBuffer", "GlbWriter", "read_glb_json", "read_glb_chunks",
+           "read_accessor", "z_up_to_y_up", "Z_UP_TO_Y_UP", "GlbError", "ARRAY_BUFFER", "ELEMENT_ARRAY_BUFFER", "REPEAT",
            "CLAMP_TO_EDGE", "TRIANGLES"]
 
 _GLB_MAGIC = 0x46546C67  # "glTF"
@@ -205,16 +205,66 @@ def _part_primitive(writer: GlbWriter, part: MeshPart, material: int) -> dict:
     return {"attributes": attributes, "indices": indices, "material": material, "mode": TRIANGLES}
 
 
-def tree_mesh_to_glb(tree: TreeMesh) -> bytes:
+def node_matrix(transform) -> list[float] | None:
+    """The glTF node `matrix` (16 floats, column-major, Y up) of a 4x4 `transform` in our Z-up world, or None for
+    the identity (glTF's default, left out of the file).
+
+    Vertices are written Y up (v_gltf = C v, C = Z_UP_TO_Y_UP), so the node matrix is the conjugate C T C^T:
+    then M v_gltf = C (T v), the transformed point turned Y up. C is a signed permutation, so no value is
+    rounded. The transform must decompose into translation, rotation and positive scale along its own axes
+    (glTF requires a TRS-decomposable node matrix): bottom row (0, 0, 0, 1), orthogonal columns, determinant > 0.
+    """
+    try:
+        matrix = np.array(transform, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise GlbError(f"transform {transform!r} is not numeric: allowed a 4x4 matrix of finite numbers") from None
+    if matrix.shape != (4, 4):
+        raise GlbError(f"transform has shape {matrix.shape}: allowed a 4x4 matrix of finite numbers")
+    if not np.all(np.isfinite(matrix)):
+        raise GlbError(f"transform {matrix.tolist()} has NaN or infinity: allowed a 4x4 matrix of finite numbers")
+    if not np.array_equal(matrix[3], [0.0, 0.0, 0.0, 1.0]):
+        raise GlbError(f"transform bottom row {matrix[3].tolist()} is invalid: allowed [0, 0, 0, 1] (an affine map)")
+    linear = matrix[:3, :3]
+    gram = linear.T @ linear
+    scale = np.sqrt(np.diag(gram))
+    off_diagonal = gram - np.diag(np.diag(gram))
+    if np.linalg.det(linear) <= 0 or np.abs(off_diagonal).max() > 1e-6 * scale.max() ** 2:
+        raise GlbError(f"transform linear part {np.round(linear, 6).tolist()} is invalid: allowed a rotation times a "
+                       "positive scale (orthogonal columns, determinant > 0), as a glTF node matrix must decompose")
+    if np.array_equal(matrix, np.eye(4)):
+        return None
+    turn = np.eye(4)
+    turn[:3, :3] = Z_UP_TO_Y_UP
+    return [float(x) for x in (turn @ matrix @ turn.T).T.ravel()]
+
+
+def _check_extras(extras) -> dict:
+    if not isinstance(extras, dict) or not all(isinstance(key, str) for key in extras):
+        raise GlbError(f"extras {extras!r:.80} is invalid: allowed a dict with string keys of JSON values")
+    try:
+        json.dumps(extras, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise GlbError(f"extras {extras!r:.80} is not JSON ({exc}): allowed strings, finite numbers, booleans, "
+                       "None, lists and dicts") from None
+    return extras
+
+
+def tree_mesh_to_glb(tree: TreeMesh, transform=None, extras: dict | None = None) -> bytes:
     """GLB bytes for `tree`: Y up, one scene, a root node named tree.name with children "bark" and "leaves".
 
     Each part becomes one mesh with POSITION (with min/max), NORMAL, TEXCOORD_0 (v flipped) and indices
     (uint16 when they fit, else uint32); an empty part is left out. Materials are metallic-roughness PBR:
     bark (tiling bark texture, roughness 0.9) and leaves (texture with alpha, alphaMode MASK at 0.5,
     doubleSided). Textures are PNGs embedded in the binary chunk. No timestamps: same TreeMesh, same bytes.
+    transform : optional (4, 4) float, Z up, metres: where the tree's own frame sits in the world (for example a
+    scan's frame), written as the root node's `matrix` (`node_matrix`; the identity writes none).
+    extras : optional JSON-able dict, the root node's `extras` (what frame the file is in, measures, ...).
+    With neither, the bytes are those this function wrote before it took them.
     """
     if not isinstance(tree, TreeMesh):
         raise GlbError(f"tree_mesh_to_glb needs a TreeMesh; got {type(tree).__name__}")
+    matrix = None if transform is None else node_matrix(transform)
+    extras = None if extras is None else _check_extras(extras)
     writer = GlbWriter()
     root = writer.node({"name": tree.name, "children": []})
     parts = (("bark", tree.bark, bark_png(tree.bark_color), REPEAT),
@@ -231,6 +281,10 @@ def tree_mesh_to_glb(tree: TreeMesh) -> bytes:
         writer.nodes[root]["children"].append(writer.node({"name": name, "mesh": mesh}))
     if not writer.nodes[root]["children"]:
         del writer.nodes[root]["children"]
+    if matrix is not None:
+        writer.nodes[root]["matrix"] = matrix
+    if extras is not None:
+        writer.nodes[root]["extras"] = extras
     # The generator string predates the meshing subpackage; it is in every GLB's bytes, so it stays.
     return writer.to_glb({"asset": {"version": "2.0", "generator": "treefarm species.gltf"},
                           "scene": 0, "scenes": [{"name": tree.name, "nodes": [root]}]})

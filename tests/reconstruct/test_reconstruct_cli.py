@@ -165,7 +165,7 @@ def test_bad_input_is_one_line_and_writes_nothing(drawings, tmp_path, capsys):
                              "--out", str(out)], "no model registry")
     assert not (tmp_path / "nowhere").exists()
     _one_line_error(capsys, ["reconstruct", str(drawings["tsn"]), "--method", "cloud", "--out", str(out)],
-                    "not built yet")
+                    "is not a point cloud")
     _one_line_error(capsys, ["reconstruct", str(drawings["edges"]), "--method", "sketch-depth", "--out", str(out)],
                     "--strokes")
     _one_line_error(capsys, ["reconstruct", str(drawings["tsn"]), "--out", str(tmp_path / "t.png")], ".glb or .obj")

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from species.meshing.gltf import (CLAMP_TO_EDGE, Z_UP_TO_Y_UP, GlbBuffer, GlbError, GlbWriter, read_accessor,
-                                  read_glb_chunks, read_glb_json, tree_mesh_to_glb, z_up_to_y_up)
+from species.meshing.gltf import (CLAMP_TO_EDGE, Z_UP_TO_Y_UP, GlbBuffer, GlbError, GlbWriter, node_matrix,
+                                  read_accessor, read_glb_chunks, read_glb_json, tree_mesh_to_glb, z_up_to_y_up)
 from species.meshing.tubes_and_cards import build_mesh
 from species.tree_mesh import MeshError, MeshPart, TreeMesh
 from tests.gltf_validator import assert_valid_glb
@@ -179,3 +179,69 @@ def test_buffer_views_are_padded_to_four_bytes():
     buffer.view(b"defgh", target=34963)
     assert buffer.tobytes() == b"abc\0defgh\0\0\0" and buffer.size == 12
     assert [(v["byteOffset"], v["byteLength"]) for v in buffer.views] == [(0, 3), (4, 5)]
+
+
+# --------------------------------------------------------------- transform and extras (issue 24 outputs)
+def _scan_transform() -> np.ndarray:
+    """A rotation of 30 degrees about world z, scale 2, and a georeferenced-size translation (Z up, metres)."""
+    angle = np.radians(30.0)
+    transform = np.eye(4)
+    transform[:3, :3] = 2.0 * np.array([[np.cos(angle), -np.sin(angle), 0], [np.sin(angle), np.cos(angle), 0],
+                                        [0, 0, 1]])
+    transform[:3, 3] = [512345.25, -4210987.5, 312.0]
+    return transform
+
+
+def test_a_transform_puts_each_point_where_it_maps_in_our_frame_after_reading_back(fork_mesh):
+    transform = _scan_transform()
+    document, binary = read_glb_chunks(fork_mesh.to_glb(transform=transform))
+    root = document["nodes"][document["scenes"][0]["nodes"][0]]
+    matrix = np.array(root["matrix"]).reshape(4, 4).T  # glTF stores column-major
+    gltf = read_accessor(document, binary, document["meshes"][0]["primitives"][0]["attributes"]["POSITION"])
+    placed_gltf = gltf.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+    placed_world = placed_gltf @ Z_UP_TO_Y_UP  # back from glTF's Y up to our Z up
+    expected = fork_mesh.bark.vertices.astype(np.float64) @ transform[:3, :3].T + transform[:3, 3]
+    np.testing.assert_allclose(placed_world, expected, rtol=0, atol=1e-6)
+
+
+def test_extras_are_stored_on_the_root_node_and_the_file_validates(fork_mesh, tmp_path):
+    extras = {"frame": "scan", "offset_m": [512345.25, -4210987.5, 312.0], "dbh_m": 0.31, "note": None}
+    data = fork_mesh.to_glb(transform=_scan_transform(), extras=extras)
+    document = read_glb_json(data)
+    root = document["nodes"][document["scenes"][0]["nodes"][0]]
+    assert root["extras"] == extras and root["name"] == "fork"
+    assert [document["nodes"][i]["name"] for i in root["children"]] == ["bark", "leaves"]
+    assert_valid_glb(data, tmp_path)
+
+
+def test_no_arguments_and_an_identity_transform_write_the_same_bytes_as_before(fork_mesh, fork_glb):
+    assert tree_mesh_to_glb(fork_mesh) == fork_glb == fork_mesh.to_glb(None, None)
+    assert fork_mesh.to_glb(transform=np.eye(4)) == fork_glb
+    assert "matrix" not in read_glb_json(fork_glb)["nodes"][0] and "extras" not in read_glb_json(fork_glb)["nodes"][0]
+
+
+def test_node_matrix_is_the_transform_conjugated_into_y_up():
+    transform = _scan_transform()
+    turn = np.eye(4)
+    turn[:3, :3] = Z_UP_TO_Y_UP
+    np.testing.assert_array_equal(np.array(node_matrix(transform)).reshape(4, 4).T, turn @ transform @ turn.T)
+    assert node_matrix(np.eye(4)) is None
+
+
+@pytest.mark.parametrize("transform, match", [
+    (np.eye(3), "shape"),
+    ([[1, 0, 0, np.nan], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "NaN"),
+    ([[1, 0.5, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "rotation times a positive scale"),
+    (np.diag([1.0, -1.0, 1.0, 1.0]), "determinant"),
+    ([[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]], "bottom row"),
+    ("up", "not numeric"),
+])
+def test_a_transform_that_is_not_a_trs_matrix_is_rejected(fork_mesh, transform, match):
+    with pytest.raises(GlbError, match=match):
+        fork_mesh.to_glb(transform=transform)
+
+
+@pytest.mark.parametrize("extras", [["frame"], {1: "x"}, {"dbh": float("nan")}, {"when": object()}])
+def test_extras_that_are_not_a_json_object_are_rejected(fork_mesh, extras):
+    with pytest.raises(GlbError, match="extras"):
+        fork_mesh.to_glb(extras=extras)

@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 
 from species.errors import ParameterError
-from species.lsystem.graft import graft, pipe_smooth_radius, side_anchor, smooth_radius, subtree_mask
+from species.lsystem.graft import extract_subtree, graft, pipe_smooth_radius, side_anchor, smooth_radius, subtree_mask
 from species.lsystem.lstring_io import lstring_to_tree
 from species.skeleton import Skeleton
+from tests.species.skeleton_factory import fork_with_leaves
 
 
 def trunk(n=4, radius=0.1) -> Skeleton:
@@ -103,3 +104,33 @@ def test_pipe_smoothing_applies_the_pipe_rule_below_the_start():
 def test_graft_rejects_the_root_as_anchor():
     with pytest.raises(ParameterError, match="'anchor'"):
         graft(trunk(), 0, fork())
+
+
+def test_extract_subtree_is_the_masked_nodes_renumbered_with_the_root_at_start():
+    tree = fork_with_leaves()
+    mask = subtree_mask(tree, 5)
+    sub = extract_subtree(tree, 5)
+    assert len(sub) == mask.sum() == 4
+    assert np.all(sub.parent[1:] < np.arange(1, len(sub))) and sub.parent[0] == -1
+    np.testing.assert_array_equal(sub.positions, tree.positions[mask])
+    np.testing.assert_array_equal(sub.positions[0], tree.positions[5])
+    np.testing.assert_array_equal(sub.radius, tree.radius[mask])
+    assert sub.order.tolist() == [0, 0, 1, 1]  # orders shifted so the subtree's root is order 0
+
+
+def test_extract_subtree_keeps_the_leaves_that_hang_on_its_nodes():
+    tree = fork_with_leaves()
+    sub = extract_subtree(tree, 5)
+    kept = np.isin(tree.leaf_node, np.flatnonzero(subtree_mask(tree, 5)))
+    assert sub.n_leaves == kept.sum() == 2
+    np.testing.assert_array_equal(sub.leaves, tree.leaves[kept])
+    np.testing.assert_array_equal(sub.positions[sub.leaf_node], tree.positions[tree.leaf_node[kept]])
+
+
+def test_extract_subtree_of_the_root_is_the_whole_tree_and_a_bad_start_is_rejected():
+    tree = fork()
+    whole = extract_subtree(tree, 0)
+    for name, array in tree.to_arrays().items():
+        np.testing.assert_array_equal(getattr(whole, name), array)
+    with pytest.raises(ParameterError, match="'start'"):
+        extract_subtree(tree, 99)

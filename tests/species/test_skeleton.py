@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from species.skeleton import Skeleton, SkeletonError
+from tests.species.skeleton_factory import fork_with_leaves
 
 
 def fork() -> Skeleton:
@@ -55,3 +56,21 @@ def test_rejects_non_positive_radius_and_nan():
         Skeleton([[0, 0, 0], [0, 0, 1]], [-1, 0], [0.1, 0.0], [0, 0])
     with pytest.raises(SkeletonError, match="NaN"):
         Skeleton([[0, 0, 0], [0, np.nan, 1]], [-1, 0], [0.1, 0.1], [0, 0])
+
+
+def test_subset_keeps_the_chosen_nodes_in_order_with_their_leaves():
+    s = fork_with_leaves()
+    keep = np.ones(len(s), bool)
+    keep[[8, 9]] = False  # the order-2 twig and the leaf on its tip
+    sub = s.subset(keep)
+    assert len(sub) == 8 and np.array_equal(sub.positions, s.positions[keep])
+    assert np.array_equal(sub.parent, s.parent[keep]) and np.array_equal(sub.order, s.order[keep])
+    assert np.array_equal(sub.leaf_node, [7]) and np.array_equal(sub.leaves[0], s.leaves[2])
+
+
+def test_subset_rejects_a_mask_that_orphans_a_node_or_has_the_wrong_shape():
+    s = fork()
+    with pytest.raises(SkeletonError, match="drops node 1 but keeps its child"):
+        s.subset(np.array([True, False, True, True, True, True, True]))
+    with pytest.raises(SkeletonError, match="bool mask"):
+        s.subset(np.ones(3, bool))

@@ -1,0 +1,239 @@
+"""`farm reconstruct --method cloud|photos`: trees from point clouds and photo folders, one or a batch.
+
+  farm reconstruct cloud.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv b.csv] [--no-complete] [--up y]
+  farm reconstruct photos/ --method photos --out tree.glb [--height 9]
+  farm reconstruct a.laz b.laz scans/ --out trees/          a batch: one tree each, summary.csv, contact_sheet.png
+
+The method is inferred when omitted: cloud files -> cloud; a folder of images -> photos; a folder of cloud files or
+of photo folders -> a batch of those. A batch runs one Ray task per tree; a tree that fails is reported in the
+summary and the others still finish (exit status 2 if any failed).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+import traceback
+from pathlib import Path
+
+
+from species.errors import TreefarmError, user_path
+
+from farm.commands import CommandLineError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
+SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "dbh_m", "total_volume_m3", "branches",
+                   "faces", "seconds", "message")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("point clouds and photos (--method cloud|photos)")
+    group.add_argument("--up", default="z", help="the cloud's up axis: z, -z, y, -y, x, -x (default z)")
+    group.add_argument("--frame", choices=("base", "scan"), default="base",
+                       help="base: the trunk's base at the origin (default); scan: the scan's own coordinates")
+    group.add_argument("--skeleton-ply", help="write the measured skeleton as PLY (vertices with radii, edges)")
+    group.add_argument("--qsm-csv", help="write the branch table (id, parent, order, length, radius, volume)")
+    group.add_argument("--complete", action=argparse.BooleanOptionalAction, default=True,
+                       help="seed 003's editing: twigs, leaves and grafts into occlusion gaps (default on)")
+    group.add_argument("--workers", type=int, help="batch: Ray tasks at once (default: the CPUs)")
+    group.add_argument("--address", help="batch: a Ray cluster to join (default: a local Ray)")
+
+
+def _is_cloud(path: Path) -> bool:
+    from reconstruct.clouds import CLOUD_SUFFIXES
+
+    return path.is_file() and path.suffix.lower() in CLOUD_SUFFIXES
+
+
+def _is_photo_folder(path: Path) -> bool:
+    return path.is_dir() and any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
+
+
+def cloud_inputs(args: argparse.Namespace) -> tuple[str, list[Path], bool] | None:
+    """(method, inputs, batch) when the inputs are clouds or photo folders, else None (a drawing method)."""
+    paths = [Path(p) for p in args.inputs]
+    if not paths or args.front or args.side:
+        return None
+    if args.method not in (None, "cloud", "photos"):
+        return None
+    for path in paths:
+        if not path.exists():
+            if args.method in ("cloud", "photos") or path.suffix.lower() in _cloud_suffixes():
+                raise CommandLineError(f"{path} does not exist: allowed a cloud file or a folder of photos")
+            return None
+    items: list[tuple[str, Path]] = []
+    for path in paths:
+        if _is_cloud(path):
+            items.append(("cloud", path))
+        elif _is_photo_folder(path):
+            items.append(("photos", path))
+        elif path.is_dir():
+            inside = sorted(path.iterdir())
+            items += [("cloud", p) for p in inside if _is_cloud(p)]
+            items += [("photos", p) for p in inside if _is_photo_folder(p)]
+            if not any(_is_cloud(p) or _is_photo_folder(p) for p in inside):
+                raise CommandLineError(f"{path} holds no point cloud ({', '.join(_cloud_suffixes())}) and no photos: "
+                                       "allowed a cloud file, a folder of photos, or a folder of those")
+        elif args.method in ("cloud", "photos"):
+            raise CommandLineError(f"{path} is not a point cloud: allowed {', '.join(_cloud_suffixes())} files or a "
+                                   "folder of photos")
+        else:
+            return None
+    methods = {m for m, _ in items}
+    if args.method is not None and methods != {args.method}:
+        wrong = next(p for m, p in items if m != args.method)
+        raise CommandLineError(f"--method {args.method} does not take {wrong}: it is "
+                               f"{'a point cloud' if _is_cloud(wrong) else 'a folder of photos'}")
+    if len(methods) > 1:
+        raise CommandLineError("the inputs mix point clouds and photo folders: allowed one kind a run (--method)")
+    batch = len(items) > 1 or any(p.is_dir() and not _is_photo_folder(p) for p in paths) or Path(args.out).suffix == ""
+    return methods.pop(), [p for _, p in items], batch
+
+
+def _cloud_suffixes() -> tuple[str, ...]:
+    from reconstruct.clouds import CLOUD_SUFFIXES
+
+    return CLOUD_SUFFIXES
+
+
+def _options(args: argparse.Namespace) -> dict:
+    return {"up": args.up, "frame": args.frame, "completion": args.complete, "seed": args.seed,
+            "height": args.height}
+
+
+def reconstruct_one(method: str, source: Path, out: Path, options: dict, skeleton_ply: Path | None = None,
+                    qsm_csv: Path | None = None, report: Path | None = None) -> dict:
+    """Reconstruct one tree and write its files; returns its summary row (TreefarmErrors propagate)."""
+    import reconstruct
+
+    started = time.perf_counter()
+    common = {k: options[k] for k in ("frame", "completion", "seed")}
+    if method == "cloud":
+        result = reconstruct.from_cloud(source, up=options["up"], name=out.stem, **common)
+    else:
+        result = reconstruct.from_photos(source, height=options["height"], name=out.stem, **common)
+    with user_path(out, "write"):
+        result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
+    if report is not None:
+        from reconstruct.report import cloud_drawing, write_report
+
+        with user_path(report, "write"):
+            write_report(report, [("cloud front", cloud_drawing(result.cloud.points, 0)),
+                                  ("cloud side", cloud_drawing(result.cloud.points, 1))],
+                         result.skeleton, result.mesh, title=f"{method}: {out.name}")
+    measures = result.measures
+    return {"input": str(source), "status": "ok", "output": str(out), "points": len(result.cloud.points),
+            "height_m": round(measures["height_m"], 3),
+            "dbh_m": None if measures["dbh_m"] is None else round(measures["dbh_m"], 4),
+            "total_volume_m3": round(measures["total_volume_m3"], 5), "branches": measures["branch_count"],
+            "faces": result.mesh.n_faces, "seconds": round(time.perf_counter() - started, 3),
+            "message": "; ".join(result.warnings), "_timings": result.timings, "_skeleton": result.skeleton,
+            "_cloud": result.cloud.points}
+
+
+def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
+    out = Path(args.out)
+    if out.suffix.lower() != ".glb":
+        raise CommandLineError(f"--out {args.out} must name a .glb file for --method {method} (the GLB carries the "
+                               "frame and the measures in its extras), or a folder for a batch")
+    if args.format not in (None, "glb"):
+        raise CommandLineError(f"--format {args.format}: --method {method} writes glb only")
+    row = reconstruct_one(method, source, out, _options(args),
+                          Path(args.skeleton_ply) if args.skeleton_ply else None,
+                          Path(args.qsm_csv) if args.qsm_csv else None, Path(args.report) if args.report else None)
+    for warning in row["message"].split("; ") if row["message"] else []:
+        print(f"warning: {warning}", file=sys.stderr)
+    stages = ", ".join(f"{k} {v:.2f}" for k, v in row["_timings"].items())
+    dbh = "n/a" if row["dbh_m"] is None else f"{row['dbh_m']:.3f} m"
+    print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, woody volume "
+          f"{row['total_volume_m3']:.4f} m3, {row['branches']} branches, {row['faces']} faces -> {out} "
+          f"({row['seconds']:.2f} s; {stages})")
+    return 0
+
+
+def _batch_task(method: str, source: str, out: str, options: dict, extras: bool) -> dict:
+    out_path = Path(out)
+    try:
+        row = reconstruct_one(method, Path(source), out_path, options,
+                              out_path.with_suffix(".skeleton.ply") if extras else None,
+                              out_path.with_suffix(".branches.csv") if extras else None)
+        row["_skeleton"] = row["_skeleton"].to_arrays()
+        row["_cloud"] = row["_cloud"][:: max(1, len(row["_cloud"]) // 20000)]
+        return row
+    except TreefarmError as error:
+        return {"input": source, "status": "failed", "message": str(error)}
+    except Exception:  # a bug: reported with its traceback, and the run exits 1
+        return {"input": source, "status": "error", "message": traceback.format_exc()}
+
+
+def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int:
+    import ray
+    from tqdm import tqdm
+
+    from farm.pipeline import ray_connection
+    from renderers.contact_sheet import write_contact_sheet
+    from reconstruct.report import cloud_drawing, skeleton_drawing
+    from species.skeleton import Skeleton
+
+    out_dir = Path(args.out)
+    if out_dir.suffix:
+        raise CommandLineError(f"--out {args.out}: a batch of {len(sources)} writes a folder (one GLB a tree); "
+                               "allowed a folder name without a suffix")
+    if args.skeleton_ply or args.qsm_csv or args.report:
+        raise CommandLineError("--skeleton-ply, --qsm-csv and --report name one file: a batch writes NAME.skeleton.ply "
+                               "and NAME.branches.csv beside each GLB, and contact_sheet.png")
+    stems = [s.stem if s.is_file() else s.name for s in sources]
+    if len(set(stems)) < len(stems):
+        twice = sorted({s for s in stems if stems.count(s) > 1})
+        raise CommandLineError(f"inputs {twice} share a name: allowed inputs whose names differ (one GLB each)")
+    with user_path(out_dir, "write"):
+        out_dir.mkdir(parents=True, exist_ok=True)
+    options = _options(args)
+    rows = []
+    with ray_connection(args.address, args.workers, log_to_driver=False):
+        task = ray.remote(num_cpus=1)(_batch_task)
+        pending = [task.remote(method, str(s), str(out_dir / f"{stem}.glb"), options, True)
+                   for s, stem in zip(sources, stems)]
+        with tqdm(total=len(pending), desc="reconstruct", unit="tree", disable=None) as bar:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                rows.append(ray.get(done[0]))
+                bar.update(1)
+    rows.sort(key=lambda r: r["input"])
+    with user_path(out_dir / "summary.csv", "write"):
+        with open(out_dir / "summary.csv", "w", newline="") as handle:
+            writer = csv.DictWriter(handle, SUMMARY_COLUMNS, extrasaction="ignore")
+            writer.writeheader()
+            writer.writerows(rows)
+    sheet_rows = []
+    for row in rows:
+        if row["status"] == "ok":
+            skeleton = Skeleton(**row["_skeleton"])
+            sheet_rows.append((Path(row["input"]).name, [("cloud", cloud_drawing(row["_cloud"], 0)),
+                                                         ("skeleton front", skeleton_drawing(skeleton, 0)),
+                                                         ("skeleton side", skeleton_drawing(skeleton, 1))]))
+    if sheet_rows:
+        write_contact_sheet(out_dir / "contact_sheet.png", sheet_rows)
+    print(f"{'input':<32} {'status':<7} {'height m':>8} {'DBH m':>7} {'volume m3':>10} {'branches':>8} {'s':>6}")
+    for row in rows:
+        if row["status"] == "ok":
+            dbh = "-" if row["dbh_m"] is None else f"{row['dbh_m']:.3f}"
+            print(f"{Path(row['input']).name:<32} ok      {row['height_m']:>8.2f} {dbh:>7} "
+                  f"{row['total_volume_m3']:>10.4f} {row['branches']:>8} {row['seconds']:>6.2f}")
+        else:
+            print(f"{Path(row['input']).name:<32} {row['status']:<7} {row['message'].strip().splitlines()[-1]}")
+    for row in rows:
+        if row["status"] == "error":
+            print(f"error in {row['input']}:\n{row['message']}", file=sys.stderr)
+    ok = sum(r["status"] == "ok" for r in rows)
+    print(f"{ok} of {len(rows)} trees -> {out_dir} (summary.csv, contact_sheet.png)")
+    if any(r["status"] == "error" for r in rows):
+        return 1
+    return 0 if ok == len(rows) else 2
+
+
+def run(args: argparse.Namespace, method: str, sources: list[Path], batch: bool) -> int:
+    if batch:
+        return run_batch(args, method, sources)
+    return run_single(args, method, sources[0])
