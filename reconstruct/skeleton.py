@@ -5,7 +5,8 @@ In: a `PointCloud` (reconstruct.clouds: Z up, metres, base near the origin) or a
 (parent[i] < i, renumbered breadth-first, orders by `branch_orders`) with radii, and what was measured on the way.
 
 The stages, each a function below:
-1. duplicate removal (points closer than 1 mm become one), and a voxel grid above `max_points`;
+1. duplicate removal (points closer than 1 mm become one), a voxel grid above `max_points`, and the
+   statistical outlier filter (mean distance to 16 neighbours above the mean + 3 sigma);
 2. the trunk's initial radius from the lowest 2 % of the points (a circle fit);
 3. trunk centralisation: slice by slice up the trunk, the points on the fitted circle move to its centre, so the
    paths of step 5 climb the trunk's axis instead of spiralling round its bark;
@@ -64,6 +65,8 @@ class SkeletonSettings:
     """The constants of `cloud_skeleton`; the defaults are the documented ones.
 
     max_points        : above this many (after duplicates go) the cloud is thinned on a voxel grid.
+    outlier_sigma     : points whose mean distance to their 16 neighbours exceeds the mean by this many
+                        standard deviations go (0 keeps all).
     graph             : "knn" (`knn` nearest neighbours, pieces joined) or "delaunay" (AdTree's, slower).
     band_spacings     : width of a path-length band in median point spacings (stage 6).
     link_spacings     : points closer than this many spacings and in one band are one vertex.
@@ -77,6 +80,7 @@ class SkeletonSettings:
     """
 
     max_points: int = 50_000
+    outlier_sigma: float = 3.0
     graph: str = "knn"
     knn: int = 16
     trunk_base_share: float = 0.02
@@ -98,7 +102,7 @@ class SkeletonSettings:
         for name, (value, least) in checks.items():
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
                 raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
-        for name in ("trunk_base_share", "band_spacings", "link_spacings", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
+        for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "link_spacings", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
                      "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
@@ -158,6 +162,14 @@ def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
     return np.sort(first)
 
 
+def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0) -> np.ndarray:
+    """(N,) bool: points whose mean distance to their k nearest neighbours is within the cloud's mean + `sigma`
+    standard deviations of it (digest 3.1's outlier filter; stray returns in the air are far from everything)."""
+    distance, _ = cKDTree(points).query(points, k=min(k + 1, len(points)))
+    mean = distance[:, 1:].mean(axis=1)
+    return mean <= mean.mean() + sigma * mean.std()
+
+
 # ------------------------------------------------------------------------------------------------ stages 2, 3
 def fit_circle(xy: np.ndarray) -> tuple[np.ndarray, float]:
     """Centre (2,) and radius of the least-squares circle through 2D points (the algebraic fit: linear, exact for
@@ -179,10 +191,15 @@ def centralise_trunk(points: np.ndarray, base_share: float, spacing: float,
     than twice the base radius; the climb stops at the first fork or where the trunk disappears into the crown."""
     z = points[:, 2]
     low = z <= np.quantile(z, base_share)
-    centre, radius0 = fit_circle(points[low, :2])
-    spread = np.median(_planar_norms(points[low, :2] - np.median(points[low, :2], axis=0)))
+    base = points[low]
+    # The stem's foot is the largest group of touching low points; strays near the ground are not part of it.
+    pairs = cKDTree(base).query_pairs(3.0 * spacing, output_type="ndarray")
+    _, group = connected_components(_adjacency(pairs, len(base)), directed=False)
+    base = base[group == np.argmax(np.bincount(group))]
+    centre, radius0 = fit_circle(base[:, :2])
+    spread = np.median(_planar_norms(base[:, :2] - np.median(base[:, :2], axis=0)))
     if not np.isfinite(radius0) or radius0 > 4 * max(spread, spacing):  # too few or collinear points: no arc
-        centre, radius0 = np.median(points[low, :2], axis=0), float(spread)
+        centre, radius0 = np.median(base[:, :2], axis=0), float(spread)
     radius0 = max(radius0, spacing)
     height = max(2.0 * radius0, 4.0 * spacing)
     trunk = np.zeros(len(points), bool)
@@ -520,11 +537,16 @@ def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: fl
         rel = points - np.array([x[0], x[1], z0])
         return row_norms(rel - np.outer(rel @ d, d)) - x[4]
 
-    fit = least_squares(residual, [start[0], start[1], tilt[0], tilt[1], radius0], loss="soft_l1",
-                        f_scale=max(0.2 * radius0, 1e-3), max_nfev=50)
+    # Bounded: the axis within about 17 degrees of the slice centres' line, the radius within a factor of 2.
+    first = np.array([start[0], start[1], tilt[0], tilt[1], radius0])
+    span = np.array([2 * radius0, 2 * radius0, 0.3, 0.3, 0.0])
+    lower, upper = first - span, first + span
+    lower[4], upper[4] = 0.5 * radius0, 2.0 * radius0
+    fit = least_squares(residual, first, loss="soft_l1", f_scale=max(0.2 * radius0, 1e-3), max_nfev=50,
+                        bounds=(lower, upper))
     x = fit.x
     direction = np.array([x[2], x[3], 1.0])
-    radius = float(abs(x[4])) if np.isfinite(x[4]) and 0.25 * radius0 < abs(x[4]) < 4 * radius0 else radius0
+    radius = float(x[4])
     return radius, np.array([[x[0], x[1], z0], direction / row_norms(direction[None])[0]])
 
 
@@ -598,6 +620,8 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)
     points = unique_points(cloud.points.astype(np.float64), settings.max_points)
+    if settings.outlier_sigma > 0 and len(points) > 20:
+        points = points[statistical_inliers(points, sigma=settings.outlier_sigma)]
     if len(points) < 20:
         raise CloudError(f"{cloud.source} has {len(points)} distinct points: allowed at least 20")
     spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))

@@ -234,6 +234,9 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
 
 
 def run(args: argparse.Namespace, method: str, sources: list[Path], batch: bool) -> int:
+    if method == "photos":
+        raise CommandLineError(f"{sources[0]} is a folder of photos: --method photos (pycolmap SfM) is not built yet; "
+                               "allowed point cloud files (.xyz, .ply, .las, .laz, ...)")
     if batch:
         return run_batch(args, method, sources)
     return run_single(args, method, sources[0])
