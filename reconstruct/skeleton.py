@@ -35,7 +35,6 @@ chosen on `tree1.xyz` and the synthetic clouds of `benchmarks/bench_reconstruct_
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -51,6 +50,7 @@ from species.skeleton import Skeleton
 from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_maximum
 
 from .clouds import CloudError, PointCloud, read_cloud
+from .timing import StageTimer
 
 __all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT"]
 
@@ -608,14 +608,8 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     settings = SkeletonSettings() if settings is None else settings
     if not isinstance(settings, SkeletonSettings):
         raise CloudError(f"settings is a {type(settings).__name__}: allowed a SkeletonSettings")
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(name: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[name] = now - clock
-        clock = now
+    timer = StageTimer()
+    lap, timings = timer.lap, timer.timings
 
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)

@@ -6,7 +6,6 @@ renderers' "two-view" rig). Out: `TwoViewResult` (Skeleton in metres, Z up, base
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import cv2
@@ -20,6 +19,7 @@ from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_he
 from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
+from .timing import StageTimer
 
 __all__ = ["two_view", "TwoViewResult", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
            "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
@@ -187,14 +187,8 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     Raises TwoViewError for images that are blank, not (H, W) / (H, W, 3) uint8, of different sizes, 1-pixel
     strokes in several pieces, bad outlines, heights or options.
     """
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = now - clock
-        clock = now
+    timer = StageTimer()
+    lap, timings = timer.lap, timer.timings
 
     if not isinstance(rng, np.random.Generator):
         raise TwoViewError(f"rng is a {type(rng).__name__}: allowed a numpy.random.Generator "
