@@ -1,0 +1,253 @@
+"""Photos to points with pycolmap (issue 24, first stage): SIFT features, matching, and either incremental mapping
+or, when the folder's `cameras.json` gives every photo's pose, triangulation at those poses.
+
+In: a folder of photos (IMAGE_SUFFIXES), optionally with the `cameras.json` our Blender renders write (OpenCV axes,
+world Z up in metres: COLMAP's own camera convention, so the poses go in as they are). Out: `SfmPoints`, the
+triangulated points with their colours in the cameras' world frame. Making them upright and metric without known
+poses, isolating the tree and `from_photos` come next (docs/reconstruct.md records what the first probes measured).
+
+Pixel centres: OpenCV puts pixel (0, 0)'s centre at (0, 0), COLMAP at (0.5, 0.5), so a known principal point moves
+by half a pixel on the way in. pycolmap's random seed is set from `SfmSettings.seed`; with more than one thread,
+bundle adjustment's sums may run in another order and an estimated model can differ in its last digits.
+"""
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .clouds import CloudError
+from .timing import StageTimer
+
+__all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras", "IMAGE_SUFFIXES",
+           "MIN_PHOTOS"]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
+MATCHERS = ("auto", "exhaustive", "sequential")
+POSES = ("auto", "known", "estimate")
+
+
+class PhotoError(CloudError):
+    """A photo folder that SfM cannot turn into points; the message names the value and what is allowed."""
+
+
+@dataclass(frozen=True)
+class SfmSettings:
+    """pycolmap's options that matter for tree photos.
+
+    max_image_size : pixels, the longer side SIFT sees. max_features : per photo.
+    matcher        : "exhaustive" (every pair), "sequential" (each photo with the next `overlap`, for orbits and
+                     walks) or "auto" (exhaustive up to `exhaustive_max` photos).
+    poses          : "known" (cameras.json, triangulation only), "estimate" (incremental mapping) or "auto"
+                     (known when cameras.json lists every photo).
+    min_registered : the share of photos the model must hold. threads : 0 = all CPUs. seed : pycolmap's PRNG.
+    """
+
+    max_image_size: int = 1600
+    max_features: int = 8192
+    matcher: str = "auto"
+    exhaustive_max: int = 60
+    overlap: int = 10
+    poses: str = "auto"
+    min_registered: float = 0.5
+    threads: int = 0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.matcher not in MATCHERS:
+            raise PhotoError(f"matcher {self.matcher!r} is unknown: allowed {', '.join(MATCHERS)}")
+        if self.poses not in POSES:
+            raise PhotoError(f"poses {self.poses!r} is unknown: allowed {', '.join(POSES)}")
+        if not 0.0 < self.min_registered <= 1.0:
+            raise PhotoError(f"min_registered {self.min_registered!r} is out of range: allowed (0, 1]")
+        for name in ("max_image_size", "max_features", "exhaustive_max", "overlap"):
+            if int(getattr(self, name)) < 1:
+                raise PhotoError(f"{name} {getattr(self, name)!r} is too small: allowed 1 or more")
+
+
+@dataclass(frozen=True, eq=False)
+class SfmPoints:
+    """What SfM made of a folder.
+
+    points  : (N, 3) float64, the model's frame (known poses: the cameras' world, Z up, metres).
+    colours : (N, 3) uint8. track_length : (N,) int, photos that see each point.
+    registered : names of the photos in the model, of `n_photos`. poses : "known" or "estimated".
+    reprojection_px : mean reprojection error. camera_centres : (R, 3) float64, of the registered photos.
+    """
+
+    points: np.ndarray
+    colours: np.ndarray
+    track_length: np.ndarray
+    registered: list[str]
+    n_photos: int
+    poses: str
+    reprojection_px: float
+    camera_centres: np.ndarray
+    timings: dict[str, float]
+
+
+def photo_names(folder: str | Path) -> list[str]:
+    """The sorted names of the photos directly in `folder`; PhotoError for a missing folder or too few photos."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise PhotoError(f"{folder} is not a folder: allowed a folder of photos ({', '.join(IMAGE_SUFFIXES)})")
+    names = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
+                   and not p.stem.endswith(("_depth", "_mask")))
+    if len(names) < MIN_PHOTOS:
+        raise PhotoError(f"{folder} holds {len(names)} photo(s): allowed at least {MIN_PHOTOS} "
+                         f"({', '.join(IMAGE_SUFFIXES)})")
+    return names
+
+
+def known_cameras(folder: str | Path, names: list[str]) -> dict[str, dict] | None:
+    """`cameras.json`'s record for every photo (keys K, world_to_camera, width, height), or None when the file is
+    absent or misses a photo; PhotoError when it exists but is not our convention or cannot be read."""
+    path = Path(folder) / "cameras.json"
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text())
+        records = {v["image"]: v for v in data["views"]}
+    except (ValueError, KeyError, TypeError) as error:
+        raise PhotoError(f"{path} cannot be read as camera poses ({error}): allowed the cameras.json that "
+                         f"`farm render --backend blender` writes") from None
+    if data.get("convention") != "opencv":
+        raise PhotoError(f"{path} has convention {data.get('convention')!r}: allowed 'opencv'")
+    if not set(names) <= set(records):
+        return None
+    for name in names:
+        record = records[name]
+        if record.get("projection", "perspective") != "perspective":
+            raise PhotoError(f"{path}: {name} is {record['projection']}: SfM allowed perspective photos only")
+    return {name: records[name] for name in names}
+
+
+def _camera_params(record: dict) -> str:
+    K = np.asarray(record["K"], np.float64)
+    return ",".join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5))
+
+
+def sfm_points(folder: str | Path, settings: SfmSettings | None = None, *, workdir: str | Path | None = None
+               ) -> SfmPoints:
+    """The points SfM triangulates from the photos in `folder` (see the module docstring).
+
+    workdir : where COLMAP's database and model go (kept); by default a temporary folder, removed after.
+    Raises PhotoError for a missing folder, too few photos, a bad cameras.json, or a model that registers fewer
+    than `settings.min_registered` of the photos.
+    """
+    settings = SfmSettings() if settings is None else settings
+    names = photo_names(folder)
+    cameras = known_cameras(folder, names) if settings.poses != "estimate" else None
+    if settings.poses == "known" and cameras is None:
+        raise PhotoError(f"poses 'known' needs {Path(folder) / 'cameras.json'} listing every photo: allowed "
+                         "poses 'estimate' or 'auto' without it")
+    if workdir is None:
+        with tempfile.TemporaryDirectory(prefix="treefarm-sfm-") as tmp:
+            return _run(Path(folder), names, cameras, settings, Path(tmp))
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    return _run(Path(folder), names, cameras, settings, workdir)
+
+
+def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSettings, work: Path) -> SfmPoints:
+    import pycolmap
+
+    timer = StageTimer()
+    pycolmap.set_random_seed(int(settings.seed))
+    database = work / "database.db"
+    database.unlink(missing_ok=True)
+    threads = int(settings.threads) or -1
+    reader = pycolmap.ImageReaderOptions()
+    mode = pycolmap.CameraMode.AUTO
+    if cameras is not None:
+        params = {_camera_params(r) for r in cameras.values()}
+        if len(params) == 1:
+            reader.camera_model, reader.camera_params, mode = "PINHOLE", params.pop(), pycolmap.CameraMode.SINGLE
+        else:
+            reader.camera_model, mode = "PINHOLE", pycolmap.CameraMode.PER_IMAGE
+    else:
+        reader.camera_model = "SIMPLE_RADIAL"
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = threads
+    extraction.max_image_size = int(settings.max_image_size)
+    extraction.sift.max_num_features = int(settings.max_features)
+    pycolmap.extract_features(database, folder, image_names=names, camera_mode=mode, reader_options=reader,
+                              extraction_options=extraction, device=pycolmap.Device.cpu)
+    if cameras is not None and mode == pycolmap.CameraMode.PER_IMAGE:
+        _set_known_intrinsics(pycolmap, database, cameras)
+    timer.lap("features")
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    exhaustive = settings.matcher == "exhaustive" or (settings.matcher == "auto" and len(names) <= settings.exhaustive_max)
+    if exhaustive:
+        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+    else:
+        pairing = pycolmap.SequentialPairingOptions()
+        pairing.overlap = int(settings.overlap)
+        pycolmap.match_sequential(database, matching_options=matching, pairing_options=pairing,
+                                  device=pycolmap.Device.cpu)
+    timer.lap("matching")
+    options = pycolmap.IncrementalPipelineOptions()
+    options.num_threads = threads
+    options.random_seed = int(settings.seed)
+    model_dir = work / "model"
+    model_dir.mkdir(exist_ok=True)
+    if cameras is not None:
+        model = pycolmap.triangulate_points(_posed_reconstruction(pycolmap, database, cameras), database, folder,
+                                            model_dir, options=options)
+        poses = "known"
+    else:
+        models = pycolmap.incremental_mapping(database, folder, model_dir, options=options)
+        model = max(models.values(), key=lambda m: (m.num_reg_images(), m.num_points3D()), default=None)
+        poses = "estimated"
+    timer.lap("mapping" if poses == "estimated" else "triangulation")
+    registered = 0 if model is None else model.num_reg_images()
+    needed = max(MIN_PHOTOS, math.ceil(settings.min_registered * len(names)))
+    if registered < needed or model.num_points3D() == 0:
+        raise PhotoError(f"{folder}: SfM registered {registered} of {len(names)} photos"
+                         f"{'' if model is None else f' with {model.num_points3D()} points'}: allowed at least "
+                         f"{needed} ({settings.min_registered:.0%}); take more photos with more overlap "
+                         f"(about 10 degrees apart round the tree), or give cameras.json")
+    points = list(model.points3D.values())
+    images = [model.image(i) for i in model.reg_image_ids()]
+    return SfmPoints(points=np.array([p.xyz for p in points], np.float64).reshape(-1, 3),
+                     colours=np.array([p.color for p in points], np.uint8).reshape(-1, 3),
+                     track_length=np.array([p.track.length() for p in points], np.int64),
+                     registered=sorted(image.name for image in images), n_photos=len(names), poses=poses,
+                     reprojection_px=float(model.compute_mean_reprojection_error()),
+                     camera_centres=np.array([image.projection_center() for image in images], np.float64),
+                     timings=timer.timings)
+
+
+def _set_known_intrinsics(pycolmap, database: Path, cameras: dict) -> None:
+    """Per-photo pinhole intrinsics from cameras.json into the database (photos of different sizes or lenses)."""
+    db = pycolmap.Database.open(database)
+    try:
+        for image in db.read_all_images():
+            camera = db.read_camera(image.camera_id)
+            camera.params = [float(v) for v in _camera_params(cameras[image.name]).split(",")]
+            db.update_camera(camera)
+    finally:
+        db.close()
+
+
+def _posed_reconstruction(pycolmap, database: Path, cameras: dict):
+    """A model holding the database's cameras and photos at their cameras.json poses, and no points."""
+    model = pycolmap.Reconstruction()
+    db = pycolmap.Database.open(database)
+    try:
+        for camera in db.read_all_cameras():
+            model.add_camera_with_trivial_rig(camera)
+        for image in db.read_all_images():
+            E = np.asarray(cameras[image.name]["world_to_camera"], np.float64)
+            pose = pycolmap.Rigid3d(pycolmap.Rotation3d(E[:3, :3]), E[:3, 3])
+            model.add_image_with_trivial_frame(
+                pycolmap.Image(name=image.name, camera_id=image.camera_id, image_id=image.image_id), pose)
+    finally:
+        db.close()
+    return model

@@ -1,0 +1,95 @@
+"""reconstruct.sfm: pycolmap on ten Blender renders at known poses (cameras.json), and its one-line errors."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import species
+from reconstruct.sfm import PhotoError, SfmSettings, photo_names, sfm_points
+from renderers.blender import render_photos
+from renderers.camera import perspective_camera
+
+VIEWS = 10
+STEP_DEG = 10.0   # SIFT on a tree needs small steps: at 60 degrees apart almost nothing matches
+
+
+@pytest.fixture(scope="module")
+def photos(tmp_path_factory):
+    """Ten 320 px Cycles renders (4 samples) of a 4.3 m tree on a textured ground, 10 degrees apart."""
+    _, mesh = species.rebuild(species.sample("sc_open_fruit_tree", np.random.default_rng(1)))
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    cameras = [perspective_camera(points, k * STEP_DEG, 15.0 if k % 2 else 8.0, 320) for k in range(VIEWS)]
+    return render_photos(mesh.to_glb(), cameras, tmp_path_factory.mktemp("photos"), samples=4)
+
+
+@pytest.fixture(scope="module")
+def known(photos):
+    return sfm_points(photos.cameras_json.parent, SfmSettings(threads=1))
+
+
+def test_known_poses_register_every_photo_where_the_renderer_put_it(photos, known):
+    assert known.poses == "known" and known.n_photos == VIEWS and len(known.registered) == VIEWS
+    centres = np.array(sorted(c.position.tolist() for c in photos.cameras))
+    np.testing.assert_allclose(np.array(sorted(known.camera_centres.tolist())), centres, atol=1e-9)
+    assert len(known.points) >= 30 and known.reprojection_px < 1.0
+    assert known.colours.shape == known.points.shape and known.colours.dtype == np.uint8
+    assert (known.track_length >= 2).all()
+
+
+def test_triangulated_ground_lies_on_the_rendered_ground_plane(known):
+    # Blender's ground is the plane z = 0 of the cameras' world: points SfM puts near it must sit on it, which
+    # holds only if poses, intrinsics and the half-pixel shift between OpenCV and COLMAP all went in right.
+    near = known.points[np.abs(known.points[:, 2]) < 0.3]
+    assert len(near) >= 20
+    assert np.median(np.abs(near[:, 2])) < 0.03
+
+
+def test_same_photos_and_seed_give_the_same_points(photos, known):
+    again = sfm_points(photos.cameras_json.parent, SfmSettings(threads=1))
+    assert again.points.tobytes() == known.points.tobytes()
+    assert again.colours.tobytes() == known.colours.tobytes()
+
+
+def test_renderer_depth_and_mask_files_are_not_photos(photos):
+    names = photo_names(photos.cameras_json.parent)
+    assert names == sorted(p.name for p in photos.images)
+
+
+def test_blank_photos_register_nothing_and_say_so(tmp_path):
+    for k in range(4):
+        Image.fromarray(np.full((64, 64, 3), 128, np.uint8)).save(tmp_path / f"grey_{k}.png")
+    with pytest.raises(PhotoError, match=r"registered 0 of 4 photos.*allowed at least 3"):
+        sfm_points(tmp_path, SfmSettings(threads=1))
+
+
+def test_folder_errors_name_the_folder_and_what_is_allowed(tmp_path):
+    with pytest.raises(PhotoError, match="is not a folder"):
+        sfm_points(tmp_path / "missing")
+    Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / "only.png")
+    with pytest.raises(PhotoError, match=r"holds 1 photo\(s\): allowed at least 3"):
+        sfm_points(tmp_path)
+
+
+def test_cameras_json_errors(tmp_path):
+    for k in range(3):
+        Image.fromarray(np.zeros((8, 8, 3), np.uint8)).save(tmp_path / f"p{k}.png")
+    with pytest.raises(PhotoError, match="poses 'known' needs"):
+        sfm_points(tmp_path, SfmSettings(poses="known"))
+    (tmp_path / "cameras.json").write_text("{not json")
+    with pytest.raises(PhotoError, match="cannot be read as camera poses"):
+        sfm_points(tmp_path)
+    (tmp_path / "cameras.json").write_text(json.dumps({"convention": "opengl", "views": []}))
+    with pytest.raises(PhotoError, match="convention 'opengl': allowed 'opencv'"):
+        sfm_points(tmp_path)
+
+
+@pytest.mark.parametrize("bad, message", [({"matcher": "vocab"}, "matcher 'vocab' is unknown"),
+                                          ({"poses": "guess"}, "poses 'guess' is unknown"),
+                                          ({"min_registered": 0.0}, "min_registered 0.0 is out of range"),
+                                          ({"overlap": 0}, "overlap 0 is too small")])
+def test_settings_are_checked(bad, message):
+    with pytest.raises(PhotoError, match=message):
+        SfmSettings(**bad)
