@@ -40,7 +40,12 @@ class PhotoError(CloudError):
 class SfmSettings:
     """pycolmap's options that matter for tree photos.
 
-    max_image_size : pixels, the longer side SIFT sees. max_features : per photo.
+    max_image_size : pixels, the longer side SIFT sees. max_features : per photo. peak_threshold : SIFT's contrast
+                     floor (COLMAP's default 0.0067). max_ratio : the nearest/second-nearest descriptor distance
+                     ratio a match may have (COLMAP's 0.8). guided : guided matching (more matches along the
+                     verified epipolar lines). The three defaults are loosened for trees: on ten 640 px renders
+                     10 degrees apart at known poses they raise the points more than 10 cm above the ground
+                     from 14 of 399 to 459 of 2,263 (0.9 px reprojection error), at 3.5x the time.
     matcher        : "exhaustive" (every pair), "sequential" (each photo with the next `overlap`, for orbits and
                      walks) or "auto" (exhaustive up to `exhaustive_max` photos).
     poses          : "known" (cameras.json, triangulation only), "estimate" (incremental mapping) or "auto"
@@ -50,6 +55,9 @@ class SfmSettings:
 
     max_image_size: int = 1600
     max_features: int = 8192
+    peak_threshold: float = 0.002
+    max_ratio: float = 0.9
+    guided: bool = True
     matcher: str = "auto"
     exhaustive_max: int = 60
     overlap: int = 10
@@ -63,6 +71,10 @@ class SfmSettings:
             raise PhotoError(f"matcher {self.matcher!r} is unknown: allowed {', '.join(MATCHERS)}")
         if self.poses not in POSES:
             raise PhotoError(f"poses {self.poses!r} is unknown: allowed {', '.join(POSES)}")
+        if not 0.0 < self.max_ratio <= 1.0:
+            raise PhotoError(f"max_ratio {self.max_ratio!r} is out of range: allowed (0, 1]")
+        if not self.peak_threshold > 0.0:
+            raise PhotoError(f"peak_threshold {self.peak_threshold!r} is out of range: allowed > 0")
         if not 0.0 < self.min_registered <= 1.0:
             raise PhotoError(f"min_registered {self.min_registered!r} is out of range: allowed (0, 1]")
         for name in ("max_image_size", "max_features", "exhaustive_max", "overlap"):
@@ -176,6 +188,7 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
     extraction.num_threads = threads
     extraction.max_image_size = int(settings.max_image_size)
     extraction.sift.max_num_features = int(settings.max_features)
+    extraction.sift.peak_threshold = float(settings.peak_threshold)
     pycolmap.extract_features(database, folder, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=extraction, device=pycolmap.Device.cpu)
     if cameras is not None and mode == pycolmap.CameraMode.PER_IMAGE:
@@ -183,6 +196,8 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
     timer.lap("features")
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
+    matching.guided_matching = bool(settings.guided)
+    matching.sift.max_ratio = float(settings.max_ratio)
     exhaustive = settings.matcher == "exhaustive" or (settings.matcher == "auto" and len(names) <= settings.exhaustive_max)
     if exhaustive:
         pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
