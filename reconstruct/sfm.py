@@ -23,8 +23,8 @@ import numpy as np
 from .clouds import CloudError
 from .timing import StageTimer
 
-__all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras", "IMAGE_SUFFIXES",
-           "MIN_PHOTOS"]
+__all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras",
+           "align_to_cameras", "IMAGE_SUFFIXES", "MIN_PHOTOS"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
@@ -88,8 +88,10 @@ class SfmPoints:
 
     points  : (N, 3) float64, the model's frame (known poses: the cameras' world, Z up, metres).
     colours : (N, 3) uint8. track_length : (N,) int, photos that see each point.
-    registered : names of the photos in the model, of `n_photos`. poses : "known" or "estimated".
-    reprojection_px : mean reprojection error. camera_centres : (R, 3) float64, of the registered photos.
+    registered : names of the photos in the model (sorted), of `n_photos`. poses : "known", "estimated" or
+    "aligned" (estimated, then moved onto cameras.json's centres by `align_to_cameras`).
+    reprojection_px : mean reprojection error. camera_centres : (R, 3) float64, of `registered` in that order;
+    camera_rotations : (R, 3, 3) float64, their world-to-camera rotations (OpenCV axes).
     """
 
     points: np.ndarray
@@ -100,7 +102,34 @@ class SfmPoints:
     poses: str
     reprojection_px: float
     camera_centres: np.ndarray
+    camera_rotations: np.ndarray
     timings: dict[str, float]
+
+
+def align_to_cameras(sfm: SfmPoints, cameras: dict[str, dict]) -> tuple[SfmPoints, float]:
+    """An estimated model moved into cameras.json's world (Z up, metres); returns it and the camera centres' RMS
+    residual after the move, metres.
+
+    The rotation is the chordal mean of the cameras' own (known.T @ estimated, one per photo), which an orbit's
+    orientations fix well; the centres alone leave it loose when they lie on a short arc. Scale and shift then
+    come from the centres by least squares.
+    """
+    known = [np.asarray(cameras[name]["world_to_camera"], np.float64) for name in sfm.registered]
+    known_centres = np.array([np.linalg.inv(E)[:3, 3] for E in known])
+    u, _, vt = np.linalg.svd(sum(E[:3, :3].T @ R for E, R in zip(known, sfm.camera_rotations)))
+    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    turned = sfm.camera_centres @ rotation.T
+    a, b = turned - turned.mean(axis=0), known_centres - known_centres.mean(axis=0)
+    if (a ** 2).sum() <= 0:
+        raise PhotoError("the camera centres coincide: allowed photos taken from different places")
+    scale = float((a * b).sum() / (a ** 2).sum())
+    shift = known_centres.mean(axis=0) - scale * turned.mean(axis=0)
+    move = lambda p: scale * p @ rotation.T + shift  # noqa: E731
+    centres = move(sfm.camera_centres)
+    residual = float(np.sqrt(((centres - known_centres) ** 2).sum(axis=1).mean()))
+    rotations = sfm.camera_rotations @ rotation.T
+    return (SfmPoints(move(sfm.points), sfm.colours, sfm.track_length, sfm.registered, sfm.n_photos, "aligned",
+                      sfm.reprojection_px, centres, rotations, sfm.timings), residual)
 
 
 def photo_names(folder: str | Path) -> list[str]:
@@ -229,13 +258,15 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
                          f"{needed} ({settings.min_registered:.0%}); take more photos with more overlap "
                          f"(about 10 degrees apart round the tree), or give cameras.json")
     points = list(model.points3D.values())
-    images = [model.image(i) for i in model.reg_image_ids()]
+    images = sorted((model.image(i) for i in model.reg_image_ids()), key=lambda image: image.name)
     return SfmPoints(points=np.array([p.xyz for p in points], np.float64).reshape(-1, 3),
                      colours=np.array([p.color for p in points], np.uint8).reshape(-1, 3),
                      track_length=np.array([p.track.length() for p in points], np.int64),
-                     registered=sorted(image.name for image in images), n_photos=len(names), poses=poses,
+                     registered=[image.name for image in images], n_photos=len(names), poses=poses,
                      reprojection_px=float(model.compute_mean_reprojection_error()),
                      camera_centres=np.array([image.projection_center() for image in images], np.float64),
+                     camera_rotations=np.array([image.cam_from_world().rotation.matrix() for image in images],
+                                               np.float64),
                      timings=timer.timings)
 
 
