@@ -19,6 +19,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pycolmap
+
+from renderers.camera import Camera, CameraError
 
 from .clouds import CloudError
 from .timing import StageTimer
@@ -106,7 +109,7 @@ class SfmPoints:
     timings: dict[str, float]
 
 
-def align_to_cameras(sfm: SfmPoints, cameras: dict[str, dict]) -> tuple[SfmPoints, float]:
+def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoints, float]:
     """An estimated model moved into cameras.json's world (Z up, metres); returns it and the camera centres' RMS
     residual after the move, metres.
 
@@ -114,9 +117,10 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, dict]) -> tuple[SfmPoint
     orientations fix well; the centres alone leave it loose when they lie on a short arc. Scale and shift then
     come from the centres by least squares.
     """
-    known = [np.asarray(cameras[name]["world_to_camera"], np.float64) for name in sfm.registered]
-    known_centres = np.array([np.linalg.inv(E)[:3, 3] for E in known])
-    u, _, vt = np.linalg.svd(sum(E[:3, :3].T @ R for E, R in zip(known, sfm.camera_rotations)))
+    known = [cameras[name] for name in sfm.registered]
+    known_centres = np.array([camera.position for camera in known])
+    u, _, vt = np.linalg.svd(sum(camera.world_to_camera[:3, :3].T @ R
+                                 for camera, R in zip(known, sfm.camera_rotations)))
     rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
     turned = sfm.camera_centres @ rotation.T
     a, b = turned - turned.mean(axis=0), known_centres - known_centres.mean(axis=0)
@@ -145,9 +149,9 @@ def photo_names(folder: str | Path) -> list[str]:
     return names
 
 
-def known_cameras(folder: str | Path, names: list[str]) -> dict[str, dict] | None:
-    """`cameras.json`'s record for every photo (keys K, world_to_camera, width, height), or None when the file is
-    absent or misses a photo; PhotoError when it exists but is not our convention or cannot be read."""
+def known_cameras(folder: str | Path, names: list[str]) -> dict[str, Camera] | None:
+    """`cameras.json`'s camera for every photo, or None when the file is absent or misses a photo; PhotoError when
+    it exists but is not our convention, cannot be read, or holds an orthographic view."""
     path = Path(folder) / "cameras.json"
     if not path.is_file():
         return None
@@ -161,16 +165,20 @@ def known_cameras(folder: str | Path, names: list[str]) -> dict[str, dict] | Non
         raise PhotoError(f"{path} has convention {data.get('convention')!r}: allowed 'opencv'")
     if not set(names) <= set(records):
         return None
-    for name in names:
-        record = records[name]
-        if record.get("projection", "perspective") != "perspective":
-            raise PhotoError(f"{path}: {name} is {record['projection']}: SfM allowed perspective photos only")
-    return {name: records[name] for name in names}
+    try:
+        cameras = {name: Camera.from_dict(records[name]) for name in names}
+    except CameraError as error:
+        raise PhotoError(f"{path}: {error}") from None
+    for name, camera in cameras.items():
+        if camera.is_orthographic:
+            raise PhotoError(f"{path}: {name} is orthographic: SfM allowed perspective photos only")
+    return cameras
 
 
-def _camera_params(record: dict) -> str:
-    K = np.asarray(record["K"], np.float64)
-    return ",".join(repr(float(v)) for v in (K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5))
+def _pinhole_params(camera: Camera) -> tuple[float, float, float, float]:
+    """COLMAP's PINHOLE (fx, fy, cx, cy): the principal point half a pixel on, to COLMAP's pixel centres."""
+    K = camera.K
+    return float(K[0, 0]), float(K[1, 1]), float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5
 
 
 def sfm_points(folder: str | Path, settings: SfmSettings | None = None, *, workdir: str | Path | None = None
@@ -195,9 +203,8 @@ def sfm_points(folder: str | Path, settings: SfmSettings | None = None, *, workd
     return _run(Path(folder), names, cameras, settings, workdir)
 
 
-def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSettings, work: Path) -> SfmPoints:
-    import pycolmap
-
+def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, settings: SfmSettings,
+         work: Path) -> SfmPoints:
     timer = StageTimer()
     pycolmap.set_random_seed(int(settings.seed))
     database = work / "database.db"
@@ -206,9 +213,10 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
     reader = pycolmap.ImageReaderOptions()
     mode = pycolmap.CameraMode.AUTO
     if cameras is not None:
-        params = {_camera_params(r) for r in cameras.values()}
+        params = {_pinhole_params(camera) for camera in cameras.values()}
         if len(params) == 1:
-            reader.camera_model, reader.camera_params, mode = "PINHOLE", params.pop(), pycolmap.CameraMode.SINGLE
+            reader.camera_model, mode = "PINHOLE", pycolmap.CameraMode.SINGLE
+            reader.camera_params = ",".join(repr(v) for v in params.pop())
         else:
             reader.camera_model, mode = "PINHOLE", pycolmap.CameraMode.PER_IMAGE
     else:
@@ -221,7 +229,7 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
     pycolmap.extract_features(database, folder, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=extraction, device=pycolmap.Device.cpu)
     if cameras is not None and mode == pycolmap.CameraMode.PER_IMAGE:
-        _set_known_intrinsics(pycolmap, database, cameras)
+        _set_known_intrinsics(database, cameras)
     timer.lap("features")
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
@@ -242,7 +250,7 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
     model_dir = work / "model"
     model_dir.mkdir(exist_ok=True)
     if cameras is not None:
-        model = pycolmap.triangulate_points(_posed_reconstruction(pycolmap, database, cameras), database, folder,
+        model = pycolmap.triangulate_points(_posed_reconstruction(database, cameras), database, folder,
                                             model_dir, options=options)
         poses = "known"
     else:
@@ -270,19 +278,19 @@ def _run(folder: Path, names: list[str], cameras: dict | None, settings: SfmSett
                      timings=timer.timings)
 
 
-def _set_known_intrinsics(pycolmap, database: Path, cameras: dict) -> None:
+def _set_known_intrinsics(database: Path, cameras: dict[str, Camera]) -> None:
     """Per-photo pinhole intrinsics from cameras.json into the database (photos of different sizes or lenses)."""
     db = pycolmap.Database.open(database)
     try:
         for image in db.read_all_images():
             camera = db.read_camera(image.camera_id)
-            camera.params = [float(v) for v in _camera_params(cameras[image.name]).split(",")]
+            camera.params = list(_pinhole_params(cameras[image.name]))
             db.update_camera(camera)
     finally:
         db.close()
 
 
-def _posed_reconstruction(pycolmap, database: Path, cameras: dict):
+def _posed_reconstruction(database: Path, cameras: dict[str, Camera]):
     """A model holding the database's cameras and photos at their cameras.json poses, and no points."""
     model = pycolmap.Reconstruction()
     db = pycolmap.Database.open(database)
@@ -290,7 +298,7 @@ def _posed_reconstruction(pycolmap, database: Path, cameras: dict):
         for camera in db.read_all_cameras():
             model.add_camera_with_trivial_rig(camera)
         for image in db.read_all_images():
-            E = np.asarray(cameras[image.name]["world_to_camera"], np.float64)
+            E = cameras[image.name].world_to_camera
             pose = pycolmap.Rigid3d(pycolmap.Rotation3d(E[:3, :3]), E[:3, 3])
             model.add_image_with_trivial_frame(
                 pycolmap.Image(name=image.name, camera_id=image.camera_id, image_id=image.image_id), pose)
