@@ -9,11 +9,12 @@ timings and intermediate maps. The submodules keep their names: `from reconstruc
 """
 from .clouds import CloudError, PointCloud, read_cloud
 from .from_cloud import CloudReconstruction, from_cloud
+from .from_photos import from_photos
 from .from_params import ParamsReconstruction, from_params
 from .from_sketch import SketchError, SketchReconstruction, from_maps, from_sketch
 from .metrics import MetricError
 from .networks import InputImageError
 from .two_view import TwoViewError, TwoViewResult, two_view
 
-__all__ = ["from_cloud", "CloudReconstruction", "read_cloud", "PointCloud", "CloudError", "from_sketch", "from_maps", "SketchReconstruction", "SketchError", "from_params", "ParamsReconstruction",
+__all__ = ["from_cloud", "CloudReconstruction", "from_photos", "read_cloud", "PointCloud", "CloudError", "from_sketch", "from_maps", "SketchReconstruction", "SketchError", "from_params", "ParamsReconstruction",
            "two_view", "TwoViewResult", "TwoViewError", "MetricError", "InputImageError"]

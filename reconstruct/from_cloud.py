@@ -46,6 +46,7 @@ class CloudReconstruction:
     frame    : "base" or "scan"; transform : (4, 4) float64 from the base frame to the frame the files use.
     fit      : the skeletonisation's record (trunk radius, spacing, points used, stage timings).
     warnings : what a user should know (a leaf-on cloud, points the graph could not join).
+    method   : "cloud", or "photos" for `from_photos`, whose SfM record is `provenance` (both go in the extras).
     """
 
     measured: Skeleton
@@ -58,11 +59,13 @@ class CloudReconstruction:
     cloud: PointCloud
     warnings: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    method: str = "cloud"
+    provenance: dict = field(default_factory=dict)
 
     @property
     def extras(self) -> dict:
         """The GLB's root-node extras: the frame, the scan's offset and up axis, the method and the measures."""
-        return {"treefarm": {"method": "cloud", "frame": self.frame, "source": self.cloud.source,
+        return {"treefarm": {"method": self.method, **self.provenance, "frame": self.frame, "source": self.cloud.source,
                              "scan_offset_m": [float(v) for v in self.cloud.offset], "scan_up": self.cloud.up,
                              "base_in_scan_m": [float(v) for v in self.transform[:3, 3]],
                              "measures": self.measures}}

@@ -95,6 +95,7 @@ class SfmPoints:
     "aligned" (estimated, then moved onto cameras.json's centres by `align_to_cameras`).
     reprojection_px : mean reprojection error. camera_centres : (R, 3) float64, of `registered` in that order;
     camera_rotations : (R, 3, 3) float64, their world-to-camera rotations (OpenCV axes).
+    half_widths : (R,) float64, each photo's half width over its focal length (tan of half the horizontal view).
     """
 
     points: np.ndarray
@@ -106,6 +107,7 @@ class SfmPoints:
     reprojection_px: float
     camera_centres: np.ndarray
     camera_rotations: np.ndarray
+    half_widths: np.ndarray
     timings: dict[str, float]
 
 
@@ -133,7 +135,7 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoi
     residual = float(np.sqrt(((centres - known_centres) ** 2).sum(axis=1).mean()))
     rotations = sfm.camera_rotations @ rotation.T
     return (SfmPoints(move(sfm.points), sfm.colours, sfm.track_length, sfm.registered, sfm.n_photos, "aligned",
-                      sfm.reprojection_px, centres, rotations, sfm.timings), residual)
+                      sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings), residual)
 
 
 def photo_names(folder: str | Path) -> list[str]:
@@ -275,6 +277,9 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                      camera_centres=np.array([image.projection_center() for image in images], np.float64),
                      camera_rotations=np.array([image.cam_from_world().rotation.matrix() for image in images],
                                                np.float64),
+                     half_widths=np.array([0.5 * model.camera(image.camera_id).width
+                                           / model.camera(image.camera_id).mean_focal_length() for image in images],
+                                          np.float64),
                      timings=timer.timings)
 
 

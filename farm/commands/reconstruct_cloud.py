@@ -22,7 +22,6 @@ from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "dbh_m", "total_volume_m3", "branches",
                    "faces", "seconds", "message")
 
@@ -36,6 +35,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--qsm-csv", help="write the branch table (id, parent, order, length, radius, volume)")
     group.add_argument("--complete", action=argparse.BooleanOptionalAction, default=True,
                        help="seed 003's editing: twigs, leaves and grafts into occlusion gaps (default on)")
+    group.add_argument("--poses", choices=("auto", "known", "estimate"), default="auto",
+                       help="photos: known (the folder's cameras.json), estimate (SfM's own, aligned onto "
+                            "cameras.json when there is one) or auto (known when cameras.json lists every photo)")
     group.add_argument("--workers", type=int, help="batch: Ray tasks at once (default: the CPUs)")
     group.add_argument("--address", help="batch: a Ray cluster to join (default: a local Ray)")
 
@@ -47,6 +49,8 @@ def _is_cloud(path: Path) -> bool:
 
 
 def _is_photo_folder(path: Path) -> bool:
+    from reconstruct.sfm import IMAGE_SUFFIXES
+
     return path.is_dir() and any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
 
 
@@ -97,9 +101,10 @@ def _cloud_suffixes() -> tuple[str, ...]:
     return CLOUD_SUFFIXES
 
 
-def _options(args: argparse.Namespace) -> dict:
+def _options(args: argparse.Namespace, batch: bool = False) -> dict:
+    """What each tree's reconstruction takes; a batch's SfM runs on one thread a Ray task."""
     return {"up": args.up, "frame": args.frame, "completion": args.complete, "seed": args.seed,
-            "height": args.height}
+            "height": args.height, "poses": args.poses, "threads": 1 if batch else 0}
 
 
 def reconstruct_one(method: str, source: Path, out: Path, options: dict, skeleton_ply: Path | None = None,
@@ -112,7 +117,11 @@ def reconstruct_one(method: str, source: Path, out: Path, options: dict, skeleto
     if method == "cloud":
         result = reconstruct.from_cloud(source, up=options["up"], name=out.stem, **common)
     else:
-        result = reconstruct.from_photos(source, height=options["height"], name=out.stem, **common)
+        from reconstruct.sfm import SfmSettings
+
+        settings = SfmSettings(poses=options["poses"], threads=options["threads"], seed=options["seed"])
+        result = reconstruct.from_photos(source, height=options["height"], name=out.stem, settings=settings,
+                                         **common)
     with user_path(out, "write"):
         result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
     if report is not None:
@@ -189,7 +198,7 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
         raise CommandLineError(f"inputs {twice} share a name: allowed inputs whose names differ (one GLB each)")
     with user_path(out_dir, "write"):
         out_dir.mkdir(parents=True, exist_ok=True)
-    options = _options(args)
+    options = _options(args, batch=True)
     rows = []
     with ray_connection(args.address, args.workers, log_to_driver=False):
         task = ray.remote(num_cpus=1)(_batch_task)
@@ -234,9 +243,6 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
 
 
 def run(args: argparse.Namespace, method: str, sources: list[Path], batch: bool) -> int:
-    if method == "photos":
-        raise CommandLineError(f"{sources[0]} is a folder of photos: --method photos (pycolmap SfM) is not built yet; "
-                               "allowed point cloud files (.xyz, .ply, .las, .laz, ...)")
     if batch:
         return run_batch(args, method, sources)
     return run_single(args, method, sources[0])

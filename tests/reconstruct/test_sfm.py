@@ -8,22 +8,10 @@ import pytest
 from PIL import Image
 from scipy.spatial import cKDTree
 
-import species
 from reconstruct.sfm import PhotoError, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
-from renderers.blender import load_view, render_photos
-from renderers.camera import perspective_camera
+from renderers.blender import load_view
 
-VIEWS = 10
-STEP_DEG = 10.0   # SIFT on a tree needs small steps: at 60 degrees apart almost nothing matches
-
-
-@pytest.fixture(scope="module")
-def photos(tmp_path_factory):
-    """Ten 320 px Cycles renders (4 samples) of a 4.3 m tree on a textured ground, 10 degrees apart."""
-    _, mesh = species.rebuild(species.sample("sc_open_fruit_tree", np.random.default_rng(1)))
-    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
-    cameras = [perspective_camera(points, k * STEP_DEG, 15.0 if k % 2 else 8.0, 320) for k in range(VIEWS)]
-    return render_photos(mesh.to_glb(), cameras, tmp_path_factory.mktemp("photos"), samples=4)
+VIEWS = 10   # the `photos` fixture's (tests/reconstruct/conftest.py)
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +23,7 @@ def test_known_poses_register_every_photo_where_the_renderer_put_it(photos, know
     assert known.poses == "known" and known.n_photos == VIEWS and len(known.registered) == VIEWS
     centres = np.array(sorted(c.position.tolist() for c in photos.cameras))
     np.testing.assert_allclose(np.array(sorted(known.camera_centres.tolist())), centres, atol=1e-9)
-    assert len(known.points) >= 30 and known.reprojection_px < 1.0
+    assert len(known.points) >= 30 and known.reprojection_px < 1.5
     assert known.colours.shape == known.points.shape and known.colours.dtype == np.uint8
     assert (known.track_length >= 2).all()
 

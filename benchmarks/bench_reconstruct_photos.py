@@ -1,0 +1,138 @@
+"""Photos to trees (issue 24): an orbit of Blender photos of a generated tree through the full SfM path.
+
+  .venv/bin/python benchmarks/bench_reconstruct_photos.py [--views 36] [--size 640] [--tree sc_broad_oak:0]
+
+The orbit (`--views` photos 360/views degrees apart, alternating 8 and 15 degrees up, Cycles `--samples` per
+pixel) is rendered once and cached under ~/.cache/treefarm/bench-photos/ (Cycles takes seconds a photo). Then,
+on the same photos, in one run:
+1. `from_photos` three ways: poses estimated by incremental mapping and scaled by the tree's true height (no
+   cameras.json: what a user with a phone has), estimated then aligned onto cameras.json, and cameras.json's
+   poses with triangulation only; per-stage seconds and the points each isolation step leaves.
+2. quality against the generated tree's skeleton: Chamfer distance / height, the Smart-Tree F1 AUC, trunk radius
+   and height errors, and the share of the tree's isolated points within 10 cm of the reconstructed bark, for ours
+   and, on the same isolated cloud, PyTLidar's TreeQSM (installed for the benchmark only).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+import species  # noqa: E402
+from bench_reconstruct_cloud import _quality_row, _scores  # noqa: E402
+from pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
+from reconstruct.from_photos import from_photos  # noqa: E402
+from reconstruct.metrics import MetricError  # noqa: E402
+from reconstruct.sfm import PhotoError, SfmSettings  # noqa: E402
+from renderers.blender import render_photos  # noqa: E402
+from renderers.camera import perspective_camera  # noqa: E402
+
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "treefarm" / "bench-photos"
+PYTLIDAR_TIMEOUT_S = 300
+
+
+def orbit(preset: str, seed: int, views: int, size: int, samples: int) -> tuple[Path, species.Skeleton]:
+    """The cached orbit's folder (photos and cameras.json) and the tree's true skeleton."""
+    skeleton, mesh = species.rebuild(species.sample(preset, np.random.default_rng(seed)))
+    folder = CACHE / f"{preset}-{seed}-{views}x{size}-{samples}spp"
+    if not (folder / "cameras.json").is_file():
+        points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+        cameras = [perspective_camera(points, k * 360.0 / views, 15.0 if k % 2 else 8.0, size, name=f"view{k}")
+                   for k in range(views)]
+        partial = folder.with_name(folder.name + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        started = time.perf_counter()
+        render_photos(mesh.to_glb(), cameras, partial, samples=samples)
+        print(f"rendered {views} photos at {size} px in {time.perf_counter() - started:.0f} s -> {folder}")
+        partial.replace(folder)
+    return folder, skeleton
+
+
+def photos_only(folder: Path) -> Path:
+    """A copy of the orbit's photos without cameras.json, depth or masks: what a camera gives."""
+    bare = folder.with_name(folder.name + "-bare")
+    if not bare.is_dir():
+        bare.mkdir()
+        for photo in sorted(folder.glob("view_???.png")):
+            shutil.copy(photo, bare / photo.name)
+    return bare
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--views", type=int, default=36)
+    parser.add_argument("--size", type=int, default=640)
+    parser.add_argument("--samples", type=int, default=4)
+    parser.add_argument("--tree", default="sc_broad_oak:0", help="PRESET:SEED of the generated tree")
+    parser.add_argument("--threads", type=int, default=0, help="pycolmap threads (0 = all CPUs)")
+    parser.add_argument("--pytlidar-timeout", type=float, default=PYTLIDAR_TIMEOUT_S)
+    parser.add_argument("--render-only", action="store_true")
+    args = parser.parse_args()
+    preset, seed = args.tree.split(":")
+    folder, true = orbit(preset, int(seed), args.views, args.size, args.samples)
+    if args.render_only:
+        return
+    ways = [("estimated, scaled by the height", photos_only(folder), "auto", true.height),
+            ("estimated, aligned to cameras.json", folder, "estimate", None),
+            ("known poses (cameras.json)", folder, "known", None)]
+    print(f"\n## {args.views} photos of {preset} #{seed} ({true.height:.1f} m) at {args.size} px, "
+          f"{args.samples} spp\n")
+    print("| way | registered | reprojection px | SfM points | colour | ground | cluster | outliers | "
+          "features s | matching s | mapping s | tree s | total s |")
+    print("|---" * 13 + "|")
+    results = []
+    for label, source, poses, height in ways:
+        started = time.perf_counter()
+        try:
+            result = from_photos(source, height=height, settings=SfmSettings(poses=poses, threads=args.threads))
+        except PhotoError as error:
+            print(f"| {label} | failed: {error} |" + " |" * 11)
+            continue
+        total = time.perf_counter() - started
+        record, t = result.provenance["sfm"], result.timings
+        counts = record["points"]
+        tree_s = sum(v for k, v in t.items() if not k.startswith("sfm."))
+        mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
+        print(f"| {label} | {record['registered']}/{record['photos']} | {record['reprojection_px']:.2f} | "
+              f"{counts['sfm']} | {counts['colour']} | {counts['ground']} | {counts['cluster']} | "
+              f"{counts['outliers']} | {t['sfm.features']:.1f} | {t['sfm.matching']:.1f} | {mapping:.1f} | "
+              f"{tree_s:.2f} | {total:.1f} |")
+        results.append((label, result, total))
+    print("\n## quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)\n")
+    print("| way, method | height m | Chamfer / height | F1 AUC | trunk radius error | height error | within 10 cm "
+          "| s |")
+    print("|---|---|---|---|---|---|---|---|")
+    missing = pytlidar_missing(args.pytlidar_timeout)
+    base = true.positions[0]
+    true_here = species.Skeleton(true.positions - base, true.parent, true.radius, true.order)
+    for label, result, total in results:
+        # Both trees in the base frame: ours has its root at the origin; the isolated cloud is shifted the same.
+        shift = (result.transform[:3, 3] - result.cloud.offset).astype(np.float32)
+        cloud = result.cloud.points - shift
+        print(_quality_row(f"{label}, ours", f"{true.height:.1f}",
+                           _scores(result.measured, result.measures["trunk_radius_fit_m"], true, true_here, cloud,
+                                   total)))
+        if missing is not None:
+            print(f"| {label}, PyTLidar | | {missing} | | | | | |")
+            continue
+        try:
+            run = pytlidar_run(cloud, args.pytlidar_timeout)
+            print(_quality_row(f"{label}, PyTLidar", f"{true.height:.1f}",
+                               _scores(run.skeleton, float(run.skeleton.radius[0]), true, true_here, cloud,
+                                       run.seconds)))
+        except (PyTLidarFailed, MetricError) as error:
+            print(f"| {label}, PyTLidar | | failed: {error} | | | | | |")
+    print("\n" + json.dumps({label: r.provenance["sfm"] for label, r, _ in results}, indent=None))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,286 @@
+"""Photos to a tree (issue 24): SfM points (`reconstruct.sfm`), made upright and metric, the tree isolated from
+the ground and the clutter, then `from_cloud`.
+
+Upright: known poses (cameras.json) are already Z up in metres. Estimated poses are levelled by the ground plane
+(RANSAC over the points, its normal within GROUND_MAX_TILT_DEG of the cameras' mean image-up direction, which
+people and our renders keep upright) or, where no plane holds GROUND_MIN_SHARE of the points, by that camera up.
+Metric: known poses give metres; estimated ones are scaled so the isolated tree is `height` tall, and without a
+height or cameras.json the scale is unknown and `from_photos` says so.
+
+Isolation, in order: near-black and near-white points (sky, shadow, overexposed bark: colours SfM places badly)
+are dropped; the ground plane's band is removed; so is what lies outside the photos' footprint round the point
+they aim at (`in_footprint`); the points are linked within LINK_FACTOR times their median
+spacing and the largest group kept with the groups inside its footprint (crown fragments the sparse cloud leaves
+apart); statistical outliers go next (`skeleton.statistical_inliers`), and last, once in metres, the points near
+the ground that are not the trunk's group (from_cloud's one-tree rule would refuse them as a second stem). scipy does these: open3d, the library that
+has them, is a 400 MB wheel for four short steps.
+
+The "scan" frame of a photo tree is the upright metric frame: the cameras' world for known or aligned poses, the
+SfM model levelled and scaled about its origin for estimated ones.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from .clouds import MIN_POINTS, read_cloud
+from .from_cloud import FRAMES, STEM_BAND_M, STEM_GAP_M, CloudReconstruction, from_cloud
+from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
+from .skeleton import _adjacency, statistical_inliers
+from .timing import StageTimer
+
+__all__ = ["from_photos", "level_and_isolate", "ground_plane", "camera_up", "look_at", "in_footprint",
+           "IsolatedTree"]
+
+DARK = 25                 # every channel at or below: near-black (deep shadow, a dark background)
+LIGHT = 235               # every channel at or above: near-white (sky, overexposed highlights)
+GROUND_MAX_TILT_DEG = 30.0
+GROUND_MIN_SHARE = 0.10   # a plane holding fewer of the points is not taken for the ground
+GROUND_BAND = 0.006       # the ground band's half-width, a share of the cameras' mean distance to the points
+GROUND_TRIALS = 256
+LINK_FACTOR = 4.0         # points within this many median spacings are one group
+FOOTPRINT_MARGIN = 1.2    # groups whose centre lies within this times the main group's reach are kept
+FOOTPRINT_SHARE = 1.0     # of the photos' footprint radius (`in_footprint`)
+HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale is warned about
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class IsolatedTree:
+    """The tree's points in the upright metric frame (Z up; the cameras' world for known or aligned poses, else the
+    model levelled, its ground under the tree at z = 0 and scaled to the given height), their colours, where up and
+    scale came from, the ground's height under the tree, up (3,) in the SfM model's frame, and the points left after each step (`counts`)."""
+
+    points: np.ndarray
+    colours: np.ndarray
+    up_source: str
+    scale_source: str
+    scale: float
+    ground_z: float
+    up: np.ndarray
+    counts: dict[str, int]
+
+
+def camera_up(sfm: SfmPoints) -> np.ndarray:
+    """(3,) the cameras' mean image-up direction in the model's frame (OpenCV: -y in the camera is up)."""
+    ups = -sfm.camera_rotations[:, 1, :]     # R.T @ (0, -1, 0) for each world-to-camera rotation R
+    mean = ups.sum(axis=0)
+    norm = np.linalg.norm(mean)
+    if norm < 1e-9:
+        raise PhotoError("the cameras' up directions cancel out: allowed photos taken upright (or cameras.json)")
+    return mean / norm
+
+
+def ground_plane(points: np.ndarray, up: np.ndarray, band: float, rng: np.random.Generator
+                 ) -> tuple[np.ndarray, float, np.ndarray] | None:
+    """RANSAC: the plane (unit normal towards `up`, offset d: n . x = d) holding the most points within `band`,
+    its normal within GROUND_MAX_TILT_DEG of `up`, refined by least squares on its inliers; with its inlier mask.
+    None when no such plane holds GROUND_MIN_SHARE of the points."""
+    if len(points) < 3:
+        return None
+    trials = rng.integers(0, len(points), size=(GROUND_TRIALS, 3))
+    a, b, c = points[trials[:, 0]], points[trials[:, 1]], points[trials[:, 2]]
+    normals = np.cross(b - a, c - a)
+    lengths = np.linalg.norm(normals, axis=1)
+    ok = lengths > 1e-12
+    normals[ok] /= lengths[ok, None]
+    normals *= np.sign(normals @ up)[:, None]
+    ok &= normals @ up >= np.cos(np.radians(GROUND_MAX_TILT_DEG))
+    if not ok.any():
+        return None
+    normals, offsets = normals[ok], np.einsum("ij,ij->i", normals[ok], a[ok])
+    votes = (np.abs(points @ normals.T - offsets) <= band).sum(axis=0)
+    best = int(np.argmax(votes))
+    if votes[best] < GROUND_MIN_SHARE * len(points):
+        return None
+    inliers = np.abs(points @ normals[best] - offsets[best]) <= band
+    centre = points[inliers].mean(axis=0)
+    normal = np.linalg.svd(points[inliers] - centre, full_matrices=False)[2][-1]
+    normal *= np.sign(normal @ up)
+    if normal @ up < np.cos(np.radians(GROUND_MAX_TILT_DEG)):
+        normal = normals[best]
+    offset = float(normal @ centre)
+    return normal, offset, np.abs(points @ normal - offset) <= band
+
+
+def look_at(sfm: SfmPoints) -> np.ndarray:
+    """(3,) the point nearest every photo's optical axis (least squares): where the photographer aimed."""
+    axes = sfm.camera_rotations[:, 2, :]             # the optical axis in the model's frame, per photo
+    projectors = np.eye(3) - axes[:, :, None] * axes[:, None, :]
+    try:
+        return np.linalg.solve(projectors.sum(axis=0), np.einsum("kij,kj->i", projectors, sfm.camera_centres))
+    except np.linalg.LinAlgError:
+        raise PhotoError("the photos all look the same way from one line: allowed photos from around the "
+                         "tree") from None
+
+
+def in_footprint(sfm: SfmPoints, points: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """(N,) bool: points within the photos' footprint, a vertical cylinder round the aim point whose radius is the
+    median over photos of distance x half-width / focal length (a photo that frames the tree whole sees no more
+    of it to either side). SfM's false matches on foliage and the background land all round the tree."""
+    aim = look_at(sfm)
+    flat = lambda v: v - np.outer(v @ up, up)  # noqa: E731  (the part across `up`)
+    reach = float(np.median(np.linalg.norm(flat(sfm.camera_centres - aim), axis=1) * sfm.half_widths))
+    return np.linalg.norm(flat(points - aim), axis=1) <= FOOTPRINT_SHARE * reach
+
+
+def _rotation_to_z(up: np.ndarray) -> np.ndarray:
+    """The (3, 3) rotation taking unit `up` to +Z by the shortest turn."""
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(up, z)
+    s, c = np.linalg.norm(axis), float(up @ z)
+    if s < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    k = axis / s
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + s * K + (1 - c) * K @ K
+
+
+def _tree_group(points: np.ndarray) -> np.ndarray:
+    """(N,) bool: the largest group of points linked within LINK_FACTOR median spacings, with the groups whose
+    horizontal centre lies inside its footprint."""
+    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    pairs = cKDTree(points).query_pairs(max(LINK_FACTOR * spacing, 1e-9), output_type="ndarray")
+    count, label = connected_components(_adjacency(pairs, len(points)), directed=False)
+    main = int(np.argmax(np.bincount(label, minlength=count)))
+    centre = points[label == main, :2].mean(axis=0)
+    reach = float(np.linalg.norm(points[label == main, :2] - centre, axis=1).max())
+    sums = np.zeros((count, 2))
+    np.add.at(sums, label, points[:, :2])
+    centres = sums / np.bincount(label, minlength=count)[:, None]
+    inside = np.linalg.norm(centres - centre, axis=1) <= FOOTPRINT_MARGIN * reach
+    return inside[label]
+
+
+def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Generator,
+                      metric: bool) -> IsolatedTree:
+    """The tree's points from SfM's (see the module docstring). metric : the model is already upright in metres
+    (known or aligned poses). height : metres, scales the tree to it (over the known scale too, with a warning
+    left to the caller). PhotoError when the scale is unknown or too little of the tree is left."""
+    counts = {"sfm": len(sfm.points)}
+    dark = (sfm.colours <= DARK).all(axis=1)
+    light = (sfm.colours >= LIGHT).all(axis=1)
+    keep = ~(dark | light)
+    points, colours = sfm.points[keep], sfm.colours[keep]
+    counts["colour"] = len(points)
+    if len(points) < MIN_POINTS:
+        raise PhotoError(f"SfM placed {counts['sfm']} points, {len(points)} not near-black or near-white: allowed at "
+                         f"least {MIN_POINTS}; take more photos, larger, closer to the tree")
+    centroid = points.mean(axis=0)
+    reach = float(np.linalg.norm(sfm.camera_centres - centroid, axis=1).mean())
+    up = np.array([0.0, 0.0, 1.0]) if metric else camera_up(sfm)
+    plane = ground_plane(points, up, GROUND_BAND * reach, rng)
+    if plane is not None:
+        normal, offset, ground = plane
+        up_source = "cameras.json and ground plane" if metric else "ground plane"
+    else:
+        normal, offset = up, None
+        ground = np.zeros(len(points), bool)
+        up_source = "cameras.json" if metric else "camera up"
+    if not metric:
+        up = normal
+    rotation = np.eye(3) if metric else _rotation_to_z(up)
+    upright = points @ rotation.T
+    above = ~ground
+    if plane is not None:
+        # points under the ground are reflections and mismatches
+        above &= (points @ normal - offset) > 0
+    points, colours, upright = points[above], colours[above], upright[above]
+    counts["ground"] = len(points)
+    near = in_footprint(sfm, points, up)
+    points, colours, upright = points[near], colours[near], upright[near]
+    counts["footprint"] = len(points)
+    if len(points) < MIN_POINTS:
+        raise PhotoError(f"{counts['colour'] - len(points)} of {counts['colour']} SfM points lie on the ground: "
+                         f"allowed at least {MIN_POINTS} on the tree; take photos that frame the tree larger")
+    group = _tree_group(upright)
+    upright, colours = upright[group], colours[group]
+    counts["cluster"] = len(upright)
+    inliers = statistical_inliers(upright)
+    upright, colours = upright[inliers], colours[inliers]
+    counts["outliers"] = len(upright)
+    if len(upright) < MIN_POINTS:
+        raise PhotoError(f"SfM left {len(upright)} points on the tree (of {counts['sfm']}): allowed at least "
+                         f"{MIN_POINTS}; take more photos, larger, closer to the tree")
+    if plane is not None:
+        # the plane in the upright frame, at the tree's centre (R n is +Z when levelled by it)
+        turned = rotation @ normal
+        ground_z = float((offset - turned[:2] @ upright[:, :2].mean(axis=0)) / turned[2])
+    else:
+        ground_z = float(upright[:, 2].min())
+    scale, scale_source = 1.0, "cameras.json" if metric else "none"
+    if height is not None:
+        if not (np.isfinite(height) and height > 0):
+            raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
+        # scaled about the ground under the tree, which goes to z = 0
+        scale, scale_source = float(height) / float(upright[:, 2].max() - ground_z), "height"
+        upright = (upright - np.array([0.0, 0.0, ground_z])) * scale
+        ground_z = 0.0
+    elif not metric:
+        raise PhotoError("the photos' scale is unknown (no cameras.json): allowed a tree height in metres "
+                         "(--height M, or height= in Python) to scale the tree by")
+    low = upright[:, 2] - ground_z <= STEM_BAND_M
+    if low.sum() >= 2:
+        # one stem: near the ground, only the largest group linked within STEM_GAP_M is the tree's
+        pairs = cKDTree(upright[low]).query_pairs(STEM_GAP_M, output_type="ndarray")
+        count, label = connected_components(_adjacency(pairs, int(low.sum())), directed=False)
+        stray = np.flatnonzero(low)[label != np.argmax(np.bincount(label, minlength=count))]
+        keep = np.ones(len(upright), bool)
+        keep[stray] = False
+        upright, colours = upright[keep], colours[keep]
+    counts["stem"] = len(upright)
+    return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts)
+
+
+def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
+                seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
+                workdir: str | Path | None = None) -> CloudReconstruction:
+    """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`.
+
+    height   : the tree's height in metres; needed when the folder has no cameras.json (the scale is unknown).
+    settings : pycolmap's (`SfmSettings`); poses "estimate" with a cameras.json aligns the estimated model onto it.
+    frame, completion, seed, name : as `from_cloud`. workdir : keeps COLMAP's database and model there.
+    The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
+    Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
+    """
+    if frame not in FRAMES:
+        raise PhotoError(f"frame {frame!r} is not known: allowed {', '.join(FRAMES)}")
+    if height is not None and not (isinstance(height, (int, float, np.number)) and np.isfinite(height) and height > 0):
+        raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
+    settings = SfmSettings() if settings is None else settings
+    if height is None and known_cameras(folder, photo_names(folder)) is None:
+        # said before SfM spends minutes on a model that could not be scaled
+        raise PhotoError(f"{folder} has no cameras.json listing every photo, so the photos' scale is unknown: "
+                         "allowed a tree height in metres (--height M, or height= in Python) to scale the tree by")
+    timer = StageTimer()
+    sfm = sfm_points(folder, settings, workdir=workdir)
+    timer.lap("sfm")
+    warnings: list[str] = []
+    residual = None
+    if sfm.poses == "estimated":
+        cameras = known_cameras(folder, sfm.registered)
+        if cameras is not None:
+            sfm, residual = align_to_cameras(sfm, cameras)
+    metric = sfm.poses in ("known", "aligned")
+    tree = level_and_isolate(sfm, height, np.random.default_rng(seed), metric)
+    if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:
+        warnings.append(f"height {height} m scales the tree by {tree.scale:.2f} from the cameras' metres "
+                        f"(cameras.json makes it {height / tree.scale:.2f} m tall)")
+    missed = sfm.n_photos - len(sfm.registered)
+    if missed:
+        warnings.append(f"{missed} of {sfm.n_photos} photos were not registered")
+    timer.lap("isolate")
+    cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
+    result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
+    record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
+              "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,
+              "scale_factor": tree.scale, "points": tree.counts}
+    if residual is not None:
+        record["alignment_residual_m"] = round(residual, 4)
+    timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.timings["isolate"],
+               **result.timings}
+    return dataclasses.replace(result, method="photos", provenance={"sfm": record},
+                               warnings=warnings + result.warnings, timings=timings)
