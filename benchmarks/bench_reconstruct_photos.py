@@ -1,6 +1,7 @@
 """Photos to trees (issue 24): an orbit of Blender photos of a generated tree through the full SfM path.
 
   .venv/bin/python benchmarks/bench_reconstruct_photos.py [--views 36] [--size 640] [--tree sc_broad_oak:0]
+      [--leafless] [--max-features 4096] [--matcher sequential]
 
 The orbit (`--views` photos 360/views degrees apart, alternating 8 and 15 degrees up, Cycles `--samples` per
 pixel) is rendered once and cached under ~/.cache/treefarm/bench-photos/ (Cycles takes seconds a photo). Then,
@@ -15,6 +16,7 @@ on the same photos, in one run:
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import shutil
@@ -35,15 +37,19 @@ from reconstruct.metrics import MetricError  # noqa: E402
 from reconstruct.sfm import PhotoError, SfmSettings  # noqa: E402
 from renderers.blender import render_photos  # noqa: E402
 from renderers.camera import perspective_camera  # noqa: E402
+from species.tree_mesh import MeshPart  # noqa: E402
 
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "treefarm" / "bench-photos"
 PYTLIDAR_TIMEOUT_S = 300
 
 
-def orbit(preset: str, seed: int, views: int, size: int, samples: int) -> tuple[Path, species.Skeleton]:
+def orbit(preset: str, seed: int, views: int, size: int, samples: int, leafless: bool
+          ) -> tuple[Path, species.Skeleton]:
     """The cached orbit's folder (photos and cameras.json) and the tree's true skeleton."""
     skeleton, mesh = species.rebuild(species.sample(preset, np.random.default_rng(seed)))
-    folder = CACHE / f"{preset}-{seed}-{views}x{size}-{samples}spp"
+    if leafless:
+        mesh = dataclasses.replace(mesh, leaves=MeshPart.empty())
+    folder = CACHE / f"{preset}-{seed}-{views}x{size}-{samples}spp{'-leafless' if leafless else ''}"
     if not (folder / "cameras.json").is_file():
         points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
         cameras = [perspective_camera(points, k * 360.0 / views, 15.0 if k % 2 else 8.0, size, name=f"view{k}")
@@ -74,28 +80,35 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=4)
     parser.add_argument("--tree", default="sc_broad_oak:0", help="PRESET:SEED of the generated tree")
     parser.add_argument("--threads", type=int, default=0, help="pycolmap threads (0 = all CPUs)")
+    parser.add_argument("--max-features", type=int, default=4096,
+                        help="SIFT features a photo (matching costs grow with their square)")
+    parser.add_argument("--matcher", default="sequential", choices=("sequential", "exhaustive", "auto"),
+                        help="sequential (each photo with the next 10, for an orbit: the default) or exhaustive")
     parser.add_argument("--pytlidar-timeout", type=float, default=PYTLIDAR_TIMEOUT_S)
+    parser.add_argument("--leafless", action="store_true", help="the tree in winter: bark only")
     parser.add_argument("--render-only", action="store_true")
     args = parser.parse_args()
     preset, seed = args.tree.split(":")
-    folder, true = orbit(preset, int(seed), args.views, args.size, args.samples)
+    folder, true = orbit(preset, int(seed), args.views, args.size, args.samples, args.leafless)
     if args.render_only:
         return
     ways = [("estimated, scaled by the height", photos_only(folder), "auto", true.height),
             ("estimated, aligned to cameras.json", folder, "estimate", None),
             ("known poses (cameras.json)", folder, "known", None)]
     print(f"\n## {args.views} photos of {preset} #{seed} ({true.height:.1f} m) at {args.size} px, "
-          f"{args.samples} spp\n")
-    print("| way | registered | reprojection px | SfM points | colour | ground | cluster | outliers | "
-          "features s | matching s | mapping s | tree s | total s |")
-    print("|---" * 13 + "|")
+          f"{args.samples} spp{', leafless' if args.leafless else ', in leaf'}; {args.matcher} matching, {args.max_features} features a photo\n")
+    print("| way | registered | reprojection px | SfM points | colour | ground | footprint | group | outliers | "
+          "stem | features s | matching s | mapping s | tree s | total s |")
+    print("|---" * 15 + "|")
     results = []
     for label, source, poses, height in ways:
         started = time.perf_counter()
         try:
-            result = from_photos(source, height=height, settings=SfmSettings(poses=poses, threads=args.threads))
+            settings = SfmSettings(poses=poses, threads=args.threads, max_features=args.max_features,
+                                   matcher=args.matcher)
+            result = from_photos(source, height=height, settings=settings)
         except PhotoError as error:
-            print(f"| {label} | failed: {error} |" + " |" * 11)
+            print(f"| {label} | failed: {error} |" + " |" * 13)
             continue
         total = time.perf_counter() - started
         record, t = result.provenance["sfm"], result.timings
@@ -103,8 +116,8 @@ def main() -> None:
         tree_s = sum(v for k, v in t.items() if not k.startswith("sfm."))
         mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
         print(f"| {label} | {record['registered']}/{record['photos']} | {record['reprojection_px']:.2f} | "
-              f"{counts['sfm']} | {counts['colour']} | {counts['ground']} | {counts['cluster']} | "
-              f"{counts['outliers']} | {t['sfm.features']:.1f} | {t['sfm.matching']:.1f} | {mapping:.1f} | "
+              f"{counts['sfm']} | {counts['colour']} | {counts['ground']} | {counts['footprint']} | "
+              f"{counts['cluster']} | {counts['outliers']} | {counts['stem']} | {t['sfm.features']:.1f} | {t['sfm.matching']:.1f} | {mapping:.1f} | "
               f"{tree_s:.2f} | {total:.1f} |")
         results.append((label, result, total))
     print("\n## quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)\n")

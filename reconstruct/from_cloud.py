@@ -27,7 +27,7 @@ from .qsm import qsm_measures, write_branch_csv, write_skeleton_ply
 from .skeleton import CloudSkeleton, SkeletonSettings, _adjacency, cloud_skeleton
 from .wood import LEAF_ON_SHARE, leaf_on_share, wood_points
 
-__all__ = ["CloudReconstruction", "from_cloud", "FRAMES", "check_single_tree"]
+__all__ = ["CloudReconstruction", "from_cloud", "FRAMES", "check_single_tree", "stem_groups"]
 
 FRAMES = ("base", "scan")
 # Several trees: the lowest STEM_BAND_M of the cloud splits into stems more than STEM_GAP_M apart, each holding
@@ -110,15 +110,24 @@ def _rotated(skeleton: Skeleton, rotation: np.ndarray) -> Skeleton:
                     np.zeros(0, np.int32))
 
 
+def stem_groups(points: np.ndarray, ground: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The points within STEM_BAND_M above `ground` (a mask) and their group labels, points linked within
+    STEM_GAP_M sharing one: each group near the ground is a stem."""
+    low = points[:, 2] - ground <= STEM_BAND_M
+    if low.sum() < 2:
+        return low, np.zeros(int(low.sum()), np.int64)
+    pairs = cKDTree(points[low]).query_pairs(STEM_GAP_M, output_type="ndarray")
+    return low, connected_components(_adjacency(pairs, int(low.sum())), directed=False)[1]
+
+
 def check_single_tree(cloud: PointCloud) -> None:
-    """CloudError when the cloud's lowest STEM_BAND_M holds several stems: groups of points linked within
-    STEM_GAP_M that are each at least STEM_SHARE of the band."""
-    low = cloud.points[cloud.points[:, 2] <= STEM_BAND_M]
+    """CloudError when the cloud's lowest STEM_BAND_M holds several stems (`stem_groups`) that are each at least
+    STEM_SHARE of the band."""
+    mask, label = stem_groups(cloud.points)
+    low = cloud.points[mask]
     if len(low) < 10:
         return
-    pairs = cKDTree(low).query_pairs(STEM_GAP_M, output_type="ndarray")
-    count, label = connected_components(_adjacency(pairs, len(low)), directed=False)
-    sizes = np.bincount(label, minlength=count)
+    sizes = np.bincount(label)
     stems = np.flatnonzero(sizes >= STEM_SHARE * len(low))
     if len(stems) > 1:
         centres = [low[label == s, :2].mean(axis=0).round(2).tolist() for s in stems]

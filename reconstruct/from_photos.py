@@ -28,7 +28,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from .clouds import MIN_POINTS, read_cloud
-from .from_cloud import FRAMES, STEM_BAND_M, STEM_GAP_M, CloudReconstruction, from_cloud
+from .from_cloud import FRAMES, CloudReconstruction, from_cloud, stem_groups
 from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
 from .timing import StageTimer
@@ -222,12 +222,10 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     elif not metric:
         raise PhotoError("the photos' scale is unknown (no cameras.json): allowed a tree height in metres "
                          "(--height M, or height= in Python) to scale the tree by")
-    low = upright[:, 2] - ground_z <= STEM_BAND_M
-    if low.sum() >= 2:
-        # one stem: near the ground, only the largest group linked within STEM_GAP_M is the tree's
-        pairs = cKDTree(upright[low]).query_pairs(STEM_GAP_M, output_type="ndarray")
-        count, label = connected_components(_adjacency(pairs, int(low.sum())), directed=False)
-        stray = np.flatnonzero(low)[label != np.argmax(np.bincount(label, minlength=count))]
+    low, label = stem_groups(upright, ground_z)
+    if len(label):
+        # one stem: near the ground, only the largest group is the tree's
+        stray = np.flatnonzero(low)[label != np.argmax(np.bincount(label))]
         keep = np.ones(len(upright), bool)
         keep[stray] = False
         upright, colours = upright[keep], colours[keep]

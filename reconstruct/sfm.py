@@ -3,8 +3,8 @@ or, when the folder's `cameras.json` gives every photo's pose, triangulation at 
 
 In: a folder of photos (IMAGE_SUFFIXES), optionally with the `cameras.json` our Blender renders write (OpenCV axes,
 world Z up in metres: COLMAP's own camera convention, so the poses go in as they are). Out: `SfmPoints`, the
-triangulated points with their colours in the cameras' world frame. Making them upright and metric without known
-poses, isolating the tree and `from_photos` come next (docs/reconstruct.md records what the first probes measured).
+triangulated points with their colours in the cameras' world frame; `reconstruct.from_photos` makes them upright
+and metric, isolates the tree and grows it (docs/reconstruct.md records what was measured).
 
 Pixel centres: OpenCV puts pixel (0, 0)'s centre at (0, 0), COLMAP at (0.5, 0.5), so a known principal point moves
 by half a pixel on the way in. pycolmap's random seed is set from `SfmSettings.seed`; with more than one thread,

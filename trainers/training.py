@@ -302,6 +302,11 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
     run_dir = Path(run_dir).resolve()
     run_dir.mkdir(parents=True, exist_ok=True)
     last_epoch = _check_run_folder(run_dir, task_spec.name, settings, split)
+    if last_epoch is not None:
+        # a damaged checkpoint is said here, before Ray Train spends tens of seconds starting workers to find it
+        saved = sorted((run_dir / "ray_train").glob(f"checkpoint_*/{_CHECKPOINT_FILE}"))
+        if saved:
+            _read_checkpoint(saved[-1])
     split.save(run_dir / RUN_FILES["split"])
     (run_dir / RUN_FILES["settings"]).write_text(json.dumps({"task": task_spec.name,
                                                              "settings": settings.to_dict()}))
