@@ -96,7 +96,8 @@ def main() -> None:
             ("estimated, aligned to cameras.json", folder, "estimate", None),
             ("known poses (cameras.json)", folder, "known", None)]
     print(f"\n## {args.views} photos of {preset} #{seed} ({true.height:.1f} m) at {args.size} px, "
-          f"{args.samples} spp{', leafless' if args.leafless else ', in leaf'}; {args.matcher} matching, {args.max_features} features a photo\n")
+          f"{args.samples} spp{', leafless' if args.leafless else ', in leaf'}; {args.matcher} matching, "
+          f"{args.max_features} features a photo\n")
     print("| way | registered | reprojection px | SfM points | colour | ground | footprint | group | outliers | "
           "stem | features s | matching s | mapping s | tree s | total s |")
     print("|---" * 15 + "|")
@@ -117,8 +118,8 @@ def main() -> None:
         mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
         print(f"| {label} | {record['registered']}/{record['photos']} | {record['reprojection_px']:.2f} | "
               f"{counts['sfm']} | {counts['colour']} | {counts['ground']} | {counts['footprint']} | "
-              f"{counts['cluster']} | {counts['outliers']} | {counts['stem']} | {t['sfm.features']:.1f} | {t['sfm.matching']:.1f} | {mapping:.1f} | "
-              f"{tree_s:.2f} | {total:.1f} |")
+              f"{counts['cluster']} | {counts['outliers']} | {counts['stem']} | {t['sfm.features']:.1f} | "
+              f"{t['sfm.matching']:.1f} | {mapping:.1f} | {tree_s:.2f} | {total:.1f} |")
         results.append((label, result, total))
     print("\n## quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)\n")
     print("| way, method | height m | Chamfer / height | F1 AUC | trunk radius error | height error | within 10 cm "

@@ -65,7 +65,8 @@ class CloudReconstruction:
     @property
     def extras(self) -> dict:
         """The GLB's root-node extras: the frame, the scan's offset and up axis, the method and the measures."""
-        return {"treefarm": {"method": self.method, **self.provenance, "frame": self.frame, "source": self.cloud.source,
+        return {"treefarm": {"method": self.method, **self.provenance, "frame": self.frame,
+                             "source": self.cloud.source,
                              "scan_offset_m": [float(v) for v in self.cloud.offset], "scan_up": self.cloud.up,
                              "base_in_scan_m": [float(v) for v in self.transform[:3, 3]],
                              "measures": self.measures}}

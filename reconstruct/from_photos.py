@@ -12,8 +12,8 @@ are dropped; the ground plane's band is removed; so is what lies outside the pho
 they aim at (`in_footprint`); the points are linked within LINK_FACTOR times their median
 spacing and the largest group kept with the groups inside its footprint (crown fragments the sparse cloud leaves
 apart); statistical outliers go next (`skeleton.statistical_inliers`), and last, once in metres, the points near
-the ground that are not the trunk's group (from_cloud's one-tree rule would refuse them as a second stem). scipy does these: open3d, the library that
-has them, is a 400 MB wheel for four short steps.
+the ground that are not the trunk's group (from_cloud's one-tree rule would refuse them as a second stem). scipy
+does these: open3d, the library that has them, is a 400 MB wheel for a few short steps.
 
 The "scan" frame of a photo tree is the upright metric frame: the cameras' world for known or aligned poses, the
 SfM model levelled and scaled about its origin for estimated ones.
@@ -33,8 +33,8 @@ from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cam
 from .skeleton import _adjacency, statistical_inliers
 from .timing import StageTimer
 
-__all__ = ["from_photos", "level_and_isolate", "ground_plane", "camera_up", "look_at", "in_footprint",
-           "IsolatedTree"]
+__all__ = ["from_photos", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
+           "in_footprint", "IsolatedTree"]
 
 DARK = 25                 # every channel at or below: near-black (deep shadow, a dark background)
 LIGHT = 235               # every channel at or above: near-white (sky, overexposed highlights)
@@ -52,7 +52,8 @@ HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale 
 class IsolatedTree:
     """The tree's points in the upright metric frame (Z up; the cameras' world for known or aligned poses, else the
     model levelled, its ground under the tree at z = 0 and scaled to the given height), their colours, where up and
-    scale came from, the ground's height under the tree, up (3,) in the SfM model's frame, and the points left after each step (`counts`)."""
+    scale came from, the ground's height under the tree, up (3,) in the SfM model's frame, and the points left
+    after each step (`counts`)."""
 
     points: np.ndarray
     colours: np.ndarray
@@ -62,6 +63,13 @@ class IsolatedTree:
     ground_z: float
     up: np.ndarray
     counts: dict[str, int]
+
+
+def check_height(height) -> None:
+    """PhotoError unless `height` is None or a finite number of metres > 0."""
+    if height is not None and not (isinstance(height, (int, float, np.number)) and not isinstance(height, bool)
+                                   and np.isfinite(height) and height > 0):
+        raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
 
 
 def camera_up(sfm: SfmPoints) -> np.ndarray:
@@ -142,8 +150,9 @@ def _rotation_to_z(up: np.ndarray) -> np.ndarray:
 def _tree_group(points: np.ndarray) -> np.ndarray:
     """(N,) bool: the largest group of points linked within LINK_FACTOR median spacings, with the groups whose
     horizontal centre lies inside its footprint."""
-    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
-    pairs = cKDTree(points).query_pairs(max(LINK_FACTOR * spacing, 1e-9), output_type="ndarray")
+    tree = cKDTree(points)
+    spacing = float(np.median(tree.query(points, k=2)[0][:, 1]))
+    pairs = tree.query_pairs(max(LINK_FACTOR * spacing, 1e-9), output_type="ndarray")
     count, label = connected_components(_adjacency(pairs, len(points)), directed=False)
     main = int(np.argmax(np.bincount(label, minlength=count)))
     centre = points[label == main, :2].mean(axis=0)
@@ -160,6 +169,7 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     """The tree's points from SfM's (see the module docstring). metric : the model is already upright in metres
     (known or aligned poses). height : metres, scales the tree to it (over the known scale too, with a warning
     left to the caller). PhotoError when the scale is unknown or too little of the tree is left."""
+    check_height(height)
     counts = {"sfm": len(sfm.points)}
     dark = (sfm.colours <= DARK).all(axis=1)
     light = (sfm.colours >= LIGHT).all(axis=1)
@@ -194,8 +204,9 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     points, colours, upright = points[near], colours[near], upright[near]
     counts["footprint"] = len(points)
     if len(points) < MIN_POINTS:
-        raise PhotoError(f"{counts['colour'] - len(points)} of {counts['colour']} SfM points lie on the ground: "
-                         f"allowed at least {MIN_POINTS} on the tree; take photos that frame the tree larger")
+        raise PhotoError(f"{counts['colour'] - len(points)} of {counts['colour']} SfM points lie on the ground or "
+                         f"outside the photos' footprint: allowed at least {MIN_POINTS} on the tree; take photos "
+                         f"that frame the tree larger")
     group = _tree_group(upright)
     upright, colours = upright[group], colours[group]
     counts["cluster"] = len(upright)
@@ -213,8 +224,6 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
         ground_z = float(upright[:, 2].min())
     scale, scale_source = 1.0, "cameras.json" if metric else "none"
     if height is not None:
-        if not (np.isfinite(height) and height > 0):
-            raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
         # scaled about the ground under the tree, which goes to z = 0
         scale, scale_source = float(height) / float(upright[:, 2].max() - ground_z), "height"
         upright = (upright - np.array([0.0, 0.0, ground_z])) * scale
@@ -246,10 +255,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     """
     if frame not in FRAMES:
         raise PhotoError(f"frame {frame!r} is not known: allowed {', '.join(FRAMES)}")
-    if height is not None and not (isinstance(height, (int, float, np.number)) and np.isfinite(height) and height > 0):
-        raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
+    check_height(height)
     settings = SfmSettings() if settings is None else settings
-    if height is None and known_cameras(folder, photo_names(folder)) is None:
+    cameras = known_cameras(folder, photo_names(folder))
+    if height is None and cameras is None:
         # said before SfM spends minutes on a model that could not be scaled
         raise PhotoError(f"{folder} has no cameras.json listing every photo, so the photos' scale is unknown: "
                          "allowed a tree height in metres (--height M, or height= in Python) to scale the tree by")
@@ -259,9 +268,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     warnings: list[str] = []
     residual = None
     if sfm.poses == "estimated":
-        cameras = known_cameras(folder, sfm.registered)
-        if cameras is not None:
-            sfm, residual = align_to_cameras(sfm, cameras)
+        # a cameras.json that lists only some photos can still place the registered ones
+        posed = cameras if cameras is not None else known_cameras(folder, sfm.registered)
+        if posed is not None:
+            sfm, residual = align_to_cameras(sfm, posed)
     metric = sfm.poses in ("known", "aligned")
     tree = level_and_isolate(sfm, height, np.random.default_rng(seed), metric)
     if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:

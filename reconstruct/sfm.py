@@ -237,7 +237,8 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     matching.num_threads = threads
     matching.guided_matching = bool(settings.guided)
     matching.sift.max_ratio = float(settings.max_ratio)
-    exhaustive = settings.matcher == "exhaustive" or (settings.matcher == "auto" and len(names) <= settings.exhaustive_max)
+    exhaustive = settings.matcher == "exhaustive" or (settings.matcher == "auto"
+                                                      and len(names) <= settings.exhaustive_max)
     if exhaustive:
         pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
     else:

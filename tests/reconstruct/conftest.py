@@ -26,8 +26,8 @@ def photo_tree():
 @pytest.fixture(scope="session")
 def photos(photo_tree, tmp_path_factory):
     """Ten 320 px Cycles renders (4 samples) of the tree in winter (no leaves) on a textured ground, 10 degrees
-    apart, with cameras.json. In leaf, a quarter of the points SfM places above the ground land on the tree at this
-    size, leafless two thirds (docs/reconstruct.md)."""
+    apart, with cameras.json. In leaf, 14 % of the points SfM places above the ground land on the tree at this size;
+    leafless, about 70 % of those near the tree (docs/reconstruct.md)."""
     _, mesh = photo_tree
     mesh = dataclasses.replace(mesh, leaves=MeshPart.empty())
     points = mesh.bark.vertices

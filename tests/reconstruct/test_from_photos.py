@@ -19,7 +19,6 @@ from species.meshing.gltf import read_glb_json
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gltf_validator import assert_valid_glb  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
 FARM = [sys.executable, "-m", "farm.cli", "reconstruct"]
 
 
