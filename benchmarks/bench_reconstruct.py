@@ -56,8 +56,8 @@ from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
 from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
-from renderers import RenderedView, ViewRenderer, main_branches, viewable, write_contact_sheet  # noqa: E402
-from renderers.impostor import closed_silhouette  # noqa: E402
+from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
+from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes  # noqa: E402
 from species.errors import TreefarmError  # noqa: E402
 from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views  # noqa: E402
 from trainers.data import TARGET_BACKGROUND  # noqa: E402
@@ -73,13 +73,7 @@ TRAINING_SPECS = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
 BENCH_SEEDS = {"params": 2304, "sketch-depth": 2300, "two-view": 2301}
 TARGET_S = 2.0
 BASELINE = "baseline: same preset"
-# Unseen views: azimuths of rig "orbit:8:0" (45 deg apart, level) that no input view looked along (or opposite).
-UNSEEN_RIG = "orbit:8:0"
 SEEN_AZIMUTHS = {"params": (0, 180), "sketch-depth": (0, 180), "two-view": (0, 90, 180, 270)}
-
-# Silhouettes of twigs and leaf cards overlap only where two trees agree to the pixel; the crown IoU compares the
-# outlines, closed over gaps up to about twice this many pixels (at 256 px: the crown, not its twigs).
-CROWN_CLOSING_PX = 6
 
 # The papers' figures beside each metric (seeds-digest section 5); "" where none is published.
 PAPER = {
@@ -118,13 +112,6 @@ class Truth:
         return main_branch_nodes(self.skeleton)
 
 
-def main_branch_nodes(skeleton: species.Skeleton) -> np.ndarray:
-    """(K, 3) float32 metres: the nodes of a tree's main branches (`renderers.main_branches`: what the strokes
-    draw), the set a traced or lifted main skeleton is compared with."""
-    paths = skeleton.branch_paths
-    return skeleton.positions[np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))]
-
-
 def grow_truth(renderer: ViewRenderer, preset: str, seed: int, rig: str, size: int, outputs) -> Truth:
     """A tree as `farm generate` makes it from (preset, tree seed): sample, rebuild, render the rig."""
     sample_rng, render_rng = stage_rngs(seed)
@@ -150,47 +137,15 @@ def check_seeds() -> None:
 
 
 # ------------------------------------------------------------------------------------------------ scoring
-class Scorer:
-    """Geometry metrics of reconstructions of one GT tree, its GT silhouettes rendered once."""
+class Scorer(TreeScorer):
+    """`reconstruct.scoring.TreeScorer` of one GT tree, its rows keyed by the metrics' labels (the tables' rows)."""
 
     def __init__(self, renderer: ViewRenderer, truth: Truth, input_cameras, method: str, surface_samples: int):
-        self.renderer, self.truth, self.surface_samples = renderer, truth, surface_samples
-        orbit = renderer.cameras(truth.mesh, UNSEEN_RIG, np.random.default_rng(0))
-        step = 360 // len(orbit)
-        self.cameras = {"input": list(input_cameras),
-                        "unseen": [c for i, c in enumerate(orbit) if i * step not in SEEN_AZIMUTHS[method]]}
-        self.masks = {k: renderer.silhouette_masks(truth.mesh, cams) for k, cams in self.cameras.items()}
-        self.crowns = {k: _crowns(m) for k, m in self.masks.items()}
+        super().__init__(renderer, truth.skeleton, truth.mesh, input_cameras, SEEN_AZIMUTHS[method], surface_samples)
+        self.truth = truth
 
-    def __call__(self, skeleton: species.Skeleton, mesh: species.TreeMesh, main_nodes=None) -> dict[str, float]:
-        truth, height = self.truth.skeleton, self.truth.skeleton.height
-        row = {}
-        for kind, cameras in self.cameras.items():
-            masks = self.renderer.silhouette_masks(mesh, cameras)
-            views = f"{kind} view{'s' if len(cameras) > 1 else ''}"
-            row[f"silhouette IoU, {views}"] = metrics.silhouette_iou(masks, self.masks[kind])
-            row[f"crown IoU, {views}"] = metrics.silhouette_iou(_crowns(masks), self.crowns[kind])
-        nodes = metrics.node_distances(skeleton, truth, height)
-        row.update({"node Hausdorff / height": nodes.hausdorff, "node Hausdorff95 / height": nodes.hausdorff_95,
-                    "node Chamfer / height": nodes.chamfer,
-                    "nodes, unit-cube Hausdorff": metrics.unit_cube_hausdorff(skeleton, truth)})
-        if self.surface_samples:
-            surface = metrics.surface_distances(mesh, self.truth.mesh, height, self.surface_samples,
-                                                np.random.default_rng(0))
-            row.update({"surface Hausdorff / height": surface.hausdorff, "surface Chamfer / height": surface.chamfer})
-        row["skeleton F1 AUC"] = metrics.skeleton_precision_recall(skeleton, truth).auc
-        errors = metrics.height_crown_errors(skeleton, truth)
-        row.update({"height rel. error": errors["height_rel_error"],
-                    "crown radius rel. error": errors["crown_radius_rel_error"]})
-        if main_nodes is not None:
-            row["main skeleton, unit-cube Hausdorff"] = metrics.unit_cube_hausdorff(main_nodes, self.truth.main_nodes,
-                                                                                    box=truth.bounds)
-        return row
-
-
-def _crowns(masks: np.ndarray) -> np.ndarray:
-    """(V, H, W) bool crown outlines of silhouette masks: gaps up to ~2 x CROWN_CLOSING_PX closed."""
-    return np.stack([closed_silhouette(m, CROWN_CLOSING_PX) for m in masks])
+    def __call__(self, skeleton, mesh, main_nodes=None) -> dict[str, float]:
+        return {METRICS[k].label: v for k, v in super().__call__(skeleton, mesh, main_nodes).items()}
 
 
 def baseline_tree(truth: Truth, job_seed: int, index: int, n_trees: int):
@@ -200,20 +155,12 @@ def baseline_tree(truth: Truth, job_seed: int, index: int, n_trees: int):
     return params, skeleton, mesh, main_branch_nodes(skeleton)
 
 
-def render_depth(renderer: ViewRenderer, mesh, skeleton, camera) -> np.ndarray:
-    """(H, W, 3) uint8 shaded depth of a tree in a camera, for the contact sheet (black where nothing is)."""
-    if mesh.n_faces == 0:
-        return np.zeros((camera.height, camera.width, 3), np.uint8)
-    view = renderer.render_cameras(mesh, skeleton, [camera], ["depth"], np.random.default_rng(0))[0]
-    return viewable("depth", view.images["depth"])
-
-
 def sheet_cells(renderer, scorer: Scorer, inputs: dict, skeleton, mesh) -> list:
     truth, front, unseen = scorer.truth, scorer.cameras["input"][0], scorer.cameras["unseen"][0]
-    return [*inputs.items(), ("GT, input view", render_depth(renderer, truth.mesh, truth.skeleton, front)),
-            ("reconstruction", render_depth(renderer, mesh, skeleton, front)),
-            (f"GT, {unseen.name}", render_depth(renderer, truth.mesh, truth.skeleton, unseen)),
-            ("reconstruction", render_depth(renderer, mesh, skeleton, unseen))]
+    return [*inputs.items(), ("GT, input view", depth_picture(renderer, truth.mesh, truth.skeleton, front)),
+            ("reconstruction", depth_picture(renderer, mesh, skeleton, front)),
+            (f"GT, {unseen.name}", depth_picture(renderer, truth.mesh, truth.skeleton, unseen)),
+            ("reconstruction", depth_picture(renderer, mesh, skeleton, unseen))]
 
 
 # ------------------------------------------------------------------------------------------------ methods

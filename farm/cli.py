@@ -28,6 +28,7 @@ COMMAND_MODULES = [
     "farm.commands.library",
     "farm.commands.train",
     "farm.commands.reconstruct",
+    "farm.commands.evaluate",
 ]
 
 EXIT_USER_ERROR = 2

@@ -240,13 +240,13 @@ def _known_outputs() -> Sequence[str]:
 
 
 def _check_rig(rig: Any) -> None:
-    from renderers import CameraError, parse_rig
+    from renderers import CameraError, rig_parts
 
     try:
-        parse_rig(rig)
+        rig_parts(rig)
     except CameraError:
         raise JobSpecError("render.rig", rig, "tsn4, orbit:N[:E1,E2], two-view[:shared], each optionally with "
-                           ":jitter") from None
+                           "':jitter', or distinct ones joined by '+'") from None
 
 
 def _default_outputs() -> Sequence[str]:

@@ -13,11 +13,11 @@ float32 metres of the farthest surface; "trunk_strokes" (H, W, 3) uint8;
 """
 from __future__ import annotations
 
-from .camera import RIGS, Camera, CameraError, make_rig, parse_rig
+from .camera import RIGS, Camera, CameraError, make_rig, parse_rig, rig_parts
 from .contact_sheet import views_sheet_rows, viewable, write_contact_sheet
 from .strokes import PALETTE, main_branches
 from .views import DEFAULT_OUTPUTS, OUTPUTS, OutputError, RenderedView, ViewRenderer, check_outputs
 
-__all__ = ["ViewRenderer", "RenderedView", "Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "OUTPUTS",
+__all__ = ["ViewRenderer", "RenderedView", "Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "rig_parts", "OUTPUTS",
            "DEFAULT_OUTPUTS", "OutputError", "check_outputs", "PALETTE", "main_branches", "write_contact_sheet",
            "viewable", "views_sheet_rows"]

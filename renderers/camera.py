@@ -28,17 +28,19 @@ views, which seed 001's equal-height matching of front and side needs; plain "tw
 different scales when the crown is wider than the tree is tall). A ":jitter" suffix (last) perturbs each view
 with the rng: azimuth +-7.5 deg, elevation +-3 deg, distance x U(0.95, 1.05) (two-view: one common azimuth
 offset so the views stay orthogonal, and elevation 0 so rows still match under ":shared").
+Rigs joined by "+" ("tsn4+two-view+two-view:shared": an evaluation dataset that serves every method) give each
+part's cameras in turn, framed as that rig alone frames them, named "PART/VIEW" ("two-view:shared/front").
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from species.errors import TreefarmError
 
 __all__ = ["Camera", "CameraError", "RIGS", "make_rig", "parse_rig", "look_at", "perspective_camera",
-           "orthographic_camera", "orthographic_half_extent", "OPENCV_TO_OPENGL", "TSN_FOV_DEG", "TSN_FILL",
+           "orthographic_camera", "orthographic_half_extent", "OPENCV_TO_OPENGL", "RIG_JOIN", "rig_parts", "TSN_FOV_DEG", "TSN_FILL",
            "ORTHO_MARGIN"]
 
 OPENCV_TO_OPENGL = np.diag([1.0, -1.0, -1.0, 1.0])
@@ -48,6 +50,7 @@ TSN_ELEVATION_DEG = 10.0
 ORTHO_MARGIN = 0.05  # orthographic volume = bounding box + 5% (digest 1.8)
 DEPTH_MARGIN = 0.02  # near/far planes sit this fraction of the depth range outside the tree
 RIGS = ("tsn4", "orbit:N[:E1,E2,...]", "two-view[:shared]")
+RIG_JOIN = "+"  # composite rigs: "tsn4+two-view:shared"
 
 
 class CameraError(TreefarmError):
@@ -328,9 +331,21 @@ class RigSpec:
     shared_scale: bool = False
 
 
+def rig_parts(rig: str) -> list[str]:
+    """The rigs a (possibly composite, "+"-joined) rig name is made of, each checked by `parse_rig`."""
+    if not isinstance(rig, str) or not rig:
+        raise CameraError(f"rig {rig!r} is unknown: allowed {', '.join(RIGS)} (optionally with ':jitter')")
+    parts = [part.strip() for part in rig.split(RIG_JOIN)]
+    if len(set(parts)) < len(parts):
+        raise CameraError(f"rig {rig!r} names a rig twice: allowed distinct rigs joined by {RIG_JOIN!r}")
+    for part in parts:
+        parse_rig(part)
+    return parts
+
+
 def parse_rig(rig: str) -> RigSpec:
     """Parse "tsn4", "orbit:N", "orbit:N:E1,E2", "two-view", "two-view:shared", each optionally followed by
-    ":jitter"."""
+    ":jitter". A composite ("+"-joined) rig is checked part by part with `rig_parts`."""
     if not isinstance(rig, str) or not rig:
         raise CameraError(f"rig {rig!r} is unknown: allowed {', '.join(RIGS)} (optionally with ':jitter')")
     parts = rig.split(":")
@@ -365,7 +380,12 @@ def make_rig(rig: str, points: np.ndarray, size: int, rng: np.random.Generator) 
     """The cameras of a rig around a tree given by `points` (N, 3) metres (vertices or bounds corners).
 
     The rng is used only with ":jitter" (and then drawn in view order), so a plain rig is the same for any rng.
+    A composite rig gives each part's cameras in turn, named "PART/VIEW".
     """
+    parts = rig_parts(rig)
+    if len(parts) > 1:
+        return [replace(camera, name=f"{part}/{camera.name}")
+                for part in parts for camera in make_rig(part, points, size, rng)]
     spec = parse_rig(rig)
     if int(size) < 8:
         raise CameraError(f"image size {size} is too small: allowed 8 pixels or more")

@@ -15,7 +15,7 @@ from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 from . import sketch
-from .camera import Camera, CameraError, make_rig, parse_rig
+from .camera import Camera, CameraError, make_rig, rig_parts
 from .maps import DepthRenderer, combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
@@ -131,7 +131,7 @@ class ViewRenderer:
         hand-drawn style; the same inputs and rng state give identical arrays.
         """
         names = check_outputs(outputs)
-        parse_rig(rig)
+        rig_parts(rig)
         _check_rng(rng)
         _check_tree(tree)
         return self._render(tree, skeleton, self.cameras(tree, rig, rng), names, rng)

@@ -135,11 +135,11 @@ def _photo_sheet_rows(photos) -> list:
 
 def run(args: argparse.Namespace) -> int:
     import species
-    from renderers import DEFAULT_OUTPUTS, check_outputs, parse_rig
+    from renderers import DEFAULT_OUTPUTS, check_outputs, rig_parts
 
     outputs = check_outputs(DEFAULT_OUTPUTS if args.styles is None
                             else [s.strip() for s in args.styles.split(",") if s.strip()])
-    parse_rig(args.rig)
+    rig_parts(args.rig)
     check_flag_int("--size", args.size, 8, MAX_SIZE)
     check_flag_int("--seed", args.seed, 0)
     check_flag_int("--samples", args.samples, 1)

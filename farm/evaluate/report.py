@@ -1,0 +1,284 @@
+"""The evaluation report: summary.md (method x metric, median and interquartile range, the papers' figures beside
+ours, the models' registered scores, the machine and versions) and the PNG plots (metric distributions per method
+and per species, a gallery of the best, median and worst trees per method, the rotation sweep).
+
+Plots are drawn with matplotlib's Agg backend, metadata stripped, so the same rows give the same bytes.
+"""
+from __future__ import annotations
+
+import json
+import platform
+from pathlib import Path
+import numpy as np
+
+__all__ = ["write_report", "metric_columns", "summary_table", "registered_scores", "GALLERY_METRIC", "SUMMARY_FILE"]
+
+SUMMARY_FILE = "summary.md"
+# What ranks a method's trees for its gallery (best, median, worst): the first of these its rows have.
+GALLERY_METRIC = ("skeleton_f1_auc", "silhouette_iou_unseen", "cloud_fit_10cm", "silhouette_iou_input",
+                  "param_score", "species_correct")
+# The registered held-out figures worth a line in the summary, per trained task.
+_REGISTERED = {"sketchnet": ("score_overall", "accuracy_species"), "pix2pix-silhouette": ("depth_error",),
+               "pix2pix-trunk": ("depth_error",)}
+_PACKAGES = ("numpy", "scipy", "trimesh", "pyarrow", "ray", "onnxruntime", "pycolmap", "torch", "mlflow-skinny")
+
+
+def metric_columns(rows) -> list[str]:
+    """The metric columns of a rows frame (numbers, not ids, timings, models or panels) in METRICS' order."""
+    from reconstruct.scoring import METRICS
+
+    from .job import ID_COLUMNS
+
+    present = [c for c in rows.columns if c not in ID_COLUMNS and not c.startswith("seconds_")
+               and c not in ("models", "panel")]
+    return [m for m in METRICS if m in present] + sorted(set(present) - set(METRICS))
+
+
+def _quartiles(values: np.ndarray) -> tuple[float, float, float]:
+    q25, q50, q75 = np.percentile(values, [25, 50, 75])
+    return float(q50), float(q25), float(q75)
+
+
+def summary_table(rows) -> dict:
+    """{(method, source): {metric: {"median", "q25", "q75", "n"}}, plus "ok"/"failed"/"error" counts} over the
+    rows whose status is ok."""
+    out: dict = {}
+    for (method, source), group in rows.groupby(["method", "source"], sort=True):
+        ok = group[group["status"] == "ok"]
+        entry = {"counts": {s: int((group["status"] == s).sum()) for s in ("ok", "failed", "error")},
+                 "metrics": {}, "seconds": {}}
+        for metric in metric_columns(rows):
+            values = ok[metric].to_numpy(dtype=float) if metric in ok else np.zeros(0)
+            values = values[np.isfinite(values)]
+            if values.size:
+                median, q25, q75 = _quartiles(values)
+                entry["metrics"][metric] = {"median": median, "q25": q25, "q75": q75, "n": int(values.size)}
+        for column in [c for c in rows.columns if c.startswith("seconds_")]:
+            values = ok[column].to_numpy(dtype=float)
+            values = values[np.isfinite(values)]
+            if values.size:
+                entry["seconds"][column.removeprefix("seconds_")] = float(np.median(values))
+        out[(method, source)] = entry
+    return out
+
+
+def registered_scores(task: str, models: str | None) -> dict[str, float]:
+    """What the model `load` gives for `task` scored on its held-out split when it was registered (the shipped
+    default: its metrics_report.json; a registry: the champion's, else the latest version's, logged metrics)."""
+    from trainers.models import DEFAULT_MODELS
+
+    if models is None:
+        path = DEFAULT_MODELS / task / "metrics_report.json"
+        test = json.loads(path.read_text()).get("test", {}) if path.exists() else {}
+    else:
+        from trainers.registry import open_registry
+        from trainers.tasks import get_task
+
+        registry = open_registry(models)
+        name = get_task(task).model_name
+        found = registry.champion(name) or registry.latest(name)
+        test = dict(found.metrics) if found is not None else {}
+    return {k: float(test[k]) for k in _REGISTERED.get(task, ()) if k in test}
+
+
+def _versions() -> list[str]:
+    from importlib import metadata
+
+    out = []
+    for name in _PACKAGES:
+        try:
+            out.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def _cell(stats: dict | None) -> str:
+    if stats is None:
+        return "-"
+    return f"{stats['median']:.3f} [{stats['q25']:.3f}, {stats['q75']:.3f}] (n={stats['n']})"
+
+
+def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, table: dict) -> str:
+    from farm.manifest import code_version
+    from farm.table import format_table
+    from reconstruct.scoring import METRICS
+
+    lines = ["# Evaluation", "",
+             f"Datasets: {', '.join(f'{d.path} ({d.name}, {len(d.held_out)} held-out trees)' for d in plan.datasets) or 'none'}"
+             + (f"; real inputs: {plan.record['inputs']}" if plan.record.get("inputs") else "") + ".",
+             f"Methods: {', '.join(plan.methods)}; trees: the trainers' {plan.record['part']} part"
+             + (f", at most {plan.record['trees']} per dataset" if plan.record.get("trees") else "") + ".", ""]
+    for line in plan.skipped:
+        lines.append(f"- {line}")
+    if plan.skipped:
+        lines.append("")
+    keys = list(table)
+    header = ["metric", *[f"{m} ({s}, {table[(m, s)]['counts']['ok']} ok)" for m, s in keys], "paper"]
+    body = []
+    for metric in metric_columns(rows):
+        cells = [_cell(table[key]["metrics"].get(metric)) for key in keys]
+        if all(c == "-" for c in cells):
+            continue
+        info = METRICS.get(metric)
+        label = info.label if info else metric
+        better = "" if info is None else (" (higher better)" if info.higher_is_better else " (lower better)")
+        methods_with = {m for m, s in keys if metric in table[(m, s)]["metrics"]}
+        paper = info.paper if info and (not info.paper_method or info.paper_method in methods_with) else ""
+        body.append([f"{label}{better}", *cells, paper])
+    if sweep is not None and len(sweep):
+        values = sweep["unit_cube_hausdorff"].to_numpy(dtype=float)
+        median, q25, q75 = _quartiles(values[np.isfinite(values)])
+        body.append([f"{METRICS['rotation_sweep_unit_cube_hausdorff'].label} (lower better)",
+                     *[f"{median:.3f} [{q25:.3f}, {q75:.3f}] ({len(values)} views)" if m == "params" else "-"
+                       for m, _ in keys], METRICS["rotation_sweep_unit_cube_hausdorff"].paper])
+    lines += ["## Metrics (median [q25, q75] over the trees that finished)", "", "```",
+              format_table(header, body), "```", ""]
+    stage_rows = []
+    for key in keys:
+        for stage, seconds in table[key]["seconds"].items():
+            stage_rows.append([f"{key[0]} ({key[1]})", stage, f"{seconds:.2f}"])
+    lines += ["## Stage seconds (median per tree)", "", "```", format_table(["method", "stage", "s"], stage_rows),
+              "```", ""]
+    failures = rows[rows["status"] != "ok"]
+    if len(failures):
+        lines += ["## Failures", ""]
+        for _, row in failures.iterrows():
+            first = str(row["error"]).strip().splitlines()
+            lines.append(f"- {row['method']} {row['tree_id']} ({row['status']}): {first[-1] if first else ''}")
+        lines.append("")
+    lines += ["## Models", ""]
+    for task, source in sources.items():
+        scores = registered_scores(task, models)
+        figures = ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) or "no held-out figures recorded"
+        lines.append(f"- {task}: {source}; when registered, on its held-out split: {figures}")
+    if not sources:
+        lines.append("- none (no method of this evaluation uses a trained network)")
+    lines += ["", "## Made with", "",
+              f"- machine: {platform.node()}, {platform.machine()}, {platform.processor() or 'cpu'}, "
+              f"Python {platform.python_version()}, {platform.platform()}",
+              f"- treefarm {code_version()}; {', '.join(_versions())}",
+              f"- settings: {json.dumps(plan.record['settings'], sort_keys=True)}", ""]
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------------------------------------ plots
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path) -> Path:
+    import io
+
+    from .job import _write_atomically
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=90, metadata={"Software": None})
+    _pyplot().close(fig)
+    _write_atomically(path, buffer.getvalue())
+    return path
+
+
+def _distribution_plot(rows, by: str, path: Path) -> Path | None:
+    """One panel per metric: the metric's values per `by` group (method, or method/species) as box plots."""
+    from reconstruct.scoring import METRICS
+
+    plt = _pyplot()
+    ok = rows[rows["status"] == "ok"]
+    metrics = [m for m in metric_columns(rows) if m in ok and np.isfinite(ok[m].to_numpy(dtype=float)).any()]
+    if not metrics:
+        return None
+    groups = (ok["method"] if by == "method" else ok["method"] + " / " + ok["species"].fillna("?")).astype(str)
+    names = sorted(groups.unique())
+    columns = 3
+    n_rows = int(np.ceil(len(metrics) / columns))
+    height = max(2.6, 0.28 * len(names) + 1.2)
+    fig, axes = plt.subplots(n_rows, columns, figsize=(5.2 * columns, height * n_rows), squeeze=False)
+    for ax, metric in zip(axes.flat, metrics):
+        data, labels = [], []
+        for name in names:
+            values = ok.loc[groups == name, metric].to_numpy(dtype=float)
+            values = values[np.isfinite(values)]
+            if values.size:
+                data.append(values)
+                labels.append(name)
+        ax.boxplot(data, vert=False, tick_labels=labels, widths=0.6)
+        info = METRICS.get(metric)
+        ax.set_title((info.label if info else metric) + ("" if info is None else
+                                                          " (higher better)" if info.higher_is_better
+                                                          else " (lower better)"), fontsize=8)
+        ax.tick_params(labelsize=7)
+    for ax in list(axes.flat)[len(metrics):]:
+        ax.axis("off")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
+    """The method's best, median and worst trees by its gallery metric: their panels stacked, labelled."""
+    import cv2
+
+    from .job import _write_atomically
+    from species.meshing.png import png_bytes
+
+    ok = rows[(rows["method"] == method) & (rows["status"] == "ok") & rows["panel"].notna()] \
+        if "panel" in rows else rows.iloc[0:0]
+    metric = next((m for m in GALLERY_METRIC if m in ok and np.isfinite(ok[m].to_numpy(dtype=float)).any()), None)
+    if metric is None or not len(ok):
+        return None
+    from reconstruct.scoring import METRICS
+
+    ranked = ok[np.isfinite(ok[metric].to_numpy(dtype=float))].sort_values(
+        metric, ascending=not METRICS[metric].higher_is_better, kind="stable")
+    picks = {"best": 0, "median": len(ranked) // 2, "worst": len(ranked) - 1}
+    images = []
+    for label, position in picks.items():
+        row = ranked.iloc[position]
+        panel = cv2.imread(str(report / row["panel"]), cv2.IMREAD_COLOR)[..., ::-1]
+        band = np.full((26, panel.shape[1], 3), 255, np.uint8)
+        cv2.putText(band, f"{label}: {METRICS[metric].label} = {row[metric]:.3f}  ({row['tree_id']})", (6, 18),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
+        images.append(np.concatenate([band, panel]))
+    width = max(image.shape[1] for image in images)
+    images = [np.pad(image, ((0, 0), (0, width - image.shape[1]), (0, 0)), constant_values=255) for image in images]
+    _write_atomically(path, png_bytes(np.concatenate(images), 6))
+    return path
+
+
+def _sweep_plot(sweep, path: Path) -> Path:
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 3))
+    ax.plot(sweep["azimuth_deg"], sweep["unit_cube_hausdorff"], marker=".")
+    ax.axhline(0.03, color="grey", linestyle="--", label="TreeSketchNet ~0.03")
+    ax.set_xlabel("camera azimuth, degrees")
+    ax.set_ylabel("unit-cube Hausdorff")
+    ax.set_title(f"rotation sweep: {sweep['species'].iloc[0]} {sweep['tree_id'].iloc[0]} (params)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def write_report(report: Path, rows, plan, sources: dict, models: str | None, sweep) -> dict[str, Path]:
+    """summary.md and the plots; returns what was written, by name."""
+    from .job import _write_atomically
+
+    table = summary_table(rows)
+    paths = {}
+    _write_atomically(report / SUMMARY_FILE, _summary_markdown(rows, plan, sources, models, sweep, table).encode())
+    paths["summary"] = report / SUMMARY_FILE
+    for by, name in (("method", "metrics_by_method.png"), ("species", "metrics_by_species.png")):
+        written = _distribution_plot(rows, by, report / name)
+        if written:
+            paths[name] = written
+    for method in sorted(rows["method"].unique()):
+        written = _gallery(rows, report, method, report / f"gallery_{method}.png")
+        if written:
+            paths[f"gallery_{method}"] = written
+    if sweep is not None and len(sweep):
+        paths["sweep"] = _sweep_plot(sweep, report / "sweep.png")
+    return paths
