@@ -10,7 +10,7 @@ PLY's double-precision positions).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +61,29 @@ class CloudReconstruction:
     timings: dict[str, float] = field(default_factory=dict)
     method: str = "cloud"
     provenance: dict = field(default_factory=dict)
+
+    @property
+    def base_points(self) -> np.ndarray:
+        """(N, 3) float64: the cloud's points in the base frame, the skeleton's and the mesh's (its working frame
+        less the measured root)."""
+        return self.cloud.points.astype(np.float64) - self.fit.skeleton.positions[0].astype(np.float64)
+
+    def in_scan_frame(self) -> tuple[Skeleton, TreeMesh]:
+        """The completed skeleton and the mesh moved by `transform` into the scan's own coordinates (what a true
+        tree the scan was sampled from is in)."""
+        rotation, shift = self.transform[:3, :3], self.transform[:3, 3]
+
+        def moved(points: np.ndarray) -> np.ndarray:
+            return (points.astype(np.float64) @ rotation.T + shift).astype(np.float32)
+
+        def moved_part(part):
+            return replace(part, vertices=moved(part.vertices),
+                           normals=(part.normals.astype(np.float64) @ rotation.T).astype(np.float32))
+
+        leaves = (self.transform @ self.skeleton.leaves.astype(np.float64)).astype(np.float32)
+        skeleton = replace(self.skeleton, positions=moved(self.skeleton.positions), leaves=leaves)
+        mesh = replace(self.mesh, bark=moved_part(self.mesh.bark), leaves=moved_part(self.mesh.leaves))
+        return skeleton, mesh
 
     @property
     def extras(self) -> dict:

@@ -69,7 +69,7 @@ METRICS: dict[str, Metric] = {
                              "AdTree: 0.99 on tree1 (bench_reconstruct_cloud)", "cloud"),
     "cloud_fit_median_m": Metric("median point-to-bark distance, m", False),
     "bark_height_rel_error": Metric("bark height vs cloud height, rel. error", False),
-    "connected_share": Metric("share of nodes linked to the root", True),
+    "joined_share": Metric("share of points joined to the tree graph", True),
     "rotation_sweep_unit_cube_hausdorff": Metric("rotation sweep, unit-cube Hausdorff", False,
                                                  "~0.03 (TSN, 72 views, one unseen tree)", "params"),
 }

@@ -29,7 +29,7 @@ from typing import Iterator, Mapping
 
 from species.errors import TreefarmError
 
-__all__ = ["RegistryError", "ModelVersion", "Registry", "open_registry", "format_models_table",
+__all__ = ["RegistryError", "ModelVersion", "Registry", "open_registry", "check_registry_exists", "format_models_table",
            "format_model_versions", "DEFAULT_FOLDER", "CHAMPION", "LATEST", "ARTIFACT_FOLDER", "BASELINE_SUFFIX"]
 
 DEFAULT_FOLDER = "registry"
@@ -139,6 +139,14 @@ def _store_locations(models: str | Path | None) -> tuple[str, str, str | None]:
     except OSError as exc:
         raise RegistryError(f"cannot open the model registry {label}: {exc.strerror or exc}") from exc
     return label, f"sqlite:///{folder / DATABASE_FILE}", (folder / ARTIFACTS_SUBFOLDER).as_uri()
+
+
+def check_registry_exists(models: str | Path) -> None:
+    """RegistryError unless `models` is a URI or a folder that already holds an embedded store: opening one
+    creates it, and a command that only reads models must not leave an empty registry behind."""
+    if "://" not in str(models) and not (Path(models) / "mlflow.sqlite").exists():
+        raise RegistryError(f"--models {models} holds no model registry (no mlflow.sqlite): train one with "
+                            "`farm train TASK --data DIR --models DIR`, or leave --models out for the shipped models")
 
 
 def open_registry(models: str | Path | None = None) -> "Registry":

@@ -113,14 +113,9 @@ def _output(args: argparse.Namespace) -> tuple[Path, str]:
 def _models(args):
     if args.models is None:
         return None
-    from trainers.registry import open_registry
+    from trainers.registry import check_registry_exists, open_registry
 
-    if "://" not in args.models and not (Path(args.models) / "mlflow.sqlite").exists():
-        # Opening an embedded store creates it: a reconstruction must not leave an empty registry behind.
-        raise CommandLineError(f"--models {args.models} holds no model registry (no mlflow.sqlite): train one with "
-                               "`farm train TASK --data DIR --models DIR`, or leave --models out for the shipped "
-                               "models")
-
+    check_registry_exists(args.models)
     return open_registry(args.models)
 
 

@@ -6,10 +6,10 @@ beside it (`NAME.json`, the tree the sketch was drawn from). Subfolders are not 
 
 - A cloud goes through the cloud method (`reconstruct.from_cloud`): the share of its points within 10 cm of the
   reconstruction's bark and their median distance (AdTree's fit), the bark's height against the cloud's
-  (`bark_height_rel_error`) and the share of skeleton nodes linked to the root.
+  (`bark_height_rel_error`) and the share of its points the skeleton graph joined to the tree (connectedness).
 - A sketch goes through the params method (TreeSketchNet): with a reference, species and levels right or wrong and
   the parameter score (Weber-Penn references); without one, the silhouette IoU of the result re-rendered in the
-  sketch's view (tsn4 front), both outlines cut to their bounding boxes and compared at one size.
+  sketch's view (tsn4 front), both outlines cut to their bounding boxes and compared at one height.
 """
 from __future__ import annotations
 
@@ -20,13 +20,14 @@ from typing import Sequence
 
 import numpy as np
 
-from .methods import MethodContext, MethodResult, connected_share
+from .methods import MethodContext, MethodResult, joined_share
 
 __all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "outline_iou"]
 
 SKETCH_SUFFIXES = (".png",)
 _IOU_SIZE = 128  # both outlines are compared at this size, cut to their bounding boxes
 _INK = 128       # grey levels below this are strokes
+_CLOSING_PX = 6  # gaps up to about twice this closed in a drawing's and a render's outline (at 224-256 px)
 
 
 def input_units(folder: str, methods: Sequence[str]):
@@ -56,7 +57,8 @@ def input_units(folder: str, methods: Sequence[str]):
 
 
 def outline_iou(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
-    """IoU of two outlines, each cut to its bounding box and resized to one size (a drawing has no scale)."""
+    """IoU of two outlines at one scale (a drawing has none): each cut to its bounding box and scaled to one
+    height, keeping its aspect, both centred on one vertical axis (a tree's) on a shared canvas."""
     import cv2
 
     from reconstruct import metrics
@@ -67,8 +69,12 @@ def outline_iou(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
         if rows.size == 0:
             return 0.0
         box = mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].astype(np.uint8)
-        cut.append(cv2.resize(box, (_IOU_SIZE, _IOU_SIZE), interpolation=cv2.INTER_NEAREST))
-    return metrics.silhouette_iou(*cut)
+        width = max(1, int(round(box.shape[1] * _IOU_SIZE / box.shape[0])))
+        cut.append(cv2.resize(box, (width, _IOU_SIZE), interpolation=cv2.INTER_NEAREST))
+    canvas = max(c.shape[1] for c in cut)
+    placed = [np.pad(c, ((0, 0), ((canvas - c.shape[1]) // 2, canvas - c.shape[1] - (canvas - c.shape[1]) // 2)))
+              for c in cut]
+    return metrics.silhouette_iou(*placed)
 
 
 def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
@@ -79,12 +85,12 @@ def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
 
     result = reconstruct.from_cloud(path, seed=ctx.settings.seed)
     start = time.perf_counter()
-    points = result.cloud.points
+    points = result.base_points  # the skeleton's frame
     fit = metrics.cloud_fit(result.skeleton, points)
     cloud_height = float(np.ptp(points[:, 2]))
     row = {"cloud_fit_10cm": fit["within"], "cloud_fit_median_m": fit["median_m"],
            "bark_height_rel_error": abs(float(result.skeleton.height) - cloud_height) / max(cloud_height, 1e-9),
-           "connected_share": connected_share(result.skeleton)}
+           "joined_share": joined_share(result)}
     camera = ctx.renderer.cameras(result.mesh, "tsn4", np.random.default_rng(0))[0]
     cells = [("input cloud", cloud_drawing(points, 0)), ("skeleton", skeleton_drawing(result.skeleton, 0)),
              ("reconstruction", depth_picture(ctx.renderer, result.mesh, result.skeleton, camera))]
@@ -96,6 +102,8 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
     from farm.commands.reconstruct import read_image
     from reconstruct import metrics
     from reconstruct.scoring import depth_picture
+    from scipy.ndimage import binary_fill_holes
+
     from renderers.impostor import closed_silhouette
     from species.errors import user_path
 
@@ -119,9 +127,10 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
             row["param_score"] = metrics.parameter_scores(net.codec, result.params, reference)["score_overall"]
     else:
         grey = image if image.ndim == 2 else image[..., :3].mean(axis=2)
-        ink = closed_silhouette(grey < _INK, 6)
         drawn = ctx.renderer.silhouette_masks(result.mesh, [camera])[0]
-        row["silhouette_iou_input"] = outline_iou(ink, drawn)
+        # Outlines: a drawing's strokes and the rendered twigs and leaves closed into one filled shape each.
+        ink, shape = (binary_fill_holes(closed_silhouette(m, _CLOSING_PX)) for m in (grey < _INK, drawn))
+        row["silhouette_iou_input"] = outline_iou(ink, shape)
     cells = [("input", image), ("reconstruction", depth_picture(ctx.renderer, result.mesh, result.skeleton, camera))]
     return (MethodResult(row, {**result.timings, "scoring": time.perf_counter() - start}, cells,
                          {"sketchnet": net.source}), species)

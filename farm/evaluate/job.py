@@ -344,8 +344,15 @@ def _check_models(plan: EvaluationPlan, models: str | None) -> dict[str, str]:
     one line (EvaluationError). Returns task -> the model's source."""
     from reconstruct.networks import predictor
 
+    from trainers.registry import check_registry_exists
+
     tasks = sorted({task for m in {u.method for u in plan.units} for task in METHODS[m].models})
     sources = {}
+    if tasks and models is not None:
+        try:
+            check_registry_exists(models)
+        except TreefarmError as error:
+            raise EvaluationError(str(error)) from None
     for task in tasks:
         try:
             sources[task] = predictor(task, models).source
@@ -358,7 +365,8 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
                    settings: EvalSettings = EvalSettings(), workers: int | None = None, address: str | None = None,
                    sweep_step: float | None = 5.0, progress: bool = True) -> dict:
     """Run the plan's pending units on Ray, then write metrics.parquet, the sweep, summary.md and the plots.
-    Returns {"rows": DataFrame, "done_before": n, "ran": n, "models": sources, "report": paths}."""
+    Returns {"rows": DataFrame, "done_before": n, "ran": n, "models": sources, "report": paths, "sweep": table,
+    "seconds": {"trees": the Ray phase (sweep included), "total": with the report}}."""
     import ray
     from tqdm import tqdm
 
@@ -376,6 +384,7 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
     pending = [u for u in plan.units if not (report / ROWS / u.method / f"{u.key}.parquet").exists()]
     done_before = len(plan.units) - len(pending)
     limit = max(1, workers or os.cpu_count() or 1)
+    started = time.perf_counter()
     with ray_connection(address, workers, log_to_driver=False):
         task = ray.remote(num_cpus=1, max_retries=2)(evaluate_unit)
         queue, running = list(pending), []
@@ -390,6 +399,7 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
         sweep = None
         if sweep_step:
             sweep = run_sweep(plan, report, models, settings, sweep_step)
+    trees_seconds = time.perf_counter() - started
     rows = read_rows(report, plan.units)
     import pyarrow as pa
     import pyarrow.parquet as pq
@@ -399,7 +409,7 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
     _write_atomically(report / METRICS_FILE, sink.getvalue().to_pybytes())
     paths = write_report(report, rows, plan, sources, models, sweep)
     return {"rows": rows, "done_before": done_before, "ran": len(pending), "models": sources, "report": paths,
-            "sweep": sweep}
+            "sweep": sweep, "seconds": {"trees": trees_seconds, "total": time.perf_counter() - started}}
 
 
 def evaluation_data_spec(trees: int = 24, seed: int = 2500) -> str:

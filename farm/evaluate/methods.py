@@ -34,7 +34,7 @@ from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 __all__ = ["METHODS", "Method", "Needs", "HeldOutTree", "MethodResult", "EvalSettings", "MethodContext",
-           "tree_rng_seed", "connected_share"]
+           "tree_rng_seed", "joined_share"]
 
 
 @dataclass(frozen=True)
@@ -121,22 +121,10 @@ def tree_rng_seed(tree: HeldOutTree, method: str, seed: int) -> int:
     return int.from_bytes(hashlib.sha256(text).digest()[:8], "big")
 
 
-def connected_share(skeleton: Skeleton) -> float:
-    """The share of a skeleton's nodes whose parent chain reaches the first root (1.0: one connected tree)."""
-    if skeleton.n_nodes == 0:
-        return 0.0
-    parent = skeleton.parent.astype(np.int64)
-    return float(np.mean(_roots(parent) == int(np.flatnonzero(parent < 0)[0])))
-
-
-def _roots(parent: np.ndarray) -> np.ndarray:
-    """(N,) the root each node's parent chain ends at (pointer jumping, vectorized)."""
-    ancestor = np.where(parent >= 0, parent, np.arange(len(parent)))
-    while True:
-        nxt = ancestor[ancestor]
-        if np.array_equal(nxt, ancestor):
-            return ancestor
-        ancestor = nxt
+def joined_share(result) -> float:
+    """The share of a cloud's points its skeleton graph joined to the tree (a skeleton is one tree by
+    construction, so connectedness is what the graph reached: `CloudSkeleton.n_reached / n_used`)."""
+    return float(result.fit.n_reached) / max(1, int(result.fit.n_used))
 
 
 def _scorer(ctx: MethodContext, tree: HeldOutTree, cameras, seen_azimuths):
@@ -239,12 +227,14 @@ def run_two_view(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
 
 
 def _cloud_scores(ctx: MethodContext, tree: HeldOutTree, result, points: np.ndarray) -> dict[str, float]:
+    """Geometry against the true tree and the fit to `points` (the scan's own coordinates)."""
     from reconstruct import metrics
 
-    row = _scorer(ctx, tree, [], ())(result.skeleton, result.mesh)
-    fit = metrics.cloud_fit(result.skeleton, points)
+    skeleton, mesh = result.in_scan_frame()  # the true tree's frame, which the scan was sampled in
+    row = _scorer(ctx, tree, [], ())(skeleton, mesh)
+    fit = metrics.cloud_fit(skeleton, points)
     row.update({"cloud_fit_10cm": fit["within"], "cloud_fit_median_m": fit["median_m"],
-                "connected_share": connected_share(result.skeleton)})
+                "joined_share": joined_share(result)})
     return row
 
 
@@ -269,7 +259,7 @@ def run_cloud(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     row = _cloud_scores(ctx, tree, result, scan.points[scan.labels == WOOD])
     timings = {"scan": sampling, **result.timings, "scoring": time.perf_counter() - start}
     cells = [("input scan", cloud_drawing(scan.points, 0)),
-             *_pictures(ctx, tree, _front_camera(ctx, tree), result.skeleton, result.mesh)]
+             *_pictures(ctx, tree, _front_camera(ctx, tree), *result.in_scan_frame())]
     return MethodResult(row, timings, cells)
 
 
@@ -299,9 +289,10 @@ def run_photos(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
                                          workdir=Path(folder) / "sfm")
     start = time.perf_counter()
     bare = dataclasses.replace(tree, mesh=leafless)
-    row = _cloud_scores(ctx, bare, result, result.cloud.points)
+    in_world = result.base_points @ result.transform[:3, :3].T + result.transform[:3, 3]  # the renders' frame
+    row = _cloud_scores(ctx, bare, result, in_world)
     timings = {"photos (Cycles)": rendering, **result.timings, "scoring": time.perf_counter() - start}
-    cells = [("input photo", first), *_pictures(ctx, bare, _front_camera(ctx, bare), result.skeleton, result.mesh)]
+    cells = [("input photo", first), *_pictures(ctx, bare, _front_camera(ctx, bare), *result.in_scan_frame())]
     return MethodResult(row, timings, cells)
 
 

@@ -15,7 +15,7 @@ __all__ = ["write_report", "metric_columns", "summary_table", "registered_scores
 
 SUMMARY_FILE = "summary.md"
 # What ranks a method's trees for its gallery (best, median, worst): the first of these its rows have.
-GALLERY_METRIC = ("skeleton_f1_auc", "silhouette_iou_unseen", "cloud_fit_10cm", "silhouette_iou_input",
+GALLERY_METRIC = ("crown_iou_unseen", "cloud_fit_10cm", "silhouette_iou_input",
                   "param_score", "species_correct")
 # The registered held-out figures worth a line in the summary, per trained task.
 _REGISTERED = {"sketchnet": ("score_overall", "accuracy_species"), "pix2pix-silhouette": ("depth_error",),
@@ -207,7 +207,7 @@ def _distribution_plot(rows, by: str, path: Path) -> Path | None:
             if values.size:
                 data.append(values)
                 labels.append(name)
-        ax.boxplot(data, vert=False, tick_labels=labels, widths=0.6)
+        ax.boxplot(data, orientation="horizontal", tick_labels=labels, widths=0.6)
         info = METRICS.get(metric)
         ax.set_title((info.label if info else metric) + ("" if info is None else
                                                           " (higher better)" if info.higher_is_better

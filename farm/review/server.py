@@ -2,6 +2,7 @@
 
 Every request needs the token: header `X-Review-Token`, query `?token=`, or the `/static/TOKEN/...` path prefix
 (so ES module imports, which cannot set headers, resolve relative to it). JSON errors: {"error": message}.
+Over a dataset (a ReviewService) it serves the tree review; over an EvaluationReport, the report's rows and panels.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from pathlib import Path
 from urllib.parse import parse_qs
 
 from .index import NotFound
+from .report import EvaluationReport
 from .service import ReviewService, TreeQuery
 from .store import ReviewError
 
@@ -99,23 +101,20 @@ def _safe_file(root: Path, relative: str) -> Path:
     return target
 
 
-def create_app(service: ReviewService, token: str, roots: dict[str, Path] | None = None):
-    """The Starlette application for one ReviewService, wrapped in the token guard."""
+def create_app(service: ReviewService | EvaluationReport, token: str, roots: dict[str, Path] | None = None):
+    """The Starlette application for one ReviewService (a dataset) or EvaluationReport, in the token guard."""
     from starlette.applications import Starlette
-    from starlette.concurrency import run_in_threadpool
     from starlette.requests import Request
-    from starlette.responses import HTMLResponse, JSONResponse, Response
+    from starlette.responses import HTMLResponse, Response
     from starlette.routing import Route
 
     check_token(token)
     roots = static_roots() if roots is None else roots
-
-    def params(request: Request) -> dict[str, str]:
-        return {key: value for key, value in request.query_params.items()}
+    mode, script = ("report", "report.js") if isinstance(service, EvaluationReport) else ("dataset", "review.js")
 
     def page(request: Request):
-        html = (WEB_FOLDER / "index.html").read_text().replace("{{TOKEN}}", token)
-        return HTMLResponse(html, headers={"Cache-Control": "no-store"})
+        html = (WEB_FOLDER / "index.html").read_text().replace("{{MODE}}", mode).replace("{{SCRIPT}}", script)
+        return HTMLResponse(html.replace("{{TOKEN}}", token), headers={"Cache-Control": "no-store"})
 
     def static(request: Request):
         root = roots.get(request.path_params["root"])
@@ -126,11 +125,57 @@ def create_app(service: ReviewService, token: str, roots: dict[str, Path] | None
         return Response(target.read_bytes(), media_type=media or "application/octet-stream",
                         headers={"Cache-Control": "max-age=3600" if root != WEB_FOLDER else "no-cache"})
 
+    async def review_error(request, exc):
+        return _error(400, str(exc))
+
+    async def not_found(request, exc):
+        return _error(404, str(exc))
+
+    async def forbidden(request, exc):
+        return _error(403, str(exc))
+
+    routes = [Route("/", page), Route("/static/{token}/{root}/{path:path}", static)]
+    routes += _report_routes(service) if mode == "report" else _dataset_routes(service)
+    app = Starlette(routes=routes, exception_handlers={ReviewError: review_error, NotFound: not_found,
+                                                       PermissionError: forbidden})
+    return TokenGuard(app, token)
+
+
+def _params(request) -> dict[str, str]:
+    return {key: value for key, value in request.query_params.items()}
+
+
+def _report_routes(report: EvaluationReport) -> list:
+    """/api/report (job, counts, columns), /api/report/rows[?method=] (worst first), /api/report/rows/I/panel."""
+    from starlette.responses import JSONResponse, Response
+    from starlette.routing import Route
+
+    def summary(request):
+        return JSONResponse(report.summary())
+
+    def rows(request):
+        return JSONResponse({"rows": report.rows_query(_params(request))})
+
+    def panel(request):
+        return Response(report.panel_png(request.path_params["index"]), media_type="image/png",
+                        headers={"Cache-Control": "max-age=3600"})
+
+    return [Route("/api/report", summary), Route("/api/report/rows", rows),
+            Route("/api/report/rows/{index:int}/panel", panel)]
+
+
+def _dataset_routes(service: ReviewService) -> list:
+    """The tree review: batches, filtered tree pages, one tree's GLB, skeleton and view images, verdicts."""
+    from starlette.concurrency import run_in_threadpool
+    from starlette.requests import Request
+    from starlette.responses import JSONResponse, Response
+    from starlette.routing import Route
+
     def batches(request: Request):
         return JSONResponse(service.summary())
 
     def trees(request: Request):
-        return JSONResponse(service.list_trees(TreeQuery(params(request))))
+        return JSONResponse(service.list_trees(TreeQuery(_params(request))))
 
     def tree(request: Request):
         return JSONResponse(service.tree(request.path_params["tree_id"], request.query_params.get("reviewer")))
@@ -164,26 +209,13 @@ def create_app(service: ReviewService, token: str, roots: dict[str, Path] | None
             return _error(400, f"malformed JSON in the request body: {exc}")
         return JSONResponse(await run_in_threadpool(service.post_verdict, parsed))
 
-    async def review_error(request, exc):
-        return _error(400, str(exc))
-
-    async def not_found(request, exc):
-        return _error(404, str(exc))
-
-    async def forbidden(request, exc):
-        return _error(403, str(exc))
-
-    routes = [
-        Route("/", page), Route("/static/{token}/{root}/{path:path}", static),
+    return [
         Route("/api/batches", batches), Route("/api/trees", trees), Route("/api/trees/{tree_id}", tree),
         Route("/api/trees/{tree_id}/neighbours", neighbours), Route("/api/trees/{tree_id}/glb", glb),
         Route("/api/trees/{tree_id}/skeleton", skeleton),
         Route("/api/trees/{tree_id}/views/{view:int}/{output}", image),
         Route("/api/verdicts", verdicts, methods=["GET", "POST"]),
     ]
-    app = Starlette(routes=routes, exception_handlers={ReviewError: review_error, NotFound: not_found,
-                                                       PermissionError: forbidden})
-    return TokenGuard(app, token)
 
 
 def listen_socket(host: str, port: int) -> socket.socket:

@@ -195,3 +195,27 @@ def test_an_orthographic_camera_with_its_own_fitted_half_extent_is_the_fitted_ca
 def test_a_half_extent_that_is_not_positive_and_finite_is_rejected(half):
     with pytest.raises(CameraError, match="half_extent"):
         orthographic_camera(_wide_tree_points(0), 0.0, 0.0, SIZE, half_extent=half)
+
+
+def test_a_composite_rig_gives_each_part_framed_as_alone_named_part_slash_view():
+    pts = np.array([[-1, -2, 0], [1, 1, 4.0]])
+    cameras = make_rig("tsn4+two-view+two-view:shared", pts, SIZE, np.random.default_rng(0))
+    assert [c.name for c in cameras] == ["tsn4/front", "tsn4/right", "tsn4/back", "tsn4/left", "two-view/front",
+                                         "two-view/side", "two-view:shared/front", "two-view:shared/side"]
+    alone = [*make_rig("tsn4", pts, SIZE, np.random.default_rng(0)),
+             *make_rig("two-view", pts, SIZE, np.random.default_rng(0)),
+             *make_rig("two-view:shared", pts, SIZE, np.random.default_rng(0))]
+    for joined, single in zip(cameras, alone):
+        assert np.array_equal(joined.world_to_camera, single.world_to_camera) and np.array_equal(joined.K, single.K)
+    assert Camera.from_dict(json.loads(json.dumps(cameras[6].to_dict()))).name == "two-view:shared/front"
+    # Jittered parts draw from the one rng in part order: the same seed, the same cameras.
+    a = make_rig("tsn4:jitter+two-view", pts, SIZE, np.random.default_rng(3))
+    b = make_rig("tsn4:jitter+two-view", pts, SIZE, np.random.default_rng(3))
+    assert all(np.array_equal(x.world_to_camera, y.world_to_camera) for x, y in zip(a, b))
+
+
+@pytest.mark.parametrize("rig, message", [("tsn4+tsn4", "names a rig twice"), ("tsn4+", "is unknown"),
+                                          ("tsn4+orbit:0", "orbit needs")])
+def test_a_bad_composite_rig_names_the_part(rig, message):
+    with pytest.raises(CameraError, match=message):
+        make_rig(rig, np.zeros((2, 3)), SIZE, np.random.default_rng(0))
