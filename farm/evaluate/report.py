@@ -126,8 +126,8 @@ def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, tabl
         methods_with = {m for m, s in keys if metric in table[(m, s)]["metrics"]}
         paper = info.paper if info and (not info.paper_method or info.paper_method in methods_with) else ""
         body.append([f"{label}{better}", *cells, paper])
-    if sweep is not None and len(sweep):
-        values = sweep["unit_cube_hausdorff"].to_numpy(dtype=float)
+    values = np.zeros(0) if sweep is None else sweep["unit_cube_hausdorff"].to_numpy(dtype=float)
+    if np.isfinite(values).any():
         median, q25, q75 = _quartiles(values[np.isfinite(values)])
         body.append([f"{METRICS['rotation_sweep_unit_cube_hausdorff'].label} (lower better)",
                      *[f"{median:.3f} [{q25:.3f}, {q75:.3f}] ({len(values)} views)" if m == "params" else "-"

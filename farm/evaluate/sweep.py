@@ -25,6 +25,7 @@ def sweep_tree(plan):
 def _sweep_task(unit, models, settings, step: float) -> dict:
     import reconstruct
     from reconstruct import metrics
+    from species.errors import TreefarmError
 
     from .job import _context, load_tree
 
@@ -35,9 +36,12 @@ def _sweep_task(unit, models, settings, step: float) -> dict:
     net = ctx.net("sketchnet")
     rows = {"azimuth_deg": [], "unit_cube_hausdorff": []}
     for k, view in enumerate(views):
-        result = reconstruct.from_params(view.images["sketch_tsn"], net=net, height=tree.skeleton.height)
         rows["azimuth_deg"].append(k * 360.0 / n)
-        rows["unit_cube_hausdorff"].append(metrics.unit_cube_hausdorff(result.skeleton, tree.skeleton))
+        try:
+            result = reconstruct.from_params(view.images["sketch_tsn"], net=net, height=tree.skeleton.height)
+            rows["unit_cube_hausdorff"].append(metrics.unit_cube_hausdorff(result.skeleton, tree.skeleton))
+        except TreefarmError:  # a view the method cannot read: a gap in the curve, not a failed job
+            rows["unit_cube_hausdorff"].append(float("nan"))
     return {"tree_id": unit.tree_id, "species": tree.species, "dataset": unit.dataset, "model": net.source, **rows}
 
 
