@@ -20,6 +20,9 @@ GALLERY_METRIC = ("crown_iou_unseen", "cloud_fit_10cm", "silhouette_iou_input",
 # The registered held-out figures worth a line in the summary, per trained task.
 _REGISTERED = {"sketchnet": ("score_overall", "accuracy_species"), "pix2pix-silhouette": ("depth_error",),
                "pix2pix-trunk": ("depth_error",)}
+# The metrics the per-species plot shows (one panel each; every metric is in the per-method plot).
+HEADLINE = ("crown_iou_unseen", "node_chamfer", "surface_chamfer", "skeleton_f1_auc", "height_rel_error",
+            "cloud_fit_10cm", "param_score", "silhouette_iou_input")
 _PACKAGES = ("numpy", "scipy", "trimesh", "pyarrow", "ray", "onnxruntime", "pycolmap", "torch", "mlflow-skinny")
 
 
@@ -178,27 +181,31 @@ def _save(fig, path: Path) -> Path:
     from .job import _write_atomically
 
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=90, metadata={"Software": None})
+    fig.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
     _pyplot().close(fig)
     _write_atomically(path, buffer.getvalue())
     return path
 
 
 def _distribution_plot(rows, by: str, path: Path) -> Path | None:
-    """One panel per metric: the metric's values per `by` group (method, or method/species) as box plots."""
+    """One panel per metric: the metric's values per `by` group (method, or method/species: the HEADLINE metrics
+    only) as box plots. Fixed margins, not tight_layout: that alone took seconds a plot."""
     from reconstruct.scoring import METRICS
 
     plt = _pyplot()
     ok = rows[rows["status"] == "ok"]
-    metrics = [m for m in metric_columns(rows) if m in ok and np.isfinite(ok[m].to_numpy(dtype=float)).any()]
+    metrics = [m for m in metric_columns(rows) if m in ok and np.isfinite(ok[m].to_numpy(dtype=float)).any()
+               and (by == "method" or m in HEADLINE)]
     if not metrics:
         return None
     groups = (ok["method"] if by == "method" else ok["method"] + " / " + ok["species"].fillna("?")).astype(str)
     names = sorted(groups.unique())
-    columns = 3
+    columns = 3 if by == "method" else 2
     n_rows = int(np.ceil(len(metrics) / columns))
-    height = max(2.6, 0.28 * len(names) + 1.2)
+    height = max(2.4, 0.22 * len(names) + 1.0)
     fig, axes = plt.subplots(n_rows, columns, figsize=(5.2 * columns, height * n_rows), squeeze=False)
+    fig.subplots_adjust(left=0.1 if by == "method" else 0.2, right=0.98, top=1 - 0.35 / (height * n_rows),
+                        bottom=0.3 / (height * n_rows), wspace=0.45 if by == "method" else 0.75, hspace=0.55)
     for ax, metric in zip(axes.flat, metrics):
         data, labels = [], []
         for name in names:
@@ -215,7 +222,6 @@ def _distribution_plot(rows, by: str, path: Path) -> Path | None:
         ax.tick_params(labelsize=7)
     for ax in list(axes.flat)[len(metrics):]:
         ax.axis("off")
-    fig.tight_layout()
     return _save(fig, path)
 
 
@@ -259,7 +265,7 @@ def _sweep_plot(sweep, path: Path) -> Path:
     ax.set_ylabel("unit-cube Hausdorff")
     ax.set_title(f"rotation sweep: {sweep['species'].iloc[0]} {sweep['tree_id'].iloc[0]} (params)", fontsize=9)
     ax.legend(fontsize=8)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.12, right=0.98, top=0.88, bottom=0.18)
     return _save(fig, path)
 
 
