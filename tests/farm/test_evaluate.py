@@ -244,3 +244,16 @@ def test_eval_settings_are_part_of_the_job_record(eval_data):
     a = plan_evaluation([str(eval_data)], ["cloud"], part="all", settings=EvalSettings(surface_samples=10))
     b = plan_evaluation([str(eval_data)], ["cloud"], part="all", settings=EvalSettings(surface_samples=20))
     assert a.record != b.record and a.record["settings"]["surface_samples"] == 10
+
+
+@pytest.mark.slow
+def test_the_photos_method_renders_an_orbit_and_scores_the_sfm_tree_in_the_true_frame(eval_data, tmp_path):
+    out = tmp_path / "report"
+    assert main(["evaluate", "--data", str(eval_data), "--part", "all", "--trees", "1", "--methods", "photos",
+                 "--out", str(out), "--sweep-step", "0", "--surface-samples", "2000"]) == 0
+    row = pd.read_parquet(out / "metrics.parquet").iloc[0]
+    assert row["status"] == "ok" and row["method"] == "photos"
+    # Known poses give metres in the renders' world: the SfM tree stands where the true one does, about as tall
+    # (sparse SfM: docs/reconstruct.md measures -10 % on an oak).
+    assert row["height_rel_error"] < 0.3 and row["node_chamfer"] < 0.3
+    assert 0 < row["cloud_fit_10cm"] <= 1 and row["seconds_photos__cycles"] > 0 and row["seconds_sfm_features"] > 0
