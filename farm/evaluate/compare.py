@@ -40,7 +40,7 @@ class Change:
 def _summary(report: str | Path) -> dict:
     import pandas as pd
 
-    from .job import METRICS_FILE, EvaluationError
+    from .units import METRICS_FILE, EvaluationError
     from .report import summary_table
 
     path = Path(report) / METRICS_FILE
@@ -70,7 +70,7 @@ def parse_gate(text: str) -> tuple[str, float]:
     """METRIC[:TOLERANCE] -> (metric, tolerance); EvaluationError naming the value for anything else."""
     from reconstruct.scoring import METRICS
 
-    from .job import EvaluationError
+    from .units import EvaluationError
 
     metric, _, tolerance = text.partition(":")
     if metric != "all" and metric not in METRICS:

@@ -34,7 +34,7 @@ def input_units(folder: str, methods: Sequence[str]):
     """(units, skipped lines) for the files in `folder`; EvaluationError for a folder without inputs."""
     from reconstruct.clouds import CLOUD_SUFFIXES
 
-    from .job import EvaluationError, Unit
+    from .units import EvaluationError, Unit
 
     root = Path(folder)
     if not root.is_dir():

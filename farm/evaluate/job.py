@@ -26,24 +26,16 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-from .methods import METHODS, EvalSettings, HeldOutTree, MethodContext, run_method
+from .inputs import input_units, run_input
+from .methods import METHODS, EvalSettings, run_method
+from .report import write_report
+from .sweep import run_sweep
+from .units import (FORMAT, ID_COLUMNS, JOB_FILE, METRICS_FILE, PANELS, PARTS, ROWS, EvaluationError, Unit,
+                    load_tree, worker_context, write_atomically)
 
 __all__ = ["EvaluationError", "Unit", "DatasetInfo", "EvaluationPlan", "plan_evaluation", "run_evaluation",
            "JOB_FILE", "ROWS", "PANELS", "METRICS_FILE", "PARTS", "read_rows", "serves", "ID_COLUMNS",
            "load_tree", "evaluation_data_spec"]
-
-JOB_FILE = "evaluation.json"
-ROWS, PANELS = "rows", "panels"
-METRICS_FILE = "metrics.parquet"
-FORMAT = "treefarm-evaluation/1"
-PARTS = ("test", "val", "all")
-ID_COLUMNS = ["method", "source", "dataset", "spec_digest", "tree_id", "species", "status", "error"]
-
-
-class EvaluationError(TreefarmError):
-    """An evaluation that cannot run as asked: an unknown method, an empty dataset, a missing model, a report
-    folder of another job."""
-
 
 @dataclass(frozen=True)
 class DatasetInfo:
@@ -53,23 +45,6 @@ class DatasetInfo:
     rig: str
     outputs: tuple[str, ...]
     held_out: tuple[str, ...]  # tree ids, plan order
-
-
-@dataclass(frozen=True)
-class Unit:
-    """One (method, tree) to evaluate: a dataset's tree, or a real input file (source "input")."""
-
-    method: str
-    source: str
-    dataset: str
-    spec_digest: str
-    tree_id: str
-    views: tuple[tuple[str, str], ...] = ()  # (method's view name, the dataset's view_name)
-
-    @property
-    def key(self) -> str:
-        stem = Path(self.tree_id).name if self.source == "input" else self.tree_id
-        return f"{self.spec_digest[:12]}-{stem}"
 
 
 @dataclass
@@ -175,8 +150,6 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
                 continue
             units += [Unit(method, "held-out", info.path, info.spec_digest, tree, pairs) for tree in chosen]
     if inputs is not None:
-        from .inputs import input_units
-
         input_units_, input_skipped = input_units(inputs, methods)
         units += input_units_
         skipped += input_skipped
@@ -189,75 +162,8 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
     return EvaluationPlan(datasets, methods, units, skipped, record)
 
 
-# ------------------------------------------------------------------------------------------------ one unit
-def load_tree(unit: Unit, renderer_size: int | None = None) -> HeldOutTree:
-    """The unit's true tree (`species.rebuild` of the stored dictionary) and the views its method reads."""
-    import pyarrow.compute as pc
-    import pyarrow.parquet as pq
-
-    import species
-    from farm.dataset import FLOAT_OUTPUTS, part_files, read_manifest, reading_part
-    from farm.image_codec import METRIC_MAPS, decode_map
-    from renderers import Camera
-
-    location, files = part_files(unit.dataset, "trees")
-    params, name = None, None
-    for file in files:
-        with reading_part(file):
-            table = pq.read_table(file, columns=["tree_id", "species", "params_json"], filesystem=location.filesystem,
-                                  filters=pc.field("tree_id") == unit.tree_id)
-        if table.num_rows:
-            row = table.to_pylist()[0]
-            params, name = json.loads(row["params_json"]), row["species"]
-            break
-    if params is None:
-        raise EvaluationError(f"tree {unit.tree_id} is not in {unit.dataset}")
-    skeleton, mesh = species.rebuild(params)
-    tree = HeldOutTree(unit.dataset, unit.spec_digest, unit.tree_id, name, params, skeleton, mesh)
-    if not unit.views:
-        return tree
-    needs = METHODS[unit.method].needs
-    stored = read_manifest(unit.dataset)["job"]["render"]["outputs"]
-    outputs = [o for o in (*needs.outputs, *needs.optional) if o in stored]
-    columns = ["tree_id", "view_name", "camera_json"]
-    for o in outputs:
-        columns += [o] + ([f"{o}_scale", f"{o}_offset"] if o in FLOAT_OUTPUTS else [])
-    wanted = {dataset_view: view for view, dataset_view in unit.views}
-    location, files = part_files(unit.dataset, "views")
-    for file in files:
-        with reading_part(file):
-            table = pq.read_table(file, columns=columns, filesystem=location.filesystem,
-                                  filters=(pc.field("tree_id") == unit.tree_id))
-        for row in table.to_pylist():
-            if row["view_name"] in wanted:
-                images = {o: decode_map(row[o], row.get(f"{o}_scale"), row.get(f"{o}_offset"), metric=o in METRIC_MAPS)
-                          for o in outputs}
-                tree.views[wanted[row["view_name"]]] = (Camera.from_dict(json.loads(row["camera_json"])), images)
-    missing = sorted(set(wanted.values()) - set(tree.views))
-    if missing:
-        raise EvaluationError(f"tree {unit.tree_id} of {unit.dataset} has no {', '.join(missing)} view")
-    return tree
-
-
-_CONTEXTS: dict[str, MethodContext] = {}  # per worker process: the renderer and networks, kept between units
-
-
-def _context(models: str | None, settings: EvalSettings) -> MethodContext:
-    key = json.dumps([models, asdict(settings)])
-    if key not in _CONTEXTS:
-        _CONTEXTS[key] = MethodContext(models, settings)
-    return _CONTEXTS[key]
-
-
 def _stage_column(stage: str) -> str:
     return "seconds_" + "".join(c if c.isalnum() else "_" for c in stage.lower()).strip("_")
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    partial = path.with_name(f".{path.name}.{os.getpid()}.partial")
-    partial.write_bytes(data)
-    os.replace(partial, path)
 
 
 def evaluate_unit(unit: Unit, report_dir: str, models: str | None, settings: EvalSettings) -> dict:
@@ -273,10 +179,8 @@ def evaluate_unit(unit: Unit, report_dir: str, models: str | None, settings: Eva
            "tree_id": unit.tree_id, "species": None, "status": "ok", "error": None}
     started = time.perf_counter()
     try:
-        ctx = _context(models, settings)
+        ctx = worker_context(models, settings)
         if unit.source == "input":
-            from .inputs import run_input
-
             result, row["species"] = run_input(unit, ctx)
         else:
             tree = load_tree(unit)
@@ -287,7 +191,7 @@ def evaluate_unit(unit: Unit, report_dir: str, models: str | None, settings: Eva
         row["models"] = json.dumps(result.models, sort_keys=True)
         panel = Path(PANELS) / unit.method / f"{unit.key}.png"
         title = f"{unit.method}: {row['species'] or ''} {Path(unit.tree_id).name}"
-        _write_atomically(report / panel, png_bytes(contact_sheet([(title, result.cells)], cell=192), 6))
+        write_atomically(report / panel, png_bytes(contact_sheet([(title, result.cells)], cell=192), 6))
         row["panel"] = str(panel)
     except TreefarmError as error:
         row.update(status="failed", error=str(error).strip().splitlines()[0] if str(error).strip() else
@@ -298,7 +202,7 @@ def evaluate_unit(unit: Unit, report_dir: str, models: str | None, settings: Eva
     table = pa.Table.from_pylist([row])
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink)
-    _write_atomically(report / ROWS / unit.method / f"{unit.key}.parquet", sink.getvalue().to_pybytes())
+    write_atomically(report / ROWS / unit.method / f"{unit.key}.parquet", sink.getvalue().to_pybytes())
     return row
 
 
@@ -372,15 +276,12 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
 
     from farm.pipeline import ray_connection
 
-    from .report import write_report
-    from .sweep import run_sweep
-
     report = Path(out)
     sources = _check_models(plan, models)
     _check_report_dir(report, plan.record)
     report.mkdir(parents=True, exist_ok=True)
     if not (report / JOB_FILE).exists():
-        _write_atomically(report / JOB_FILE, json.dumps(plan.record, indent=1, sort_keys=True).encode())
+        write_atomically(report / JOB_FILE, json.dumps(plan.record, indent=1, sort_keys=True).encode())
     pending = [u for u in plan.units if not (report / ROWS / u.method / f"{u.key}.parquet").exists()]
     done_before = len(plan.units) - len(pending)
     limit = max(1, workers or os.cpu_count() or 1)
@@ -406,7 +307,7 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
 
     sink = pa.BufferOutputStream()
     pq.write_table(pa.Table.from_pandas(rows, preserve_index=False), sink)
-    _write_atomically(report / METRICS_FILE, sink.getvalue().to_pybytes())
+    write_atomically(report / METRICS_FILE, sink.getvalue().to_pybytes())
     paths = write_report(report, rows, plan, sources, models, sweep)
     return {"rows": rows, "done_before": done_before, "ran": len(pending), "models": sources, "report": paths,
             "sweep": sweep, "seconds": {"trees": trees_seconds, "total": time.perf_counter() - started}}

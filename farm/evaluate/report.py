@@ -30,7 +30,7 @@ def metric_columns(rows) -> list[str]:
     """The metric columns of a rows frame (numbers, not ids, timings, models or panels) in METRICS' order."""
     from reconstruct.scoring import METRICS
 
-    from .job import ID_COLUMNS
+    from .units import ID_COLUMNS
 
     present = [c for c in rows.columns if c not in ID_COLUMNS and not c.startswith("seconds_")
                and c not in ("models", "panel")]
@@ -178,12 +178,12 @@ def _pyplot():
 def _save(fig, path: Path) -> Path:
     import io
 
-    from .job import _write_atomically
+    from .units import write_atomically
 
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
     _pyplot().close(fig)
-    _write_atomically(path, buffer.getvalue())
+    write_atomically(path, buffer.getvalue())
     return path
 
 
@@ -229,7 +229,7 @@ def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
     """The method's best, median and worst trees by its gallery metric: their panels stacked, labelled."""
     import cv2
 
-    from .job import _write_atomically
+    from .units import write_atomically
     from species.meshing.png import png_bytes
 
     ok = rows[(rows["method"] == method) & (rows["status"] == "ok") & rows["panel"].notna()] \
@@ -252,7 +252,7 @@ def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
         images.append(np.concatenate([band, panel]))
     width = max(image.shape[1] for image in images)
     images = [np.pad(image, ((0, 0), (0, width - image.shape[1]), (0, 0)), constant_values=255) for image in images]
-    _write_atomically(path, png_bytes(np.concatenate(images), 6))
+    write_atomically(path, png_bytes(np.concatenate(images), 6))
     return path
 
 
@@ -271,11 +271,11 @@ def _sweep_plot(sweep, path: Path) -> Path:
 
 def write_report(report: Path, rows, plan, sources: dict, models: str | None, sweep) -> dict[str, Path]:
     """summary.md and the plots; returns what was written, by name."""
-    from .job import _write_atomically
+    from .units import write_atomically
 
     table = summary_table(rows)
     paths = {}
-    _write_atomically(report / SUMMARY_FILE, _summary_markdown(rows, plan, sources, models, sweep, table).encode())
+    write_atomically(report / SUMMARY_FILE, _summary_markdown(rows, plan, sources, models, sweep, table).encode())
     paths["summary"] = report / SUMMARY_FILE
     for by, name in (("method", "metrics_by_method.png"), ("species", "metrics_by_species.png")):
         written = _distribution_plot(rows, by, report / name)

@@ -27,9 +27,9 @@ def _sweep_task(unit, models, settings, step: float) -> dict:
     from reconstruct import metrics
     from species.errors import TreefarmError
 
-    from .job import _context, load_tree
+    from .units import load_tree, worker_context
 
-    ctx = _context(models, settings)
+    ctx = worker_context(models, settings)
     tree = load_tree(unit)
     n = max(1, int(round(360.0 / step)))
     views = ctx.renderer.render(tree.mesh, tree.skeleton, f"orbit:{n}:10", ["sketch_tsn"], np.random.default_rng(0))
@@ -51,7 +51,7 @@ def run_sweep(plan, report: Path, models, settings, step: float):
     import pandas as pd
     import ray
 
-    from .job import _write_atomically
+    from .units import write_atomically
 
     path = report / SWEEP_FILE
     if path.exists():
@@ -63,5 +63,5 @@ def run_sweep(plan, report: Path, models, settings, step: float):
     frame = pd.DataFrame({"azimuth_deg": out["azimuth_deg"], "unit_cube_hausdorff": out["unit_cube_hausdorff"]})
     for key in ("tree_id", "species", "dataset", "model"):
         frame[key] = out[key]
-    _write_atomically(path, frame.to_parquet(index=False))
+    write_atomically(path, frame.to_parquet(index=False))
     return frame
