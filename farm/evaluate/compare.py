@@ -11,6 +11,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from .units import METRICS_FILE, EvaluationError
+
 __all__ = ["Change", "compare_reports", "parse_gate", "broken_gates", "format_changes"]
 
 
@@ -40,7 +42,6 @@ class Change:
 def _summary(report: str | Path) -> dict:
     import pandas as pd
 
-    from .units import METRICS_FILE, EvaluationError
     from .report import summary_table
 
     path = Path(report) / METRICS_FILE
@@ -69,8 +70,6 @@ def compare_reports(a: str | Path, b: str | Path) -> list[Change]:
 def parse_gate(text: str) -> tuple[str, float]:
     """METRIC[:TOLERANCE] -> (metric, tolerance); EvaluationError naming the value for anything else."""
     from reconstruct.scoring import METRICS
-
-    from .units import EvaluationError
 
     metric, _, tolerance = text.partition(":")
     if metric != "all" and metric not in METRICS:

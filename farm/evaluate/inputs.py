@@ -21,6 +21,7 @@ from typing import Sequence
 import numpy as np
 
 from .methods import MethodContext, MethodResult, joined_share
+from .units import EvaluationError, Unit
 
 __all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "outline_iou"]
 
@@ -33,8 +34,6 @@ _CLOSING_PX = 6  # gaps up to about twice this closed in a drawing's and a rende
 def input_units(folder: str, methods: Sequence[str]):
     """(units, skipped lines) for the files in `folder`; EvaluationError for a folder without inputs."""
     from reconstruct.clouds import CLOUD_SUFFIXES
-
-    from .units import EvaluationError, Unit
 
     root = Path(folder)
     if not root.is_dir():

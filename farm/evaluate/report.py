@@ -9,7 +9,10 @@ from __future__ import annotations
 import json
 import platform
 from pathlib import Path
+
 import numpy as np
+
+from .units import ID_COLUMNS, write_atomically
 
 __all__ = ["write_report", "metric_columns", "summary_table", "registered_scores", "GALLERY_METRIC", "SUMMARY_FILE"]
 
@@ -29,8 +32,6 @@ _PACKAGES = ("numpy", "scipy", "trimesh", "pyarrow", "ray", "onnxruntime", "pyco
 def metric_columns(rows) -> list[str]:
     """The metric columns of a rows frame (numbers, not ids, timings, models or panels) in METRICS' order."""
     from reconstruct.scoring import METRICS
-
-    from .units import ID_COLUMNS
 
     present = [c for c in rows.columns if c not in ID_COLUMNS and not c.startswith("seconds_")
                and c not in ("models", "panel")]
@@ -178,8 +179,6 @@ def _pyplot():
 def _save(fig, path: Path) -> Path:
     import io
 
-    from .units import write_atomically
-
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=80, metadata={"Software": None})
     _pyplot().close(fig)
@@ -229,7 +228,6 @@ def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
     """The method's best, median and worst trees by its gallery metric: their panels stacked, labelled."""
     import cv2
 
-    from .units import write_atomically
     from species.meshing.png import png_bytes
 
     ok = rows[(rows["method"] == method) & (rows["status"] == "ok") & rows["panel"].notna()] \
@@ -271,8 +269,6 @@ def _sweep_plot(sweep, path: Path) -> Path:
 
 def write_report(report: Path, rows, plan, sources: dict, models: str | None, sweep) -> dict[str, Path]:
     """summary.md and the plots; returns what was written, by name."""
-    from .units import write_atomically
-
     table = summary_table(rows)
     paths = {}
     write_atomically(report / SUMMARY_FILE, _summary_markdown(rows, plan, sources, models, sweep, table).encode())

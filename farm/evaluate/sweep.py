@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .units import load_tree, worker_context, write_atomically
+
 __all__ = ["run_sweep", "SWEEP_FILE", "sweep_tree"]
 
 SWEEP_FILE = "sweep.parquet"
@@ -26,8 +28,6 @@ def _sweep_task(unit, models, settings, step: float) -> dict:
     import reconstruct
     from reconstruct import metrics
     from species.errors import TreefarmError
-
-    from .units import load_tree, worker_context
 
     ctx = worker_context(models, settings)
     tree = load_tree(unit)
@@ -50,8 +50,6 @@ def run_sweep(plan, report: Path, models, settings, step: float):
     dataset serves the params method."""
     import pandas as pd
     import ray
-
-    from .units import write_atomically
 
     path = report / SWEEP_FILE
     if path.exists():
