@@ -20,39 +20,18 @@ Reference: issue 11's target, IoU >= 0.9 at every switch (LOD1 512 px, LOD2 256,
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 
 import numpy as np
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-SHIFT_PX = 0.5
+from farm.library.quality import SHIFT_PX, level_floors  # noqa: E402
+
 TURNS_DEG = (1.0, 4.0)
 COLUMNS = ("library", f"LOD0 {SHIFT_PX:g} px aside", *(f"LOD0 turned {t:g} deg" for t in TURNS_DEG))
-
-
-def level_floors(renderer, cover, points, switch_px: int) -> tuple[float, ...]:
-    """(half-pixel floor, one floor per TURNS_DEG) of LOD0's coverage tree `cover` at `switch_px`: least IoU
-    over the quality azimuths (and, for the half pixel, over a move across and a move up)."""
-    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
-
-    def silhouette(camera) -> np.ndarray:
-        return closed_silhouette(renderer.coverage(cover, camera))
-
-    shifted, turned = [], {turn: [] for turn in TURNS_DEG}
-    for azimuth in QUALITY_AZIMUTHS:
-        camera = switch_camera(points, azimuth, switch_px)
-        reference = silhouette(camera)
-        for axis in (0, 1):  # the principal point half a pixel over, then up: the whole image moves by that much
-            aside = camera.K.copy()
-            aside[axis, 2] += SHIFT_PX
-            shifted.append(silhouette_iou(reference, silhouette(dataclasses.replace(camera, K=aside))))
-        # Seen from azimuth + t, the tree looks as if turned by -t in front of the camera of azimuth.
-        for turn in TURNS_DEG:
-            turned[turn].append(silhouette_iou(reference, silhouette(switch_camera(points, azimuth + turn, switch_px))))
-    return min(shifted), *(min(values) for values in turned.values())
 
 
 def main(names: list[str]) -> None:
@@ -78,7 +57,7 @@ def main(names: list[str]) -> None:
         levels = asset.levels[1:]
         level_names = [level.name for level in levels]
         switch_sizes = [level.switch_px for level in levels]
-        rows[name] = [(min(level.iou), *level_floors(renderer, cover, points, level.switch_px)) for level in levels]
+        rows[name] = [(min(level.iou), *level_floors(renderer, cover, points, level.switch_px, TURNS_DEG)) for level in levels]
 
     for k, (level_name, switch_px) in enumerate(zip(level_names, switch_sizes)):
         print(f"\n{level_name} at {switch_px} px: least silhouette IoU over 8 azimuths (target {IOU_TARGET})")

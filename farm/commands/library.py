@@ -1,7 +1,8 @@
 """`farm library`: build a studio asset library (LODs, impostor, wind, seasons; GLB, USD, OBJ, FBX) on the farm.
 
 `farm library [SPEC.yaml] --out DIR [--species NAME[,NAME]] [--per-species N]` (no spec: every preset, 4 variants
-each; resumable), `farm library validate DIR`, `farm library add DIR --species NAME --seed N`.
+each; resumable), `farm library validate DIR [--quality]` (--quality: each level's IoU beside its
+half-pixel floor), `farm library add DIR --species NAME --seed N`.
 """
 from __future__ import annotations
 
@@ -24,6 +25,9 @@ def register(subparsers) -> None:
                         "build, NAME[,NAME], from the spec's (default: all)")
     parser.add_argument("--seed", type=int, help="(add) the tree seed of the new asset")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quality", action="store_true",
+                        help="(validate) rebuild each asset's LOD0 and report every level's IoU beside its "
+                             "half-pixel floor (the restated target: IoU >= floor - 0.02)")
     parser.set_defaults(run=run)
 
 
@@ -51,7 +55,22 @@ def _load(args):
     return spec
 
 
+def _print_floors(folder: str, progress: bool) -> None:
+    from farm.library.quality import FLOOR_MARGIN, library_floors
+    from farm.table import format_table
+
+    floors = library_floors(folder, progress=progress)
+    rows = [[f.asset, f.level, f.switch_px, f"{f.iou:.3f}", f"{f.floor:.3f}", f"{f.margin:+.3f}",
+             "meets" if f.meets else "misses"] for f in floors]
+    print(format_table(["asset", "level", "switch px", "least IoU", "half-pixel floor", "margin",
+                        f"IoU >= floor - {FLOOR_MARGIN}"], rows))
+    print(f"{folder}: {sum(f.meets for f in floors)} of {len(floors)} levels within {FLOOR_MARGIN} of their "
+          "half-pixel floor")
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.quality and args.spec != "validate":
+        raise CommandLineError("--quality is a `farm library validate DIR` option")
     if args.spec == "validate":
         from farm.library.catalog import IOU_TARGET, quality_shortfalls, validate_library
 
@@ -68,6 +87,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"below target: {problem}")
         print(f"{args.folder}: library valid; {len(shortfalls)} level(s) below the silhouette IoU target "
               f"{IOU_TARGET}")
+        if args.quality:
+            _print_floors(args.folder, progress=not args.quiet)
         return 0
     if args.spec == "add":
         from farm.library.job import add_asset

@@ -295,3 +295,22 @@ def test_a_folder_that_is_not_a_library_is_refused(tmp_path, capsys):
     assert "not an asset library" in capsys.readouterr().err
     assert farm_main(["library", "validate", str(tmp_path)]) == 1
     assert list(tmp_path.iterdir()) == []
+
+
+def test_validate_quality_reports_every_level_beside_its_half_pixel_floor(library, capsys):
+    from farm.library.quality import FLOOR_MARGIN, library_floors
+
+    floors = library_floors(str(library))
+    rows = json.loads((library / "catalog.json").read_text())
+    assert len(floors) == sum(len(row["level_names"]) - 1 for row in rows)  # every level after LOD0
+    by_id = {row["id"]: row for row in rows}
+    for floor in floors:
+        assert 0 < floor.floor <= 1 and 0 <= floor.iou <= 1
+        row = by_id[floor.asset]  # the rebuilt asset measures what the build stored
+        assert abs(row["iou_min"][row["level_names"].index(floor.level)] - floor.iou) < 1e-9
+        assert floor.meets == (floor.iou >= floor.floor - FLOOR_MARGIN)
+    capsys.readouterr()
+    assert farm_main(["library", "validate", str(library), "--quality", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "half-pixel floor" in out and f"{sum(f.meets for f in floors)} of {len(floors)} levels within" in out
+    assert farm_main(["library", "add", str(library), "--species", "maple", "--seed", "3", "--quality"]) == 2

@@ -1,0 +1,108 @@
+"""Each level's silhouette IoU beside the measure's own floor (issue 26): LOD0 against LOD0 moved half a pixel.
+
+An engine's temporal anti-aliasing jitters the camera by sub-pixel offsets every frame, so a level whose silhouette
+differs from LOD0's by no more than LOD0's own half-pixel shift pops no more than LOD0 already shimmers. The floor
+of a level: LOD0's coverage silhouette at the level's switch size against the same camera with its principal point
+moved SHIFT_PX across, then up; the least IoU over renderers.impostor.QUALITY_AZIMUTHS (both silhouettes closed
+as the library measures them). A level meets the restated target when its least IoU is at least its floor minus
+FLOOR_MARGIN. `level_floors` also gives the floors of LOD0 turned by given angles (what a view-sampled impostor
+shows between its views), for `benchmarks/bench_silhouette_floor.py`.
+
+The floors cost extra renders (two per azimuth and level), so a build stores only the IoU per level;
+`farm library validate DIR --quality` rebuilds each asset's LOD0 (same species, seed and spec: the same bytes)
+and reports floor and margin per level.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["SHIFT_PX", "FLOOR_MARGIN", "LevelFloor", "level_floors", "asset_floors", "library_floors"]
+
+SHIFT_PX = 0.5
+FLOOR_MARGIN = 0.02
+
+
+@dataclass(frozen=True)
+class LevelFloor:
+    """One level of one asset: its least IoU over the quality azimuths, its half-pixel floor, the margin."""
+
+    asset: str
+    level: str
+    switch_px: int
+    iou: float
+    floor: float
+
+    @property
+    def margin(self) -> float:
+        return self.iou - self.floor
+
+    @property
+    def meets(self) -> bool:
+        return self.iou >= self.floor - FLOOR_MARGIN
+
+
+def level_floors(renderer, cover, points, switch_px: int, turns_deg: Sequence[float] = ()) -> tuple[float, ...]:
+    """(half-pixel floor, one floor per turn in `turns_deg`) of LOD0's coverage tree `cover` at `switch_px`: the
+    least IoU over the quality azimuths (for the half pixel, over a move across and a move up)."""
+    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
+
+    def silhouette(camera) -> np.ndarray:
+        return closed_silhouette(renderer.coverage(cover, camera))
+
+    shifted, turned = [], {turn: [] for turn in turns_deg}
+    for azimuth in QUALITY_AZIMUTHS:
+        camera = switch_camera(points, azimuth, switch_px)
+        reference = silhouette(camera)
+        for axis in (0, 1):  # the principal point half a pixel over, then up: the whole image moves by that much
+            aside = camera.K.copy()
+            aside[axis, 2] += SHIFT_PX
+            shifted.append(silhouette_iou(reference, silhouette(dataclasses.replace(camera, K=aside))))
+        # Seen from azimuth + t, the tree looks as if turned by -t in front of the camera of azimuth.
+        for turn in turns_deg:
+            turned[turn].append(silhouette_iou(reference, silhouette(switch_camera(points, azimuth + turn, switch_px))))
+    return min(shifted), *(min(values) for values in turned.values())
+
+
+def asset_floors(asset, renderer) -> list[LevelFloor]:
+    """The floor and margin of each level after LOD0 (LOD1..LOD3, the impostor) of a built `LibraryAsset`."""
+    from renderers.alpha_coverage import coverage_tree
+    from renderers.framing import framing_points
+
+    from .asset import leaf_fractions
+
+    lod0_fraction, _ = leaf_fractions(asset.leaf_atlases["summer"])
+    cover = coverage_tree(asset.lod0, lod0_fraction)
+    points = framing_points(asset.lod0)
+    return [LevelFloor(asset.asset_id, level.name, int(level.switch_px), float(min(level.iou)),
+                       float(level_floors(renderer, cover, points, level.switch_px)[0]))
+            for level in asset.levels[1:]]
+
+
+def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
+    """Every catalogued asset of a library folder rebuilt with the library's spec and measured (`asset_floors`)."""
+    from tqdm import tqdm
+
+    from farm.storage import Location
+    from farm.tree_chain import StageTimer
+    from renderers.impostor import CoverageRenderer
+
+    from .asset import build_asset
+    from .records import read_library_spec
+
+    location = Location.resolve(path)
+    spec = read_library_spec(location)
+    rows = json.loads(location.read_bytes("catalog.json")) if location.exists("catalog.json") else []
+    renderer = CoverageRenderer(64)  # one EGL context for every size: the viewport follows the camera
+    floors: list[LevelFloor] = []
+    try:
+        for row in tqdm(rows, desc="floors", unit="asset", disable=not progress):
+            asset = build_asset(row["species"], int(row["seed"]), spec, renderer, StageTimer())
+            floors += asset_floors(asset, renderer)
+    finally:
+        renderer.close()
+    return floors
