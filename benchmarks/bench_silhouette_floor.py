@@ -28,7 +28,7 @@ import numpy as np
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from farm.library.quality import SHIFT_PX, level_floors  # noqa: E402
+from farm.library.quality import FLOOR_MARGIN, SHIFT_PX, level_floors  # noqa: E402
 
 TURNS_DEG = (1.0, 4.0)
 COLUMNS = ("library", f"LOD0 {SHIFT_PX:g} px aside", *(f"LOD0 turned {t:g} deg" for t in TURNS_DEG))
@@ -57,13 +57,16 @@ def main(names: list[str]) -> None:
         levels = asset.levels[1:]
         level_names = [level.name for level in levels]
         switch_sizes = [level.switch_px for level in levels]
-        rows[name] = [(min(level.iou), *level_floors(renderer, cover, points, level.switch_px, TURNS_DEG)) for level in levels]
+        rows[name] = [(min(level.iou), *level_floors(renderer, cover, points, level.switch_px, TURNS_DEG))
+                      for level in levels]
 
     for k, (level_name, switch_px) in enumerate(zip(level_names, switch_sizes)):
         print(f"\n{level_name} at {switch_px} px: least silhouette IoU over 8 azimuths (target {IOU_TARGET})")
-        print(f"{'preset':28s} | " + " | ".join(f"{c:>20s}" for c in COLUMNS))
+        print(f"{'preset':28s} | " + " | ".join(f"{c:>20s}" for c in COLUMNS) + " | margin to 0.5 px | target")
         for name, levels in rows.items():
-            print(f"{name:28s} | " + " | ".join(f"{v:20.3f}" for v in levels[k]))
+            margin = levels[k][0] - levels[k][1]
+            print(f"{name:28s} | " + " | ".join(f"{v:20.3f}" for v in levels[k])
+                  + f" | {margin:+16.3f} | {'meets' if margin >= -FLOOR_MARGIN else 'misses'}")
     print(f"\nSummary over {len(rows)} presets (target {IOU_TARGET}); 'within .02' counts presets whose library "
           "IoU is at least the half-pixel floor - 0.02")
     head = ["level", "mean library", "mean 0.5 px", *(f"mean {t:g} deg" for t in TURNS_DEG), "library >= .9",
