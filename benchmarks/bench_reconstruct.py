@@ -57,11 +57,8 @@ from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
 from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
-from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes  # noqa: E402
+from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes, network_depth_error  # noqa: E402
 from species.errors import TreefarmError  # noqa: E402
-from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views  # noqa: E402
-from trainers.data import TARGET_BACKGROUND  # noqa: E402
-from trainers.preprocess import apply_crop  # noqa: E402
 
 METHODS = ("params", "sketch-depth", "two-view")
 # Each method's dataset spec: its species and its render.
@@ -242,23 +239,6 @@ def sweep(renderer, net, args, presets: list[str], run: Run) -> None:
             run.pooled[name] = {"network": value}
 
 
-def depth_error(net, task_name: str, view: RenderedView) -> tuple[float, float]:
-    """(foreground depth error of a pix2pix network on one view, its seconds): the target cut to the network's
-    crop of its input as training cut it, scored on the task's depth channels and mask rule."""
-    task = PIX2PIX_TASKS[task_name]
-    start = time.perf_counter()
-    prediction, prepared = net.predict_view(view.images[task.input_output])
-    crop = prepared.crop
-    seconds = time.perf_counter() - start
-    size = net.input_size
-    cut = {task.input_output: apply_crop(view.images[task.input_output], crop, size, 255),
-           task.target_output: apply_crop(view.images[task.target_output], crop, size,
-                                          TARGET_BACKGROUND[task.target_output])}
-    cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
-    _, target, mask = targets_from_views(task, cut)
-    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds
-
-
 def run_sketch_depth(renderer, args, run: Run) -> None:
     silhouette_net = predictor("pix2pix-silhouette", args.models)
     trunk_net = predictor("pix2pix-trunk", args.models)
@@ -270,8 +250,8 @@ def run_sketch_depth(renderer, args, run: Run) -> None:
         truth = grow_truth(renderer, preset, seed, spec.render.rig, spec.render.size, outputs)
         front = truth.views[0]
         scorer = Scorer(renderer, truth, [front.camera], "sketch-depth", args.surface_samples)
-        sil_error, sil_s = depth_error(silhouette_net, "silhouette", front)
-        trunk_error, trunk_s = depth_error(trunk_net, "trunk", front)
+        sil_error, sil_s = network_depth_error(silhouette_net, "silhouette", front.images)
+        trunk_error, trunk_s = network_depth_error(trunk_net, "trunk", front.images)
         height = truth.skeleton.height
         try:
             result = reconstruct.from_sketch(front.images["sketch_edges"], front.images["trunk_strokes"],

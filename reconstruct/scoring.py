@@ -22,7 +22,8 @@ from species.tree_mesh import TreeMesh
 
 from . import metrics
 
-__all__ = ["TreeScorer", "Metric", "METRICS", "UNSEEN_RIG", "CROWN_CLOSING_PX", "main_branch_nodes", "crowns", "depth_picture"]
+__all__ = ["TreeScorer", "Metric", "METRICS", "UNSEEN_RIG", "CROWN_CLOSING_PX", "main_branch_nodes", "crowns", "depth_picture",
+           "network_depth_error"]
 
 # Unseen views: azimuths of this rig (45 deg apart, level) that no input view looked along (or opposite).
 UNSEEN_RIG = "orbit:8:0"
@@ -137,3 +138,25 @@ def depth_picture(renderer: ViewRenderer, mesh: TreeMesh, skeleton: Skeleton, ca
         return np.zeros((camera.height, camera.width, 3), np.uint8)
     view = renderer.render_cameras(mesh, skeleton, [camera], ["depth"], np.random.default_rng(0))[0]
     return viewable("depth", view.images["depth"])
+
+
+def network_depth_error(net, task_name: str, images: dict) -> tuple[float, float]:
+    """(foreground depth error of a pix2pix network on one view's images, the network's seconds): the target cut
+    to the network's crop of its input as training cut it, scored on the task's depth channels and mask rule."""
+    import time
+
+    from trainers.data import TARGET_BACKGROUND
+    from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views
+    from trainers.preprocess import apply_crop
+
+    task = PIX2PIX_TASKS[task_name]
+    start = time.perf_counter()
+    prediction, prepared = net.predict_view(images[task.input_output])
+    seconds = time.perf_counter() - start
+    size = net.input_size
+    cut = {task.input_output: apply_crop(images[task.input_output], prepared.crop, size, 255),
+           task.target_output: apply_crop(images[task.target_output], prepared.crop, size,
+                                          TARGET_BACKGROUND[task.target_output])}
+    cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
+    _, target, mask = targets_from_views(task, cut)
+    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds

@@ -165,27 +165,9 @@ def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     return MethodResult(row, timings, cells, {"sketchnet": net.source})
 
 
-def _depth_error(net, task_name: str, images: dict) -> float:
-    """A pix2pix network's foreground depth error on one view: the target cut to the network's crop of its input,
-    as training cut it (`benchmarks/bench_reconstruct.py` measures the same)."""
-    from reconstruct import metrics
-    from trainers.data import TARGET_BACKGROUND
-    from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views
-    from trainers.preprocess import apply_crop
-
-    task = PIX2PIX_TASKS[task_name]
-    prediction, prepared = net.predict_view(images[task.input_output])
-    size = net.input_size
-    cut = {task.input_output: apply_crop(images[task.input_output], prepared.crop, size, 255),
-           task.target_output: apply_crop(images[task.target_output], prepared.crop, size,
-                                          TARGET_BACKGROUND[task.target_output])}
-    cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
-    _, target, mask = targets_from_views(task, cut)
-    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels)
-
-
 def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     import reconstruct
+    from reconstruct.scoring import network_depth_error
 
     silhouette_net, trunk_net = ctx.net("pix2pix-silhouette"), ctx.net("pix2pix-trunk")
     camera, images = _view(tree, "front")
@@ -196,9 +178,9 @@ def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     start = time.perf_counter()
     row = _scorer(ctx, tree, [camera], (0,))(result.skeleton, result.mesh, result.maps["main_skeleton"])
     if "silhouette_envelope" in images:
-        row["depth_error_silhouette"] = _depth_error(silhouette_net, "silhouette", images)
+        row["depth_error_silhouette"] = network_depth_error(silhouette_net, "silhouette", images)[0]
     if "trunk_depth" in images:
-        row["depth_error_trunk"] = _depth_error(trunk_net, "trunk", images)
+        row["depth_error_trunk"] = network_depth_error(trunk_net, "trunk", images)[0]
     timings = {**result.timings, "scoring": time.perf_counter() - start}
     cells = [("input", images["sketch_edges"]), ("trunk strokes", images["trunk_strokes"]),
              *_pictures(ctx, tree, camera, result.skeleton, result.mesh)]
