@@ -25,7 +25,8 @@ from species.tree_mesh import TreeMesh
 
 from .camera import Camera
 
-__all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "silhouette_map",
+__all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "tangent_space_normals",
+           "silhouette_map",
            "envelope_silhouette_map", "closed_mask", "use_headless_gl", "single_sample_renderer_class", "LEAVES",
            "ENVELOPE_CLOSING_256", "ENVELOPE_SIGMA_256"]
 
@@ -122,6 +123,16 @@ def normals_from_depth(camera: Camera, depth: np.ndarray) -> np.ndarray:
     out = np.clip((n + 1.0) * 127.5, 0, 255).astype(np.uint8)
     out[z <= 0] = 0
     return out
+
+
+def tangent_space_normals(camera: Camera, depth: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 normal-map texels of an image drawn as a texture seen head-on (x along the image's u,
+    y up the image, z toward the viewer, [-1, 1] mapped to [0, 255]) from a depth map; flat (128, 128, 255) where
+    not `covered` (H, W) bool."""
+    camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
+    tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
+    texels = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
+    return np.clip(texels, 0, 255).astype(np.uint8)
 
 
 def silhouette_map(camera: Camera, front: np.ndarray, back: np.ndarray) -> np.ndarray:

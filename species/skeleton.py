@@ -192,6 +192,12 @@ class Skeleton:
         return ids[owner]
 
     @cached_property
+    def branch_parent(self) -> np.ndarray:
+        """(B,) int64, the branch each branch grows from (-1 for the trunk)."""
+        junction = self.parent[self.branch_starts]
+        return np.where(junction >= 0, self.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
+
+    @cached_property
     def branch_path_nodes(self) -> tuple[np.ndarray, np.ndarray]:
         """Every branch path (see `branch_paths`) end to end: (K,) int32 node indices and (B + 1,) int64 offsets,
         branch `b` being nodes[offsets[b]:offsets[b + 1]]."""

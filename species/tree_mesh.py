@@ -80,6 +80,15 @@ class MeshPart:
     def empty(cls) -> "MeshPart":
         return cls(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 2)))
 
+    @classmethod
+    def concatenate(cls, parts: "list[MeshPart]") -> "MeshPart":
+        """The parts as one, in order (faces renumbered); the attributes every part has are kept."""
+        offsets = np.cumsum([0] + [part.n_vertices for part in parts])
+        names = set.intersection(*(set(part.attributes) for part in parts)) if parts else set()
+        return cls(np.concatenate([p.vertices for p in parts]), np.concatenate([p.faces + o for p, o in zip(parts, offsets)]),
+                   np.concatenate([p.normals for p in parts]), np.concatenate([p.uvs for p in parts]),
+                   {name: np.concatenate([p.attributes[name] for p in parts]) for name in sorted(names)})
+
     @property
     def n_vertices(self) -> int:
         return len(self.vertices)

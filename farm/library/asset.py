@@ -10,10 +10,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import species
-from renderers.alpha_coverage import coverage_tree, opaque_fraction, triangle_coverage
+from renderers.alpha_coverage import coverage_tree, opaque_fraction
 from renderers.framing import framing_points
 from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostor, silhouette_iou, switch_camera
+from renderers.octahedral_impostor import render_octahedral_impostor
+from renderers.twig_atlas import TWIG_ATLAS_MAX_TEXELS, render_twig_atlas
 from species.studio.collision import collision_capsules
+from species.studio.lod import metres_per_pixel
+from species.studio.twig_cards import TwigAtlas
+from species.tree_mesh import MeshPart, TreeMesh
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 from species.studio.wind import WIND_LAYOUT, wind_attributes
 
@@ -40,6 +45,8 @@ class LevelData:
     leaf_wind, leaf_pivot : (M, 4) / (M, 3) float32 wind attributes per leaf card (instance).
     switch_px : tree height on screen at which this level takes over (0 for LOD0).
     iou      : per-azimuth silhouette IoU against LOD0 at switch_px (empty for LOD0).
+    twigs    : the level's twig cluster cards (`TwigAtlas.card_part`: UVs into the asset's twig atlas, `branch`),
+               or None; twig_wind, twig_pivot: (4 C, 4) / (4 C, 3) float32 wind attributes of their vertices.
     """
 
     name: str
@@ -51,10 +58,14 @@ class LevelData:
     leaf_pivot: np.ndarray
     switch_px: int
     iou: list[float] = field(default_factory=list)
+    twigs: object = None
+    twig_index: int = -1  # the level's cards are `twig_atlas.layout.levels[twig_index]`
+    twig_wind: np.ndarray | None = None
+    twig_pivot: np.ndarray | None = None
 
     @property
     def n_triangles(self) -> int:
-        return int(self.mesh.n_faces)
+        return int(self.mesh.n_faces) + (self.twigs.n_faces if self.twigs is not None else 0)
 
 
 @dataclass
@@ -68,10 +79,11 @@ class LibraryAsset:
     params: dict
     skeleton: object
     levels: list[LevelData]
-    impostor: object  # renderers.impostor.ImpostorAtlas
+    impostor: object  # renderers.impostor.ImpostorAtlas or renderers.octahedral_impostor.OctahedralAtlas
     capsules: np.ndarray
     bark_maps: object  # species.studio.pbr_textures.BarkMaps
     leaf_atlases: dict[str, np.ndarray]
+    twig_atlas: object = None  # renderers.twig_atlas.TwigAtlasImage, when a level draws twig cards
 
     @property
     def lod0(self):
@@ -138,11 +150,12 @@ def leaf_fractions(atlas: np.ndarray) -> tuple[float, float]:
 
 
 def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float, card_fraction: float,
-                  lod0_cover=None) -> None:
+                  lod0_cover=None, twig_atlas=None) -> None:
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
     both drawn through the same camera in one depth-only pass each, every leaf card shrunk to the opaque share
     of the tile it uses (`lod0_fraction` of the single leaf for LOD0's cards and for LOD cards that are one
-    leaf; `card_fraction` of the clump for cards that merge several), the impostor cut by its atlas alpha.
+    leaf; `card_fraction` of the clump for cards that merge several), the impostor as its atlas shows it
+    (`atlas.coverage`).
     Each LOD0 reference (azimuth, size) is rendered once."""
     lod0 = levels[0].mesh
     lod0_cover = lod0_cover or coverage_tree(lod0, lod0_fraction)
@@ -153,11 +166,12 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
     references = {key: closed_silhouette(renderer.coverage(lod0_cover, camera)) for key, camera in cameras.items()}
     for level in levels[1:]:
         if level.name == "IMPOSTOR":
-            billboard, opaque = level.mesh.bark, atlas.albedo[..., 3] >= 128
-            draw = lambda camera: triangle_coverage(camera, billboard.vertices, billboard.faces,  # noqa: E731
-                                                    billboard.uvs, opaque)
+            draw = atlas.coverage  # the crossed planes cut by their alpha, or the octahedral frames the view blends
         else:
             cover = coverage_tree(level.mesh, lod0_fraction, card_fraction)
+            if level.twigs is not None:
+                runs = twig_atlas.opaque_runs(level.twig_index)
+                cover = TreeMesh(bark=MeshPart.concatenate([cover.bark, runs]), leaves=cover.leaves, name=cover.name)
             draw = lambda camera: renderer.coverage(cover, camera)  # noqa: E731
         keys = [(azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
         level.iou = [silhouette_iou(references[key], closed_silhouette(draw(cameras[key]))) for key in keys]
@@ -180,20 +194,38 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
         lods = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
                         card_fraction)
+    with timer.stage("twigs"):
+        twig_levels = [k for k, lod in enumerate(lods) if lod.twigs is not None]
+        twig_atlas = None
+        if twig_levels:
+            layout = TwigAtlas.pack([lods[k].twigs for k in twig_levels],
+                                    [metres_per_pixel(skeleton, int(spec.switch_px[k])) for k in twig_levels],
+                                    TWIG_ATLAS_MAX_TEXELS)
+            twig_atlas = render_twig_atlas(renderer, layout, lod0_cover)
     with timer.stage("wind"):
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
-        for lod, px in zip(lods, spec.switch_px):
-            levels.append(LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
-                                    *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px)))
+        for k, (lod, px) in enumerate(zip(lods, spec.switch_px)):
+            level = LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
+                              *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px))
+            if k in twig_levels:
+                level.twig_index = twig_levels.index(k)
+                level.twigs = twig_atlas.layout.card_part(level.twig_index)
+                # Each card sways with the LOD0 branch it grows from nearest the trunk.
+                level.twig_wind, level.twig_pivot = wind_attributes(skeleton, level.twigs.vertices,
+                                                                    level.twigs.attributes["branch"], None)
+            levels.append(level)
         capsules = collision_capsules(skeleton)
     with timer.stage("impostor"):
-        atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
+        if spec.impostor == "octahedral":
+            atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
+        else:
+            atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
         levels.append(LevelData("IMPOSTOR", billboard, None, np.zeros((billboard.bark.n_vertices, 4), np.float32),
                                 np.zeros((billboard.bark.n_vertices, 3), np.float32), empty4, empty3,
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
-        measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover)
+        measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
-                        levels, atlas, capsules, maps, atlases)
+                        levels, atlas, capsules, maps, atlases, twig_atlas)

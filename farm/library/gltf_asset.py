@@ -2,7 +2,7 @@
 in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for
 clumps: meshes `<level>_leaf_card`, `<level>_clump_card`), seasons as KHR_materials_variants, wind attributes
 `_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha; the normal-mapped primitives (bark, impostor) carry
-TANGENT.
+TANGENT. An octahedral impostor's layout is in its level node's `extras.impostor`.
 
 In: a LibraryAsset and the worker's PngCache. Out: GLB bytes (Y up, metres); same asset, same bytes.
 `instanced=False` bakes the leaves into plain triangles (to measure what instancing saves). The GLB itself is
@@ -15,7 +15,7 @@ import numpy as np
 from species.geometry import vertex_tangents
 from species.meshing.gltf import CLAMP_TO_EDGE, REPEAT, TRIANGLES, Z_UP_TO_Y_UP, GlbWriter, z_up_to_y_up
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
-from species.studio.pbr_textures import SEASONS
+from species.studio.pbr_textures import SEASONS, season_leaf_colour
 from species.studio.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 
@@ -61,8 +61,8 @@ def _primitive(writer: GlbWriter, vertices, normals, uvs, faces, material: int, 
 
 
 def _materials(writer: GlbWriter, asset: LibraryAsset, pngs: PngCache) -> dict[str, int]:
-    def texture(name: str, image: np.ndarray, wrap: int) -> dict:
-        return {"index": writer.texture(name, pngs.encode(image), wrap)}
+    def texture(name: str, image: np.ndarray, wrap: int, palette: bool = False) -> dict:
+        return {"index": writer.texture(name, pngs.encode(image, palette), wrap)}
 
     maps = asset.bark_maps
     bark = writer.material({"name": "bark", "pbrMetallicRoughness": {
@@ -80,6 +80,19 @@ def _materials(writer: GlbWriter, asset: LibraryAsset, pngs: PngCache) -> dict[s
                 "baseColorTexture": texture(f"leaf_atlas_{season}", asset.leaf_atlases[season], CLAMP_TO_EDGE),
                 "metallicFactor": 0.0, "roughnessFactor": 0.7}
         out[season] = writer.material(entry)
+    if asset.twig_atlas is not None:
+        # Twig cluster cards: one atlas of bark and leaf texels, recoloured per season (bare keeps the twigs).
+        twigs, leaf_color = asset.twig_atlas, asset.lod0.leaf_color
+        normal = texture("twig_normal", twigs.normal, CLAMP_TO_EDGE)
+        for season in SEASONS:
+            colour = None if season == "bare" else season_leaf_colour(season, leaf_color)
+            out[f"twigs_{season}"] = writer.material({
+                "name": f"twigs_{season}", "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
+                "pbrMetallicRoughness": {
+                    "baseColorTexture": texture(f"twig_atlas_{season}", twigs.albedo(asset.lod0.bark_color, colour),
+                                                CLAMP_TO_EDGE, palette=True),
+                    "metallicFactor": 0.0, "roughnessFactor": 0.8},
+                "normalTexture": normal})
     atlas = asset.impostor
     out["impostor"] = writer.material({
         "name": "impostor", "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
@@ -136,8 +149,20 @@ def _document(asset: LibraryAsset, instanced: bool, pngs: PngCache | None,
                                          "mesh": writer.mesh(f"{level.name}_bark", prim)}))
             if level.skeleton.n_leaves:
                 children += _leaves_nodes(writer, asset, level, materials, variant_maps, instanced)
+            if level.twigs is not None:
+                twigs = level.twigs
+                prim = _primitive(writer, twigs.vertices, twigs.normals, twigs.uvs, twigs.faces,
+                                  materials["twigs_summer"], {"_WIND": (level.twig_wind, "VEC4"),
+                                                              "_WIND_PIVOT": (z_up_to_y_up(level.twig_pivot), "VEC3")},
+                                  [{"material": materials[f"twigs_{season}"], "variants": [i]}
+                                   for i, season in enumerate(SEASONS)], tangents=twigs.tangents)
+                children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_twigs",
+                                             "mesh": writer.mesh(f"{level.name}_twigs", prim)}))
         node = {"name": f"{asset.asset_id}_{level.name}", "children": children,
                 "extras": {"switch_px": level.switch_px, "triangles": level.n_triangles}}
+        if level.name == "IMPOSTOR" and asset.impostor.layout():
+            # An octahedral impostor: what a shader needs to pick its frames (the crossed planes need nothing).
+            node["extras"]["impostor"] = asset.impostor.layout()
         level_nodes.append(writer.node(node))
     root = writer.nodes[level_nodes[0]]
     root["extensions"] = {"MSFT_lod": {"ids": level_nodes[1:]}}

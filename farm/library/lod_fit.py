@@ -12,8 +12,9 @@ from renderers.framing import framing_points
 from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
 from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
 from species.studio.lod import LodBudgetError, TreeLods
+from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS"]
+__all__ = ["fit_lods", "level_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
 # card). A simplified branch draws more silhouette per triangle than a merged leaf card on a sparse crown and less
@@ -41,7 +42,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
     from LOD2 on, at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same
-    way. A level costs three to six builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
+    way. Then the bark share climbs again with the dropped branches drawn as twig cards (`twig_cover`), and the
+better of the two wins. A level costs six to twelve builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
@@ -54,34 +56,52 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         px = int(px)
         cameras = [switch_camera(points, azimuth, px) for azimuth in CALIBRATION_AZIMUTHS]
         references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
-        tried: dict[tuple[int, int], tuple[float, object]] = {}
+        tried: dict[tuple[int, int, bool], tuple[float, object]] = {}
 
-        def score(share: int, gain: int) -> float:
-            if (share, gain) not in tried:
+        def score(share: int, gain: int, twigs: bool = False) -> float:
+            if (share, gain, twigs) not in tried:
                 scale = BARK_SHARE_SCALES[share]
                 try:
                     bark_share = None if share == full_share else min(scale * lod0_share, 1.0)
-                    lod = lods.build(level, budget, px, bark_share=bark_share, card_area_gain=CARD_AREA_GAINS[gain])
+                    lod = lods.build(level, budget, px, bark_share=bark_share, card_area_gain=CARD_AREA_GAINS[gain],
+                                     twigs=twigs)
                 except LodBudgetError:
-                    if share == full_share:
+                    if share == full_share and not twigs:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
-                    tried[share, gain] = (-1.0, None)
+                    tried[share, gain, twigs] = (-1.0, None)
                     return -1.0
-                cover = coverage_tree(lod.mesh, leaf_fraction, card_fraction)
-                tried[share, gain] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
-                                          for reference, camera in zip(references, cameras)), lod)
-            return tried[share, gain][0]
+                cover = level_cover(lod, lod0_cover, leaf_fraction, card_fraction)
+                tried[share, gain, twigs] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
+                                                 for reference, camera in zip(references, cameras)), lod)
+            return tried[share, gain, twigs][0]
 
         share = _climb(lambda index: score(index, default_gain), start, len(BARK_SHARE_SCALES))
-        if tried[share, default_gain][1] is None:  # nothing but LOD0's proportion could be built
+        if tried[share, default_gain, False][1] is None:  # nothing but LOD0's proportion could be built
             score(full_share, default_gain)
             share = full_share
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
             gain = _climb(lambda index: score(share, index), default_gain, len(CARD_AREA_GAINS))
-        levels.append(tried[share, gain][1])
-        start = share
+        twig_share = _climb(lambda index: score(index, default_gain, True), share, len(BARK_SHARE_SCALES))
+        best = (share, gain, False)
+        if score(twig_share, default_gain, True) > score(*best):
+            best = (twig_share, default_gain, True)
+        levels.append(tried[best][1])
+        start = best[0]
     return levels
+
+
+def level_cover(lod, lod0_cover: TreeMesh, leaf_fraction: float, card_fraction: float) -> TreeMesh:
+    """What a level shows, for opaque coverage passes: its tubes and leaf cards cut to their tiles' opaque share
+    (`coverage_tree`), and its twig cards as LOD0's coverage faces pressed onto each card (an exact card texture,
+    before it is sampled into the atlas)."""
+    cover = coverage_tree(lod.mesh, leaf_fraction, card_fraction)
+    if lod.twigs is None:
+        return cover
+    flat = lod.twigs.flattened(lod0_cover)
+    return TreeMesh(bark=MeshPart.concatenate([cover.bark, flat.bark]),
+                    leaves=MeshPart.concatenate([cover.leaves, flat.leaves]), bark_color=cover.bark_color,
+                    leaf_color=cover.leaf_color, name=cover.name)
 
 
 def _climb(score, start: int, count: int) -> int:

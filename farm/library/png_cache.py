@@ -32,16 +32,17 @@ class PngCache:
     def __len__(self) -> int:
         return len(self._encoded)
 
-    def encode(self, image: np.ndarray) -> bytes:
-        """PNG bytes of an (H, W, 3) or (H, W, 4) uint8 image, from the cache when these pixels were seen."""
+    def encode(self, image: np.ndarray, palette: bool = False) -> bytes:
+        """PNG bytes of an (H, W, 3) or (H, W, 4) uint8 image, from the cache when these pixels were seen
+        (`palette`: see `png_bytes`)."""
         image = np.ascontiguousarray(image)
-        digest = hashlib.blake2b(f"{image.dtype.str}{image.shape}".encode(), digest_size=20)
+        digest = hashlib.blake2b(f"{image.dtype.str}{image.shape}{'P' if palette else ''}".encode(), digest_size=20)
         digest.update(image.data)
         key = digest.digest()
         if key in self._encoded:
             self._encoded.move_to_end(key)
             return self._encoded[key]
-        data = png_bytes(image, self.compress_level)
+        data = png_bytes(image, self.compress_level, palette)
         self._encoded[key] = data
         if len(self._encoded) > self.entries:
             self._encoded.popitem(last=False)

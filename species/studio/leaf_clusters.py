@@ -10,7 +10,7 @@ import numpy as np
 
 from ..skeleton import LEAF_CARD_CORNERS
 
-__all__ = ["LeafCards", "CLUSTER_AREA_GAIN"]
+__all__ = ["LeafCards", "CLUSTER_AREA_GAIN", "cluster_axes"]
 
 # Span of a uniform spread in standard deviations: a cluster card reaches as far as its leaves do.
 _SPREAD_SPAN = 2.0 * np.sqrt(3.0)
@@ -120,14 +120,7 @@ def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarr
     """(n, 4, 4) float64 card transforms fitted to each cluster's points (P, 3) metres (labels (P,) int in
     [0, n)): centred on the points' mean, length along their principal axis, width along the second, normal
     along the least spread; length and width span the points as a uniform spread would (2 sqrt(3) std)."""
-    count = np.maximum(np.bincount(labels, minlength=n), 1).astype(np.float64)
-    mean = np.stack([np.bincount(labels, weights=points[:, k], minlength=n) for k in range(3)], axis=1)
-    mean /= count[:, None]
-    rel = points - mean[labels]
-    outer = (rel[:, :, None] * rel[:, None, :]).reshape(-1, 9)
-    cov = np.stack([np.bincount(labels, weights=outer[:, k], minlength=n) for k in range(9)], axis=1)
-    cov = cov.reshape(n, 3, 3) / count[:, None, None]
-    variance, axes = np.linalg.eigh(cov)  # ascending: axes[:, :, 2] the principal axis
+    mean, axes, variance = cluster_axes(points, labels, n, with_variance=True)
     span = _SPREAD_SPAN * np.sqrt(np.maximum(variance, 0.0))
     length, width = np.maximum(span[:, 2], 1e-4), np.maximum(span[:, 1], 1e-4)
     # The card's area is `area`, in the spread's proportions, never beyond the spread.
@@ -144,3 +137,17 @@ def _fitted_cards(points: np.ndarray, labels: np.ndarray, n: int, area: np.ndarr
     cards[:, :3, 3] = mean - 0.5 * cards[:, :3, 2]
     cards[:, 3, 3] = 1.0
     return cards
+
+
+def cluster_axes(points: np.ndarray, labels: np.ndarray, n: int, with_variance: bool = False):
+    """Each cluster's mean (n, 3) and principal axes (n, 3, 3) float64, columns by ascending spread (axes[:, :, 2]
+    the principal axis), of points (P, 3) metres labelled (P,) int in [0, n); with `with_variance`, also the
+    variances (n, 3) along those axes."""
+    count = np.maximum(np.bincount(labels, minlength=n), 1).astype(np.float64)
+    mean = np.stack([np.bincount(labels, weights=points[:, k], minlength=n) for k in range(3)], axis=1)
+    mean /= count[:, None]
+    rel = points - mean[labels]
+    outer = (rel[:, :, None] * rel[:, None, :]).reshape(-1, 9)
+    cov = np.stack([np.bincount(labels, weights=outer[:, k], minlength=n) for k in range(9)], axis=1)
+    variance, axes = np.linalg.eigh(cov.reshape(n, 3, 3) / count[:, None, None])
+    return (mean, axes, variance) if with_variance else (mean, axes)

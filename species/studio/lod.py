@@ -14,6 +14,7 @@ import numpy as np
 from ..errors import TreefarmError
 from ..meshing.tubes_and_cards import CARD_FACES, DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
 from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
+from .twig_cards import TwigCards, twig_cards, twig_labels
 from ..geometry.polyline_simplify import simplification_keys
 from ..geometry.topology import depth_levels, node_depths
 from ..skeleton import Skeleton
@@ -21,7 +22,7 @@ from ..tree_mesh import MeshPart, TreeMesh
 
 __all__ = ["LodLevel", "LodBudgetError", "TreeLods", "build_lod", "simplify_skeleton", "metres_per_pixel",
            "nearest_kept_ancestor", "LOD_SIDES", "LOD_NODE_STEPS", "LOD_SWITCH_PX", "TOLERANCE_LADDER_PX",
-           "CLUMP_ATTRIBUTE", "card_clumps", "subtree_maximum"]
+           "CLUMP_ATTRIBUTE", "card_clumps", "subtree_maximum", "branch_node_keys"]
 
 # Tube sides by branch order at each level (index = level - 1): the trunk keeps the most.
 LOD_SIDES = ((6, 4, 3), (5, 3, 3), (4, 3, 3))
@@ -45,6 +46,8 @@ _CARD_TRIANGLES = len(CARD_FACES)
 CLUMP_ATTRIBUTE = "clump"
 # Shares of the longest branch below which branches are dropped, tried in turn until the bark fits its budget.
 _PRUNE_LADDER = (0.0, 0.03, 0.06, 0.1, 0.15, 0.2, 0.3, 0.4, 0.55, 0.7, 0.85, 1.01)
+# How deep a dropped subtree splits into twig cards, tried in turn until the cards fit (None: a card per branch).
+TWIG_DEPTHS = (None, 3, 2, 1, 0)
 # The budget is filled to this fraction at most: merging of close rings can only lower counts, never raise.
 _BUDGET_MARGIN = 0.97
 
@@ -62,6 +65,9 @@ class LodLevel:
                     1 on the vertices of cards that merge several leaves, 0 on cards that are one leaf).
     original_node : (N',) int32, the LOD0 node each kept node is.
     n_clusters    : leaf clusters (one card each).
+    twigs         : the twig cluster cards drawing the branches this level drops (with their leaves), or None
+                    (dropped branches' leaves then go to the cluster cards); not part of `mesh`, which holds
+                    the tubes and leaf cards.
     """
 
     level: int
@@ -69,10 +75,11 @@ class LodLevel:
     mesh: TreeMesh
     original_node: np.ndarray
     n_clusters: int
+    twigs: TwigCards | None = None
 
     @property
     def n_triangles(self) -> int:
-        return self.mesh.n_faces
+        return self.mesh.n_faces + _CARD_TRIANGLES * (len(self.twigs) if self.twigs is not None else 0)
 
 
 def card_clumps(leaves: MeshPart) -> np.ndarray:
@@ -104,13 +111,6 @@ def _branch_lengths(skeleton: Skeleton) -> np.ndarray:
                        minlength=skeleton.n_branches)
 
 
-def _branch_parent(skeleton: Skeleton) -> np.ndarray:
-    """(B,) int64, the branch each branch grows from (-1 for the trunk)."""
-    starts = skeleton.branch_starts
-    junction = skeleton.parent[starts]
-    return np.where(junction >= 0, skeleton.branch_id[np.maximum(junction, 0)], -1).astype(np.int64)
-
-
 def _droppable(skeleton: Skeleton, clones: bool) -> tuple[np.ndarray, np.ndarray]:
     """(B,) float64 metres of each branch and (B,) bool, the branches pruning may drop: non-trunk ones (with
     `clones`, the trunk's split clones too: every branch but branch 0)."""
@@ -126,7 +126,7 @@ def _dropped_branches(skeleton: Skeleton, min_length: float, max_order: int | No
     drop = candidate & (lengths < min_length)
     if max_order is not None:
         drop |= skeleton.order[skeleton.branch_starts] > max_order
-    parent = _branch_parent(skeleton)
+    parent = skeleton.branch_parent
     while True:
         inherited = drop | ((parent >= 0) & drop[np.maximum(parent, 0)])
         if np.array_equal(inherited, drop):
@@ -292,7 +292,7 @@ def _fit_bark_by_tolerance(skeleton: Skeleton, keys: np.ndarray, sides_by_order,
     width_px = np.maximum(2.0 * skeleton.radius[starts].astype(np.float64) / metres_per_px, 1.0)
     length_px = _branch_lengths(skeleton) / metres_per_px
     area = length_px * width_px
-    parent = _branch_parent(skeleton)
+    parent = skeleton.branch_parent
     area[0] = np.inf  # the trunk always stays
     rank = np.lexsort((np.arange(len(starts)), skeleton.depth[starts], -subtree_maximum(area, parent)))
     area[0] = 0.0
@@ -340,6 +340,8 @@ class TreeLods:
     def __init__(self, skeleton: Skeleton, lod0: TreeMesh):
         self.skeleton, self.lod0 = skeleton, lod0
         self.barks: dict[tuple, tuple] = {}  # (level, target, switch px, bark share) -> fitted bark
+        self._twigs: dict[tuple, TwigCards] = {}  # (kept branches, depth) -> cards
+        self._kept_leaf_cards: dict[bytes, LeafCards] = {}  # kept branches -> their leaves, prepared to cluster
 
     @cached_property
     def node_keys(self) -> np.ndarray:
@@ -349,8 +351,20 @@ class TreeLods:
     def leaf_cards(self) -> LeafCards:
         return LeafCards(self.skeleton.leaves)
 
+    def twig_cards(self, kept_branch: np.ndarray, room: int) -> TwigCards:
+        """Twig cards for the branches not kept ((B,) bool), split as finely as TWIG_DEPTHS allows within `room`
+        triangles; LodBudgetError when not even one card per dropped subtree fits."""
+        for depth in TWIG_DEPTHS:
+            labels = twig_labels(self.skeleton, kept_branch, depth)
+            if _CARD_TRIANGLES * (int(labels.max(initial=-1)) + 1) <= room:
+                key = (kept_branch.tobytes(), depth)
+                if key not in self._twigs:
+                    self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels)
+                return self._twigs[key]
+        raise LodBudgetError(f"{room} triangles leave no room for one twig card per dropped subtree")
+
     def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
-              card_area_gain: float = CLUSTER_AREA_GAIN) -> LodLevel:
+              card_area_gain: float = CLUSTER_AREA_GAIN, twigs: bool = False) -> LodLevel:
         """`build_lod` of this tree."""
         skeleton, lod0 = self.skeleton, self.lod0
         if not 1 <= level <= len(LOD_SIDES):
@@ -374,11 +388,24 @@ class TreeLods:
             self.barks[key] = _fit_bark(self, level, budget, target, int(switch_px), bark_share)
         simplified, original, leaf_anchor, bark = self.barks[key]
         leaf_budget = target - bark.n_faces
-        n_clusters = leaf_budget // _CARD_TRIANGLES if skeleton.n_leaves else 0
-        if skeleton.n_leaves and n_clusters < 1:
+        leaf_cards, cards_made = self.leaf_cards, None
+        if twigs:
+            kept_branch = np.zeros(skeleton.n_branches, bool)
+            kept_branch[skeleton.branch_id[original]] = True
+            if kept_branch.all():
+                raise LodBudgetError(f"LOD{level} keeps every branch: no twig cards to draw")
+            leaf_kept = kept_branch[skeleton.branch_id[skeleton.leaf_node]]
+            cards_made = self.twig_cards(kept_branch, leaf_budget - (_CARD_TRIANGLES if leaf_kept.any() else 0))
+            leaf_budget -= _CARD_TRIANGLES * len(cards_made)
+            cache = kept_branch.tobytes()
+            if cache not in self._kept_leaf_cards:
+                self._kept_leaf_cards[cache] = LeafCards(skeleton.leaves[leaf_kept])
+            leaf_cards, leaf_anchor = self._kept_leaf_cards[cache], leaf_anchor[leaf_kept]
+        n_clusters = leaf_budget // _CARD_TRIANGLES if len(leaf_cards) else 0
+        if len(leaf_cards) and n_clusters < 1:
             raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "
                                  f"({bark.n_faces} bark triangles of {target}); raise the LOD{level} budget")
-        cards, card_node, merged = self.leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
+        cards, card_node, merged = leaf_cards.cluster(leaf_anchor, int(n_clusters), card_area_gain)
         lod_skeleton = Skeleton(simplified.positions, simplified.parent, simplified.radius, simplified.order,
                                 leaves=cards, leaf_node=card_node)
         leaves = leaf_part(lod_skeleton)
@@ -386,7 +413,7 @@ class TreeLods:
                           {**leaves.attributes, CLUMP_ATTRIBUTE: np.repeat(merged, 4).astype(np.uint8)})
         mesh = TreeMesh(bark=bark, leaves=leaves, bark_color=lod0.bark_color,
                         leaf_color=lod0.leaf_color, name=f"{lod0.name}_LOD{level}")
-        return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards))
+        return LodLevel(level, lod_skeleton, mesh, original.astype(np.int32), len(cards), cards_made)
 
 
 def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, switch_px: int | None = None,
