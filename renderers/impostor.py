@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from species.errors import TreefarmError
 from species.meshing.textures import linear_to_srgb
 from species.tree_mesh import MeshPart, TreeMesh
 
+from .alpha_coverage import triangle_coverage
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
 from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, normals_from_depth,
                    single_sample_renderer_class)
@@ -24,7 +26,7 @@ from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
            "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS", "AXIS_SHARE",
-           "SECTOR_OVERLAP", "sector_groups"]
+           "SECTOR_OVERLAP", "sector_groups", "atlas_tile", "pixel_rays", "plane_coordinates"]
 
 # Switch sizes are pixels of tree height on a reference screen this tall with this vertical field of view.
 REFERENCE_SCREEN_PX = 1080
@@ -78,6 +80,20 @@ class ImpostorAtlas:
     half: float
     azimuths: np.ndarray
     tile: int
+
+    kind: ClassVar[str] = "crossed"
+
+    def layout(self) -> dict:
+        """What the files record about the impostor beyond its mesh and atlas: nothing (the planes' geometry is
+        their mesh, which any glTF viewer draws); `renderers.octahedral_impostor` has a layout to record."""
+        return {}
+
+    def coverage(self, camera: Camera) -> np.ndarray:
+        """(H, W) bool, the silhouette the billboard (`mesh()`) shows through `camera`: its triangles cut by the
+        atlas alpha (>= 128, the files' 0.5 cutoff), rasterised per pixel centre (`alpha_coverage`)."""
+        billboard = self.mesh()
+        return triangle_coverage(camera, billboard.vertices, billboard.faces, billboard.uvs,
+                                 self.albedo[..., 3] >= 128)
 
     def plane_axes(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) right vectors (image u) and (P, 3) normals toward each plane's camera, float64."""
@@ -313,54 +329,72 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
     albedo = np.zeros((rows * tile, columns * tile, 4), np.uint8)
     normal = np.zeros((rows * tile, columns * tile, 3), np.uint8)
     normal[...] = (128, 128, 255)
-    bark_rgb = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
-    leaf_rgb = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
     renderer.load_groups(sector_groups(tree, centre, planes, axis_share * half, sector_overlap))
     for plane, azimuth in enumerate(azimuths):
         camera = _plane_camera(centre, half, reach, float(azimuth), tile)
         parts = PartDepths({"bark": renderer.group_depth(camera, ("bark_axis", f"bark_{plane}")),
                             LEAVES: renderer.group_depth(camera, ("leaves_axis", f"leaves_{plane}"))})
-        depth, mask, _ = combine_parts(parts)
-        camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
-        tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
-        covered = mask > 0
-        tile_albedo = np.zeros((tile, tile, 4), np.uint8)
-        tile_albedo[mask == 1, :3] = bark_rgb
-        tile_albedo[mask == 2, :3] = leaf_rgb
-        tile_albedo[covered, 3] = 255
-        tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
         row, col = (plane // columns) * tile, (plane % columns) * tile
-        albedo[row:row + tile, col:col + tile] = tile_albedo
-        normal[row:row + tile, col:col + tile] = np.clip(tile_normal, 0, 255).astype(np.uint8)
+        albedo[row:row + tile, col:col + tile], normal[row:row + tile, col:col + tile] = atlas_tile(
+            camera, parts, tree)
     return ImpostorAtlas(albedo, normal, centre, half, azimuths.astype(np.float64), tile)
+
+
+def atlas_tile(camera: Camera, parts: PartDepths, tree: TreeMesh) -> tuple[np.ndarray, np.ndarray]:
+    """One impostor atlas tile from a view's bark and leaf depths (`parts`, both (T, T) metres through the
+    orthographic `camera`): albedo (T, T, 4) uint8, the tree's bark or leaf colour in sRGB by the nearer part,
+    alpha 255 on the covered texels (not grown), and normals (T, T, 3) uint8 in tangent space (+x along u, +y
+    image up, +z toward the viewer; flat (128, 128, 255) off the tree), from the rendered depth."""
+    depth, mask, _ = combine_parts(parts)
+    camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
+    tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
+    covered = mask > 0
+    tile_albedo = np.zeros((*mask.shape, 4), np.uint8)
+    tile_albedo[mask == 1, :3] = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
+    tile_albedo[mask == 2, :3] = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
+    tile_albedo[covered, 3] = 255
+    tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
+    return tile_albedo, np.clip(tile_normal, 0, 255).astype(np.uint8)
+
+
+def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+    """The ray through each pixel centre, row by row: origins (H W, 3) and directions (H W, 3) float64, metres,
+    world (a point at depth 1 m and the step to depth 2 m; not unit length)."""
+    rows, cols = np.mgrid[0:camera.height, 0:camera.width]
+    pixels = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)
+    near_points = camera.unproject(pixels, np.full(len(pixels), 1.0))
+    return near_points, camera.unproject(pixels, np.full(len(pixels), 2.0)) - near_points
+
+
+def plane_coordinates(origin: np.ndarray, direction: np.ndarray, centre: np.ndarray, normal: np.ndarray,
+                      right: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where rays (origins and directions (P, 3), metres) cross the plane through `centre` (3,) with `normal`
+    (3,): coordinates x along `right` and y along `up` (both (3,) unit, in the plane), (P,) float64 metres from
+    the centre, and (P,) bool, True where the ray crosses the plane (not parallel to it)."""
+    denom = direction @ normal
+    valid = np.abs(denom) > 1e-12
+    t = np.where(valid, ((centre - origin) @ normal) / np.where(valid, denom, 1.0), 0.0)
+    hit = origin + t[:, None] * direction - centre
+    return hit @ right, hit @ up, valid
 
 
 def impostor_coverage(atlas: ImpostorAtlas, camera: Camera) -> np.ndarray:
     """(H, W) bool, pixels whose ray hits an opaque texel (alpha >= 128) of any impostor plane: the silhouette
     an alpha-tested, double-sided billboard shows, cast exactly per pixel centre (nearest texel)."""
     h, w = camera.height, camera.width
-    rows, cols = np.mgrid[0:h, 0:w]
-    pixels = np.stack([cols.ravel(), rows.ravel()], axis=1).astype(np.float64)
-    near_points = camera.unproject(pixels, np.full(len(pixels), 1.0))
-    far_points = camera.unproject(pixels, np.full(len(pixels), 2.0))
-    direction = far_points - near_points
-    origin = near_points
+    origin, direction = pixel_rays(camera)
     right, normal = atlas.plane_axes()
     up = np.array([0.0, 0.0, 1.0])
     s = atlas.tile / (2 * atlas.half)
-    covered = np.zeros(len(pixels), bool)
+    covered = np.zeros(len(origin), bool)
     alpha = atlas.albedo[..., 3] >= 128
     for plane in range(len(atlas.azimuths)):
-        denom = direction @ normal[plane]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = ((atlas.centre - origin) @ normal[plane]) / denom
-        hit = origin + t[:, None] * direction - atlas.centre
-        x, y = hit @ right[plane], hit @ up
+        x, y, valid = plane_coordinates(origin, direction, atlas.centre, normal[plane], right[plane], up)
         col = np.floor(x * s + atlas.tile / 2).astype(np.int64)
         row = np.floor(-y * s + atlas.tile / 2).astype(np.int64)
-        inside = np.isfinite(t) & (np.abs(denom) > 1e-12) & (col >= 0) & (col < atlas.tile) & (row >= 0) & (row < atlas.tile)
+        inside = valid & (col >= 0) & (col < atlas.tile) & (row >= 0) & (row < atlas.tile)
         r0, c0 = atlas.tile_origin(plane)
-        hits = np.zeros(len(pixels), bool)
+        hits = np.zeros(len(origin), bool)
         hits[inside] = alpha[r0 + row[inside], c0 + col[inside]]
         covered |= hits
     return covered.reshape(h, w)

@@ -113,6 +113,8 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
                    "sizes": {**{k: len(files[v]) for k, v in kinds.items() if v in files}, **sizes},
                    "sha256": {path: sha256_hex(data) for path, data in sorted(files.items())},
                    "tags": _tags(asset), "blender": "not asked"})
+    if asset.impostor.layout():  # an octahedral impostor (the crossed planes record nothing)
+        record["impostor"] = asset.impostor.layout()
     if "fbx" in spec.formats:
         record["blender"] = "pending" if "glb_flat" in kinds else BLENDER_PENDING
     return {"record": record, "level_names": [lv.name for lv in asset.levels], "folder": folder}

@@ -15,17 +15,24 @@ from typing import Any
 
 from farm.jobs import (DatasetTables, JobSpecError, PipelineSpec, check_int, check_keys, check_resources, check_seed,
                        load_spec, preset_names, species_of_trees)
+from renderers.octahedral_impostor import FRAMES_RANGE, MAX_ATLAS_PX, OCTAHEDRAL_FRAMES
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "library_spec_from_record", "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "LIBRARY_TABLES",
-           "species_of_trees"]
+           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "species_of_trees"]
 
 FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
 _MADE_FROM_GLB = ("fbx", "blend")
 DEFAULT_BUDGETS = (0.40, 0.12, 0.04)
 DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
+# Crossed planes (the portable default any glTF viewer draws) or an octahedral atlas (a shader picks its frames).
+IMPOSTOR_KINDS = ("crossed", "octahedral")
+DEFAULT_IMPOSTOR_TILE = 128  # px; an octahedral atlas takes the largest tile up to this that fits MAX_ATLAS_PX
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
-             "impostor_tile", "shard_size", "resources"}
+             "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources"}
+# Spec fields the job record leaves out while they hold these values: they came after library.json was first
+# written, and leaving them out keeps the default library's records and spec digest as they were.
+_OMITTED_WHEN = {"impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
 # The library's trees table holds the skeletons (and carries resume); the meshes are the assets' own files, so
 # no views and no GLB column.
 LIBRARY_TABLES = DatasetTables(view_outputs=(), store_glb=False)
@@ -66,7 +73,11 @@ class LibrarySpec(PipelineSpec):
                     take over; strictly decreasing, one more than lod_budgets.
     formats       : files written per asset (glb, usd, obj, fbx, collision) and per species (blend).
     texture_size  : bark texture height in pixels (leaf atlas tiles are half of it).
-    impostor_tile : pixels per impostor atlas tile (one tile per plane: 8 tiles in 4 columns).
+    impostor      : "crossed" (8 crossed planes, 16 triangles; the default) or "octahedral" (one quad and a
+                    hemi-octahedral atlas of views, `renderers.octahedral_impostor`).
+    impostor_frames : octahedral frames per side of the atlas grid (FRAMES_RANGE); crossed: the default, unused.
+    impostor_tile : pixels per impostor atlas tile (crossed: one tile per plane, 8 tiles in 4 columns;
+                    octahedral: one per frame, impostor_frames x impostor_tile at most MAX_ATLAS_PX).
     shard_size    : assets per shard; resources: Ray resources per worker actor.
     """
 
@@ -77,7 +88,9 @@ class LibrarySpec(PipelineSpec):
     switch_px: tuple[int, ...] = DEFAULT_SWITCH_PX
     formats: tuple[str, ...] = FORMATS
     texture_size: int = 256
-    impostor_tile: int = 128
+    impostor: str = "crossed"
+    impostor_frames: int = OCTAHEDRAL_FRAMES
+    impostor_tile: int = DEFAULT_IMPOSTOR_TILE
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
 
@@ -98,6 +111,9 @@ class LibrarySpec(PipelineSpec):
         out["kind"] = "library"
         out["render"] = {**_RECORD_RENDER, "outputs": list(self.tables.view_outputs)}
         out["store_glb"] = self.tables.store_glb
+        for key, value in _OMITTED_WHEN.items():
+            if out[key] == value:
+                del out[key]
         return out
 
     def digest(self) -> str:
@@ -168,11 +184,24 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     texture_size = check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
     if texture_size % 4:
         raise LibrarySpecError("texture_size", texture_size, "a multiple of 4 in [32, 4096]")
-    tile = check_int("impostor_tile", raw.get("impostor_tile", 128), 16, 2048)
+    impostor = raw.get("impostor", "crossed")
+    if impostor not in IMPOSTOR_KINDS:
+        raise LibrarySpecError("impostor", impostor, f"one of: {', '.join(IMPOSTOR_KINDS)}")
+    frames = check_int("impostor_frames", raw.get("impostor_frames", OCTAHEDRAL_FRAMES), *FRAMES_RANGE)
+    if impostor != "octahedral" and "impostor_frames" in raw:
+        raise LibrarySpecError("impostor_frames", frames, "only with impostor: octahedral (crossed planes have no "
+                               "frames)")
+    largest = MAX_ATLAS_PX // frames if impostor == "octahedral" else 2048
+    tile = check_int("impostor_tile", raw.get("impostor_tile", min(DEFAULT_IMPOSTOR_TILE, largest)), 16, 2048)
+    if tile > largest:
+        raise LibrarySpecError("impostor_tile", tile, f"at most {largest} px with impostor_frames {frames}: the "
+                               f"octahedral atlas (impostor_frames x impostor_tile px square) is at most "
+                               f"{MAX_ATLAS_PX} px")
     shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
     resources = check_resources(raw.get("resources", {}))
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
-                       formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, impostor_tile=tile,
+                       formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, impostor=impostor,
+                       impostor_frames=frames, impostor_tile=tile,
                        shard_size=shard_size, resources=resources)
 
 

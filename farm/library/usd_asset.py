@@ -1,6 +1,7 @@
 """The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
 variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on
-coarser levels, a clump card), wind primvars.
+coarser levels, a clump card), wind primvars; an octahedral impostor's layout in its prim's `treefarm:impostor`
+custom data.
 
 In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
 """
@@ -145,6 +146,20 @@ def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
     return [PROTOTYPE_NAMES[kind] for kind in kinds]
 
 
+def _custom_data(values: dict) -> dict:
+    """A JSON-able dict as USD custom data: lists of numbers as float or int arrays, the rest as it is."""
+    from pxr import Vt
+
+    out = {}
+    for key, value in values.items():
+        if isinstance(value, list) and all(isinstance(v, int) for v in value):
+            value = Vt.IntArray(value)
+        elif isinstance(value, list):
+            value = Vt.DoubleArray(value)
+        out[key] = value
+    return out
+
+
 def asset_to_usdc(asset: LibraryAsset) -> bytes:
     """`.usdc` bytes of the asset: /<id> (component, default prim) with Looks/, and Geom/ filled per `lod`
     variant (bark mesh + leaves PointInstancer, or the impostor card); the `season` variant set binds the leaf
@@ -181,6 +196,9 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             if level.name == "IMPOSTOR":
                 card = _mesh(stage, f"{geom}/impostor", level.mesh.bark)
                 UsdShade.MaterialBindingAPI.Apply(card.GetPrim()).Bind(impostor)
+                layout = asset.impostor.layout()
+                if layout:  # an octahedral impostor: how its frames lie in the atlas
+                    card.GetPrim().SetCustomDataByKey("treefarm:impostor", _custom_data(layout))
             else:
                 mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
