@@ -26,6 +26,7 @@ from ..tree_chain import stage_rngs
 from .lod_fit import fit_lods
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
+           "twig_albedos",
            "measure_chain"]
 
 
@@ -133,6 +134,18 @@ def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
     else:
         leaf_wind, leaf_pivot = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
     return bark_wind, bark_pivot, leaf_wind, leaf_pivot
+
+
+def twig_albedos(asset: "LibraryAsset") -> dict[str, np.ndarray]:
+    """(H, W, 4) uint8 twig atlas albedo per season (SEASONS order): the species' bark colour on bark texels and
+    the season's leaf colour on leaf texels; `bare` keeps the twigs and cuts the leaves away. {} without twig
+    cards."""
+    if asset.twig_atlas is None:
+        return {}
+    leaf = asset.lod0.leaf_color
+    return {season: asset.twig_atlas.albedo(asset.lod0.bark_color,
+                                            None if season == "bare" else season_leaf_colour(season, leaf))
+            for season in SEASONS}
 
 
 def leaf_alphas(atlas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -15,11 +15,11 @@ import numpy as np
 from species.geometry import vertex_tangents
 from species.meshing.gltf import CLAMP_TO_EDGE, REPEAT, TRIANGLES, Z_UP_TO_Y_UP, GlbWriter, z_up_to_y_up
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
-from species.studio.pbr_textures import SEASONS, season_leaf_colour
+from species.studio.pbr_textures import SEASONS
 from species.studio.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 
-from .asset import LibraryAsset, leaf_instances
+from .asset import LibraryAsset, leaf_instances, twig_albedos
 from .png_cache import PngCache
 
 __all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
@@ -82,15 +82,12 @@ def _materials(writer: GlbWriter, asset: LibraryAsset, pngs: PngCache) -> dict[s
         out[season] = writer.material(entry)
     if asset.twig_atlas is not None:
         # Twig cluster cards: one atlas of bark and leaf texels, recoloured per season (bare keeps the twigs).
-        twigs, leaf_color = asset.twig_atlas, asset.lod0.leaf_color
-        normal = texture("twig_normal", twigs.normal, CLAMP_TO_EDGE)
-        for season in SEASONS:
-            colour = None if season == "bare" else season_leaf_colour(season, leaf_color)
+        normal = texture("twig_normal", asset.twig_atlas.normal, CLAMP_TO_EDGE)
+        for season, image in twig_albedos(asset).items():
             out[f"twigs_{season}"] = writer.material({
                 "name": f"twigs_{season}", "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
                 "pbrMetallicRoughness": {
-                    "baseColorTexture": texture(f"twig_atlas_{season}", twigs.albedo(asset.lod0.bark_color, colour),
-                                                CLAMP_TO_EDGE, palette=True),
+                    "baseColorTexture": texture(f"twig_atlas_{season}", image, CLAMP_TO_EDGE, palette=True),
                     "metallicFactor": 0.0, "roughnessFactor": 0.8},
                 "normalTexture": normal})
     atlas = asset.impostor

@@ -23,7 +23,7 @@ from ..manifest import JOB_RECORD
 from ..pipeline import run_job
 from ..storage import Location, sha256_hex
 from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
-from .asset import LibraryAsset, build_asset
+from .asset import LibraryAsset, build_asset, twig_albedos
 from .catalog import write_catalog
 from .gltf_asset import asset_to_glb, glb_size
 from .png_cache import PngCache
@@ -31,7 +31,7 @@ from .previews import thumbnail, turntable
 from .records import (ASSETS, BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
                       library_asset_ids, read_library_spec, write_added_record, write_library_record)
 from .spec import LibrarySpec, species_of_trees
-from .usd_asset import TEXTURE_FILES, asset_to_usdc
+from .usd_asset import TEXTURE_FILES, TWIG_TEXTURE_FILES, asset_to_usdc
 
 __all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
            "retry_failed_fbx"]
@@ -82,6 +82,11 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
         if "usd" in spec.formats:
             for name, relative in TEXTURE_FILES.items():
                 put(f"texture_{name}", relative, pngs.encode(images[name]))
+            if asset.twig_atlas is not None:
+                put("texture_twig_normal", TWIG_TEXTURE_FILES["twig_normal"], pngs.encode(asset.twig_atlas.normal))
+                for season, image in twig_albedos(asset).items():
+                    put(f"texture_twig_atlas_{season}", TWIG_TEXTURE_FILES[f"twig_atlas_{season}"],
+                        pngs.encode(image, palette=True))
     if "glb" in spec.formats:
         with timer.stage("glb"):
             put("glb", f"{asset.asset_id}.glb", asset_to_glb(asset, pngs=pngs))

@@ -20,13 +20,16 @@ from species.tree_mesh import MeshPart
 
 from .asset import LibraryAsset, leaf_instances
 
-__all__ = ["asset_to_usdc", "TEXTURE_FILES", "prim_name"]
+__all__ = ["asset_to_usdc", "TEXTURE_FILES", "TWIG_TEXTURE_FILES", "prim_name"]
 
 # Texture files written beside the USD (relative asset paths in the shaders).
 TEXTURE_FILES = {"bark_base_color": "textures/bark_base_color.png", "bark_normal": "textures/bark_normal.png",
                  "bark_roughness_metallic": "textures/bark_roughness_metallic.png",
                  "impostor_albedo": "textures/impostor_albedo.png", "impostor_normal": "textures/impostor_normal.png",
                  **{f"leaf_atlas_{s}": f"textures/leaf_atlas_{s}.png" for s in SEASONS if s != "bare"}}
+# And for an asset whose levels draw twig cards (`LibraryAsset.twig_atlas`): one albedo per season, bare included.
+TWIG_TEXTURE_FILES = {"twig_normal": "textures/twig_normal.png",
+                      **{f"twig_atlas_{s}": f"textures/twig_atlas_{s}.png" for s in SEASONS}}
 
 
 def prim_name(asset_id: str) -> str:
@@ -185,6 +188,9 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
               for s in SEASONS if s != "bare"}
     impostor = _material(stage, f"{looks}/impostor", TEXTURE_FILES["impostor_albedo"],
                          TEXTURE_FILES["impostor_normal"], None, True, 0.8, "clamp")
+    twigs = {s: _material(stage, f"{looks}/twigs_{s}", TWIG_TEXTURE_FILES[f"twig_atlas_{s}"],
+                          TWIG_TEXTURE_FILES["twig_normal"], None, True, 0.8, "clamp")
+             for s in SEASONS} if asset.twig_atlas is not None else {}
     geom = f"{root_path}/Geom"
     UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")
@@ -204,6 +210,9 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
                 if level.skeleton.n_leaves:
                     prototype_names.update(_leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"]))
+                if level.twigs is not None:
+                    cards = _mesh(stage, f"{geom}/twigs", level.twigs, level.twig_wind, level.twig_pivot)
+                    UsdShade.MaterialBindingAPI.Apply(cards.GetPrim()).Bind(twigs["summer"])
             stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
     lod_set.SetVariantSelection("LOD0")
     season_set = root.GetVariantSets().AddVariantSet("season")
@@ -211,6 +220,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
         season_set.AddVariant(season)
         season_set.SetVariantSelection(season)
         with season_set.GetVariantEditContext():
+            if twigs:  # the twig cards keep their twigs in every season; their leaves follow it
+                UsdShade.MaterialBindingAPI.Apply(stage.OverridePrim(f"{geom}/twigs")).Bind(twigs[season])
             over = stage.OverridePrim(f"{geom}/leaves")
             if season == "bare":
                 over.SetActive(False)
