@@ -314,3 +314,37 @@ def test_validate_quality_reports_every_level_beside_its_half_pixel_floor(librar
     out = capsys.readouterr().out
     assert "half-pixel floor" in out and f"{sum(f.meets for f in floors)} of {len(floors)} levels within" in out
     assert farm_main(["library", "add", str(library), "--species", "maple", "--seed", "3", "--quality"]) == 2
+
+
+def test_twig_cards_carry_a_material_per_season_in_glb_and_usd(library):
+    import json
+    import struct
+
+    from pxr import Usd, UsdShade
+
+    with_twigs = 0
+    for asset_json in sorted((library / "assets").glob("*/asset.json")):
+        folder = asset_json.parent
+        data = (folder / f"{folder.name}.glb").read_bytes()
+        length = struct.unpack_from("<I", data, 12)[0]
+        doc = json.loads(data[20:20 + length])
+        twig_meshes = [m for m in doc["meshes"] if m["name"].endswith("_twigs")]
+        if not twig_meshes:
+            continue
+        with_twigs += 1
+        names = [m["name"] for m in doc["materials"]]
+        for mesh in twig_meshes:
+            mappings = mesh["primitives"][0]["extensions"]["KHR_materials_variants"]["mappings"]
+            assert [names[m["material"]] for m in mappings] == ["twigs_spring", "twigs_summer", "twigs_autumn",
+                                                                "twigs_bare"]
+            assert "TANGENT" in mesh["primitives"][0]["attributes"]
+        stage = Usd.Stage.Open(str(folder / f"{folder.name}.usdc"))
+        root = stage.GetDefaultPrim()
+        root.GetVariantSets().GetVariantSet("lod").SetVariantSelection(twig_meshes[0]["name"].split("_")[0])
+        for season in ("summer", "bare"):
+            root.GetVariantSets().GetVariantSet("season").SetVariantSelection(season)
+            twigs = stage.GetPrimAtPath(f"{root.GetPath()}/Geom/twigs")
+            bound = UsdShade.MaterialBindingAPI(twigs).ComputeBoundMaterial()[0]
+            assert bound.GetPrim().GetName() == f"twigs_{season}"
+            assert (folder / f"textures/twig_atlas_{season}.png").is_file()
+    assert with_twigs >= 1  # the sapling draws its dropped twigs as cards

@@ -1,0 +1,95 @@
+"""Twig cluster cards: which branches share a card, cards in the plane of their faces, the atlas layout and its
+inverse (species.studio.twig_cards)."""
+import numpy as np
+import pytest
+
+import species
+from species.studio.lod import TreeLods
+from species.studio.twig_cards import (TWIG_PADDING_TEXELS, TwigAtlas, TwigCardError, twig_cards, twig_labels)
+
+
+@pytest.fixture(scope="module")
+def sapling():
+    params = species.sample("sc_young_sapling", np.random.default_rng(3))
+    return species.rebuild(params)
+
+
+@pytest.fixture(scope="module")
+def kept(sapling):
+    skeleton, lod0 = sapling
+    lod = TreeLods(skeleton, lod0).build(2, 0.12, 256)
+    kept_branch = np.zeros(skeleton.n_branches, bool)
+    kept_branch[skeleton.branch_id[lod.original_node]] = True
+    assert 0 < kept_branch.sum() < skeleton.n_branches
+    return kept_branch
+
+
+def test_every_dropped_branch_gets_its_own_card_without_a_depth_limit(sapling, kept):
+    labels = twig_labels(sapling[0], kept, None)
+    assert (labels[kept] == -1).all()
+    assert sorted(labels[~kept]) == list(range(int((~kept).sum())))
+
+
+def test_depth_zero_gives_one_card_per_dropped_subtree(sapling, kept):
+    skeleton = sapling[0]
+    labels = twig_labels(skeleton, kept, 0)
+    parent = skeleton.branch_parent
+    roots = ~kept & kept[np.maximum(parent, 0)] & (parent >= 0)
+    assert labels.max() + 1 == roots.sum()
+    # A dropped branch shares its parent's card unless it is a subtree's root.
+    inner = ~kept & ~roots
+    assert (labels[inner] == labels[parent[inner]]).all()
+
+
+def test_deeper_limits_never_give_fewer_cards(sapling, kept):
+    counts = [twig_labels(sapling[0], kept, depth).max() + 1 for depth in (0, 1, 2, 3, None)]
+    assert counts == sorted(counts)
+
+
+def test_labels_of_the_wrong_shape_are_refused(sapling):
+    with pytest.raises(TwigCardError, match="kept_branch of shape"):
+        twig_labels(sapling[0], np.ones(3, bool), None)
+
+
+def test_cards_hold_their_faces_pressed_flat_inside_the_card(sapling, kept):
+    skeleton, lod0 = sapling
+    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
+    dropped_bark = ~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]]
+    assert len(cards.bark_faces) == dropped_bark.sum()
+    flat = cards.flattened(lod0)
+    for part, card in ((flat.bark, cards.bark_card), (flat.leaves, cards.leaf_card)):
+        card = np.repeat(card, 3)
+        local = np.einsum("pj,pij->pi", part.vertices[part.faces].reshape(-1, 3) - cards.origin[card],
+                          cards.axes[card])
+        assert np.abs(local[:, 2]).max() < 1e-4  # on the card's plane
+        assert (local[:, :2] >= -1e-4).all() and (local[:, :2] <= cards.extent[card] + 1e-4).all()
+    assert np.allclose(np.einsum("cij,ckj->cik", cards.axes, cards.axes), np.eye(3), atol=1e-9)
+    assert np.allclose(np.linalg.det(cards.axes), 1.0)
+
+
+def test_atlas_tiles_do_not_overlap_and_map_back_to_the_card(sapling, kept):
+    skeleton, lod0 = sapling
+    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
+    atlas = TwigAtlas.pack([cards], [0.01], 64 * 64 * 64)
+    index = atlas.card_index()
+    assert index.shape == (atlas.size[1], atlas.size[0])
+    tiles = np.bincount(index[index >= 0], minlength=len(cards))
+    expected = np.prod(np.ceil(cards.extent / atlas.texel[:, None]) + 2 * TWIG_PADDING_TEXELS, axis=1)
+    assert np.array_equal(tiles, expected)  # each tile whole: none painted over another
+    rng = np.random.default_rng(0)
+    card = rng.integers(0, len(cards), 50)
+    points = cards.origin[card] + rng.random((50, 1)) * cards.extent[card, :1] * cards.axes[card, 0] \
+        + rng.random((50, 1)) * cards.extent[card, 1:] * cards.axes[card, 1]
+    placed = atlas.to_atlas(points, card)
+    assert np.allclose(atlas.from_atlas(placed[:, :2] + 0.5, card), points, atol=1e-9)
+
+
+def test_a_texel_budget_coarsens_the_finest_level_first(sapling, kept):
+    skeleton, lod0 = sapling
+    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
+    fine, coarse = 0.001, 0.05
+    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], 20_000)
+    n = len(cards)
+    assert np.allclose(atlas.texel[n:], coarse)  # the coarse level keeps its texels
+    assert (atlas.texel[:n] > fine).all()
+    assert atlas.size[0] * atlas.size[1] <= 2 * 20_000
