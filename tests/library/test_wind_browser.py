@@ -1,7 +1,9 @@
 """The wind example in a real library: the job writes the page and the three.js it imports, and headless Chromium,
-served the folder over HTTP, loads a GLB with it and sways bark (per vertex) and leaves (per instance).
+served the folder over HTTP, loads a GLB with it and sways bark (per vertex) and leaves (per instance), and draws
+an octahedral impostor with its shader, leaning in the wind.
 
-One palm built by `farm library add` (no Ray, 32 px textures); WebGL runs on SwiftShader (CPU).
+One palm built by `farm library add` (no Ray, 32 px textures) per library (crossed planes; octahedral impostor);
+WebGL runs on SwiftShader (CPU).
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ import json
 import re
 import shutil
 import threading
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +34,7 @@ from required_tools import missing_tool
 PROJECT = Path(__file__).resolve().parents[2]
 SPEC = {"name": "wind", "seed": 1, "species": {"palm": 1}, "formats": ["glb"], "texture_size": 32,
         "impostor_tile": 16}
+OCTAHEDRAL_SPEC = {**SPEC, "impostor": "octahedral", "impostor_frames": 8, "impostor_tile": 48}
 BACKGROUND = np.array([221, 232, 240])  # the page's clear colour, 0xdde8f0
 
 
@@ -44,18 +48,26 @@ def needs_local_three(test):
     return checked
 
 
-@pytest.fixture(scope="module")
-def library(tmp_path_factory) -> Path:
-    """A library folder holding one palm (treat as read-only)."""
-    out = tmp_path_factory.mktemp("wind") / "library"
-    write_library_record(Location.resolve(str(out)), parse_library_spec(SPEC))
+def one_palm_library(out: Path, spec: dict) -> Path:
+    """A library folder of `spec` holding one palm."""
+    write_library_record(Location.resolve(str(out)), parse_library_spec(spec))
     add_asset(str(out), "palm", 3)
     return out
 
 
+def glb_path(library: Path) -> str:
+    return json.loads((library / "catalog.json").read_text())[0]["files_json"]["glb"]
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory) -> Path:
+    """A library folder holding one palm (treat as read-only)."""
+    return one_palm_library(tmp_path_factory.mktemp("wind") / "library", SPEC)
+
+
 @pytest.fixture(scope="module")
 def glb(library) -> str:
-    return json.loads((library / "catalog.json").read_text())[0]["files_json"]["glb"]
+    return glb_path(library)
 
 
 @needs_local_three
@@ -97,21 +109,23 @@ class _QuietHandler(http.server.SimpleHTTPRequestHandler):
         pass
 
 
-@pytest.fixture(scope="module")
-def served(library):
-    """The library folder on a plain local HTTP server (what `python -m http.server -d LIBRARY` does)."""
+@contextmanager
+def serving(folder: Path):
+    """The folder on a plain local HTTP server (what `python -m http.server -d LIBRARY` does): yields its URL."""
     server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_QuietHandler,
-                                                                                  directory=str(library)))
+                                                                                  directory=str(folder)))
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
-    yield f"http://127.0.0.1:{server.server_address[1]}"
-    server.shutdown()
-    server.server_close()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
 
 
 @pytest.fixture(scope="module")
-def wind_page(served, glb):
-    """The example page with the palm loaded and its animation loop paused: yields (page, problems, requests)."""
+def chromium():
+    """Headless Chromium (one for the module: playwright's sync API runs one at a time)."""
     if shutil.which("chromium") is None:
         missing_tool("chromium is not installed: run `make browser-env`")
     if three_source() is None:
@@ -120,18 +134,41 @@ def wind_page(served, glb):
 
     with sync_api.sync_playwright() as playwright:
         browser = launch_chromium(playwright)
-        page = browser.new_page(viewport={"width": 320, "height": 320})
-        problems, requests = [], []
-        page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
-        page.on("console", lambda message: problems.append(f"console: {message.text}")
-                if message.type == "error" else None)
-        page.on("request", lambda request: requests.append(request.url))
-        page.goto(f"{served}/{WIND_PAGE}?glb={glb}")
-        page.wait_for_function("window.__wind && (window.__wind.ready || window.__wind.error !== null)",
-                               timeout=60_000)
-        page.evaluate("window.__wind.pause()")
-        yield page, problems, requests
+        yield browser
         browser.close()
+
+
+@contextmanager
+def opened_page(browser, address: str):
+    """The example page at `address` loaded in a new tab, its animation loop paused: yields (page, problems,
+    requests)."""
+    page = browser.new_page(viewport={"width": 320, "height": 320})
+    problems, requests = [], []
+    page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
+    page.on("console", lambda message: problems.append(f"console: {message.text}")
+            if message.type == "error" else None)
+    page.on("request", lambda request: requests.append(request.url))
+    page.goto(address)
+    page.wait_for_function("window.__wind && (window.__wind.ready || window.__wind.error !== null)",
+                           timeout=60_000)
+    page.evaluate("window.__wind.pause()")
+    try:
+        yield page, problems, requests
+    finally:
+        page.close()
+
+
+@pytest.fixture(scope="module")
+def served(library):
+    with serving(library) as address:
+        yield address
+
+
+@pytest.fixture(scope="module")
+def wind_page(chromium, served, glb):
+    """The example page with the palm loaded and its animation loop paused: yields (page, problems, requests)."""
+    with opened_page(chromium, f"{served}/{WIND_PAGE}?glb={glb}") as opened:
+        yield opened
 
 
 def frame(page, seconds: float, strength: float, part: str, layers=(1.0, 1.0, 1.0)) -> np.ndarray:
@@ -188,4 +225,57 @@ def test_with_wind_strength_zero_nothing_moves(wind_page):
     page, problems, _ = wind_page
     before, after = frame(page, 0.0, 0.0, "all"), frame(page, 1.7, 0.0, "all")
     assert covered_share(before) > 0.02 and np.array_equal(before, after)
+    assert problems == []
+
+
+@pytest.fixture(scope="module")
+def octahedral_page(chromium, tmp_path_factory):
+    """The example page showing a palm whose GLB carries an octahedral impostor: yields (page, problems)."""
+    library = one_palm_library(tmp_path_factory.mktemp("octahedral") / "library", OCTAHEDRAL_SPEC)
+    with serving(library) as address, \
+            opened_page(chromium, f"{address}/{WIND_PAGE}?glb={glb_path(library)}") as opened:
+        yield opened[:2]
+
+
+def test_a_glb_with_crossed_planes_has_no_impostor_for_the_page_to_draw(wind_page):
+    page, problems, _ = wind_page
+    assert page.evaluate("window.__wind.parts.impostor") is None
+    assert problems == []
+
+
+def test_the_page_draws_the_octahedral_impostor_where_lod0_stands(octahedral_page):
+    page, problems = octahedral_page
+    assert page.evaluate("window.__wind.error") is None
+    assert page.evaluate("window.__wind.parts.impostor") == {"frames": 8, "tile": 48}
+    tree, impostor = frame(page, 0.0, 0.0, "all"), frame(page, 0.0, 0.0, "impostor")
+    tree_mask, impostor_mask = (np.abs(image - BACKGROUND).sum(axis=2) > 30 for image in (tree, impostor))
+    assert covered_share(impostor) > 0.01
+    # The impostor's pixels are where LOD0's are (its frame is the same palm from nearly the same side).
+    overlap = (tree_mask & impostor_mask).sum() / (tree_mask | impostor_mask).sum()
+    assert overlap > 0.5, overlap
+    assert problems == []
+
+
+def test_the_octahedral_impostor_leans_in_the_wind_and_keeps_still_without_it(octahedral_page):
+    page, problems = octahedral_page
+    before, after = frame(page, 0.0, 1.0, "impostor"), frame(page, 1.7, 1.0, "impostor")
+    assert changed_share(before, after) > 0.1 * covered_share(before)
+    still_before, still_after = frame(page, 0.0, 0.0, "impostor"), frame(page, 1.7, 0.0, "impostor")
+    assert np.array_equal(still_before, still_after)
+    assert problems == []
+
+
+def test_the_octahedral_impostor_turns_with_the_camera(octahedral_page):
+    # Seen from above, the frames of the top of the hemisphere are drawn: another silhouette than from the side.
+    page, problems = octahedral_page
+    side = frame(page, 0.0, 0.0, "impostor")
+    above = page.evaluate("""() => {
+        const wind = window.__wind;
+        wind.view(0.0, 80.0);
+        const image = wind.frame();
+        wind.view();
+        return image;
+    }""")
+    top = np.asarray(Image.open(io.BytesIO(base64.b64decode(above.split(",", 1)[1]))).convert("RGB"), np.int16)
+    assert covered_share(top) > 0.01 and changed_share(side, top) > 0.3 * covered_share(side)
     assert problems == []
