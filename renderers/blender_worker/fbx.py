@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import datetime
 import hashlib
+import json
 import os
 import time
 
@@ -222,8 +223,18 @@ def _deterministic_exporter() -> None:
     fbx_utils._uuids_to_keys.clear()
 
 
+def _json_custom_props(objects: list) -> None:
+    """Custom properties that hold a group (a glTF node's extras object, such as an octahedral impostor's
+    layout) as JSON text: the FBX exporter writes a group as its Python repr, memory address and all."""
+    for obj in objects:
+        for key in list(obj.keys()):
+            if hasattr(obj[key], "to_dict"):
+                obj[key] = json.dumps(obj[key].to_dict(), sort_keys=True)
+
+
 def export_fbx(objects: list, path: str) -> None:
     _deterministic_exporter()
+    _json_custom_props(objects)
     bpy.ops.object.select_all(action="DESELECT")
     for obj in objects:
         obj.select_set(True)

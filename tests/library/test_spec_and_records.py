@@ -70,3 +70,33 @@ def test_asset_ids_are_the_specs_trees_and_the_added_ones_sorted(tmp_path):
     assert f"palm-{tree_seed(3, 1):016x}" in planned  # species interleaved: the palm is tree 1
     write_added_record(location, "palm", 7)
     assert library_asset_ids(location, spec) == sorted([*planned, "palm-0000000000000007"])
+
+
+def test_the_default_crossed_impostor_leaves_the_job_record_as_it_was():
+    record = parse_library_spec(SPEC).to_dict()
+    assert "impostor" not in record and "impostor_frames" not in record and record["impostor_tile"] == 128
+
+
+def test_an_octahedral_spec_takes_the_largest_tile_that_fits_the_atlas_and_round_trips():
+    spec = parse_library_spec({**SPEC, "impostor": "octahedral"})
+    assert (spec.impostor, spec.impostor_frames, spec.impostor_tile) == ("octahedral", 12, 85)
+    assert parse_library_spec({**SPEC, "impostor": "octahedral", "impostor_frames": 6}).impostor_tile == 128
+    record = json.loads(json.dumps(spec.to_dict()))
+    assert record["impostor"] == "octahedral" and library_spec_from_record(record) == spec
+    assert spec.digest() != parse_library_spec(SPEC).digest()
+    sixteen = parse_library_spec({**SPEC, "impostor": "octahedral", "impostor_frames": 16})
+    assert library_spec_from_record(sixteen.to_dict()) == sixteen and sixteen.impostor_tile == 64
+
+
+@pytest.mark.parametrize("fields, named, allowed", [
+    ({"impostor": "billboard"}, "impostor", "crossed, octahedral"),
+    ({"impostor": "octahedral", "impostor_frames": 3}, "impostor_frames", "[4, 32]"),
+    ({"impostor": "octahedral", "impostor_frames": 40}, "impostor_frames", "[4, 32]"),
+    ({"impostor_frames": 12}, "impostor_frames", "only with impostor: octahedral"),
+    ({"impostor": "octahedral", "impostor_tile": 128}, "impostor_tile", "at most 85 px with impostor_frames 12"),
+    ({"impostor": "octahedral", "impostor_frames": 32, "impostor_tile": 33}, "impostor_tile",
+     "at most 32 px with impostor_frames 32")])
+def test_bad_impostor_fields_are_refused_naming_the_field_and_what_is_allowed(fields, named, allowed):
+    with pytest.raises(LibrarySpecError) as info:
+        parse_library_spec({**SPEC, **fields})
+    assert info.value.field == named and allowed in str(info.value)
