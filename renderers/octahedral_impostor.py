@@ -5,13 +5,16 @@ The frames: frame (gx, gy), gx, gy in 0..N-1, is the orthographic view of the tr
 (toward the camera, Z up) whose hemi-octahedral point is (ox, oy) = (2 gx / (N - 1) - 1, 2 gy / (N - 1) - 1):
 px = (ox + oy) / 2, py = (oy - ox) / 2, d = normalise(px, py, 1 - |px| - |py|). The square's edge is the horizon,
 its centre the zenith, its corners +X (1, 1), -Y (1, -1), -X (-1, -1) and +Y (-1, 1). A frame's image right is
-normalise(cross(-d, +Z)) (+X where d is +Z), its image up cross(right, -d); its tile spans the sphere of `radius`
-about `centre` (both axes [-radius, radius]). The atlas holds frame (gx, gy) at tile column gx, tile row gy from
+normalise(cross(-d, +Z)) (+X where d is +Z), its image up cross(right, -d). Its tile spans the tree's bounding
+cylinder about `centre` (half width w across the vertical axis, half height h) as that frame sees it: [-w, w]
+along right, [-e, e] along up with e = w |d_z| + h sqrt(1 - d_z^2) (`frame_extents`), so a tall narrow tree gets
+fine texels across and a wide one both ways. The atlas holds frame (gx, gy) at tile column gx, tile row gy from
 the top, N x N tiles of T px.
 
-Drawing: the quad faces the camera, spanning [-radius, radius] about the centre; a view direction picks the three
-frames of the grid triangle holding its hemi-octahedral point (barycentric weights), each sampled where the
-pixel's ray crosses that frame's plane (through the centre, normal d), and the blended alpha is tested at 0.5.
+Drawing: the quad faces the camera, spanning the bounding sphere, [-radius, radius], about the centre; a view
+direction picks the three frames of the grid triangle holding its hemi-octahedral point (barycentric weights),
+each sampled where the pixel's ray crosses that frame's plane (through the centre, normal d), and the blended
+alpha is tested at 0.5.
 The wind example's shader does this; `OctahedralAtlas.coverage` casts the same rays in numpy.
 """
 from __future__ import annotations
@@ -27,15 +30,15 @@ from .camera import Camera
 from .impostor import CoverageRenderer, ImpostorError, atlas_tile, pixel_rays, plane_coordinates
 
 __all__ = ["OctahedralAtlas", "render_octahedral_impostor", "octahedral_encode", "octahedral_decode",
-           "frame_directions", "frame_axes", "frame_weights", "between_frame_azimuths", "OCTAHEDRAL_FRAMES",
+           "frame_directions", "frame_axes", "frame_extents", "frame_weights", "between_frame_azimuths", "OCTAHEDRAL_FRAMES",
            "FRAMES_RANGE", "MAX_ATLAS_PX", "MAPPING"]
 
 OCTAHEDRAL_FRAMES = 12  # frames per side by default: horizon frames 5.2 to 10.4 deg apart in azimuth
 FRAMES_RANGE = (4, 32)
 MAX_ATLAS_PX = 1024  # atlas side limit (frames x tile), a texture every engine and WebGL device takes
 MAPPING = "hemi-octahedral"
-# The frames' sphere is the tree's farthest vertex from the box centre, plus this margin.
-_RADIUS_MARGIN = 1.02
+# The bounding cylinder and sphere are the tree's farthest vertices from the box centre, plus this margin.
+_BOUNDS_MARGIN = 1.02
 _UP = np.array([0.0, 0.0, 1.0])
 # The quad a static viewer shows faces the view from azimuth 0 (from -Y, world X to the image right).
 _STATIC_DIRECTION = np.array([0.0, -1.0, 0.0])
@@ -78,6 +81,16 @@ def frame_axes(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return right, np.cross(right, -d)
 
 
+def frame_extents(directions: np.ndarray, half_width: float, half_height: float) -> np.ndarray:
+    """(..., 2) float64 metres: half the width and height a frame's tile spans (along its image right and up) for
+    views from unit directions (..., 3), the bounding cylinder (half width across the vertical axis, half
+    height) seen from there."""
+    d = np.asarray(directions, np.float64)
+    across = np.abs(d[..., 2])
+    return np.stack([np.full(across.shape, half_width),
+                     half_width * across + half_height * np.sqrt(np.maximum(1.0 - across ** 2, 0.0))], axis=-1)
+
+
 def frame_weights(directions: np.ndarray, frames: int) -> tuple[np.ndarray, np.ndarray]:
     """The three frames blended for each view direction (M, 3), and their weights: cells (M, 3, 2) int64
     (gx, gy) and weights (M, 3) float64 summing to 1, the barycentric weights of the direction's
@@ -113,8 +126,10 @@ class OctahedralAtlas:
     albedo : (N T, N T, 4) uint8 sRGB + alpha (255 where the tree covers the texel, not grown).
     normal : (N T, N T, 3) uint8 tangent-space normals of each frame (+x image right, +y image up, +z toward
              the frame's camera); flat off the tree.
-    centre : (3,) float64 metres, Z up, the centre of the frames' sphere (the tree's box centre).
-    radius : metres, the sphere's radius: every frame spans [-radius, radius] about the centre.
+    centre : (3,) float64 metres, Z up, the tree's box centre.
+    radius : metres, the bounding sphere's radius about the centre (the drawn quad's half side).
+    half_width, half_height : metres, the bounding cylinder about the vertical axis through the centre (each
+             frame's tile spans it as seen from the frame, `frame_extents`).
     frames : N, frames per side of the hemi-octahedral grid.
     tile   : T, pixels per frame side.
     """
@@ -123,6 +138,8 @@ class OctahedralAtlas:
     normal: np.ndarray
     centre: np.ndarray
     radius: float
+    half_width: float
+    half_height: float
     frames: int
     tile: int
 
@@ -141,13 +158,13 @@ class OctahedralAtlas:
 
     def mesh(self) -> MeshPart:
         """The quad (4 vertices, 2 triangles), as a static viewer shows it: facing the view from azimuth 0 at the
-        horizon, spanning the sphere's [-radius, radius] about the centre, UVs (v up, OBJ convention) into
-        `static_frame`'s tile, normals toward that view. A shader that turns it toward the camera and picks
-        frames by view direction (the wind example's) takes its corners from their sides of the centre."""
+        horizon, spanning what `static_frame`'s tile spans (the bounding cylinder from the front), UVs (v up, OBJ
+        convention) into that tile, normals toward that view. A shader that turns it toward the camera and picks
+        frames by view direction (the wind example's) takes only its corners' sides of the centre from it."""
         right, up = frame_axes(_STATIC_DIRECTION)
-        r = self.radius
+        width, height = frame_extents(_STATIC_DIRECTION, self.half_width, self.half_height)
         corners = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-        vertices = self.centre + r * corners[:, :1] * right + r * corners[:, 1:] * up
+        vertices = self.centre + width * corners[:, :1] * right + height * corners[:, 1:] * up
         gx, gy = self.static_frame
         n = self.frames
         uvs = np.stack([(gx + 0.5 * (corners[:, 0] + 1.0)) / n, 1.0 - (gy + 1.0 - 0.5 * (corners[:, 1] + 1.0)) / n],
@@ -158,12 +175,15 @@ class OctahedralAtlas:
         """The layout the files record (GLB extras, USD custom data, asset.json): JSON-able, metres, Z up."""
         return {"kind": self.kind, "mapping": MAPPING, "frames": int(self.frames), "tile_px": int(self.tile),
                 "atlas_px": int(self.frames * self.tile), "centre_m": [float(v) for v in self.centre],
-                "radius_m": float(self.radius), "up_axis": "Z", "static_frame": list(self.static_frame),
+                "radius_m": float(self.radius), "half_width_m": float(self.half_width),
+                "half_height_m": float(self.half_height), "up_axis": "Z", "static_frame": list(self.static_frame),
                 "frame_direction": "frame (gx, gy) at tile column gx, tile row gy from the top views from "
                                    "normalise(px, py, 1 - |px| - |py|), px = (ox + oy) / 2, py = (oy - ox) / 2, "
                                    "(ox, oy) = (2 gx / (frames - 1) - 1, 2 gy / (frames - 1) - 1)",
                 "frame_axes": "right = normalise(cross(-d, +Z)) (+X when d = +Z), up = cross(right, -d); a tile "
-                              "spans [-radius_m, radius_m] on both about centre_m",
+                              "spans [-w, w] along right and [-e, e] along up about centre_m, w = half_width_m, "
+                              "e = half_width_m |d_z| + half_height_m sqrt(1 - d_z^2); the quad drawn spans "
+                              "[-radius_m, radius_m] both ways, turned toward the camera",
                 "blend": "the 3 frames of the grid triangle (cells split along the (1, 0)-(0, 1) diagonal) holding "
                          "the view's point, barycentric weights, each sampled where the ray crosses its plane "
                          "through centre_m; alpha test 0.5 on the blend"}
@@ -182,7 +202,6 @@ class OctahedralAtlas:
         on_quad = valid & (np.abs(x) <= r) & (np.abs(y) <= r)
         cells, weights = frame_weights(view[None], self.frames)
         opaque = self.albedo[..., 3] >= 128
-        scale = self.tile / (2.0 * r)
         blended = np.zeros(len(origin))
         directions = frame_directions(self.frames)
         for (gx, gy), weight in zip(cells[0], weights[0]):  # three frames, each over every pixel at once
@@ -191,8 +210,9 @@ class OctahedralAtlas:
             d = directions[gy, gx]
             frame_right, frame_up = frame_axes(d)
             fx, fy, crosses = plane_coordinates(origin, direction, self.centre, d, frame_right, frame_up)
-            col = np.floor(fx * scale + self.tile / 2).astype(np.int64)
-            row = np.floor(-fy * scale + self.tile / 2).astype(np.int64)
+            width, height = frame_extents(d, self.half_width, self.half_height)
+            col = np.floor(fx * self.tile / (2.0 * width) + self.tile / 2).astype(np.int64)
+            row = np.floor(-fy * self.tile / (2.0 * height) + self.tile / 2).astype(np.int64)
             inside = crosses & (col >= 0) & (col < self.tile) & (row >= 0) & (row < self.tile)
             r0, c0 = self.tile_origin(int(gx), int(gy))
             hit = np.zeros(len(origin))
@@ -201,19 +221,20 @@ class OctahedralAtlas:
         return (on_quad & (blended >= 0.5)).reshape(camera.height, camera.width)
 
 
-def _frame_camera(centre: np.ndarray, radius: float, direction: np.ndarray, tile: int, name: str) -> Camera:
+def _frame_camera(centre: np.ndarray, radius: float, extents: np.ndarray, direction: np.ndarray, tile: int,
+                  name: str) -> Camera:
     """The orthographic camera of one frame: looking along -direction at the centre, image axes `frame_axes`,
-    the sphere's [-radius, radius] across the tile both ways."""
+    the tile spanning +-extents (2,) metres along them, depth the sphere of `radius`."""
     right, up = frame_axes(direction)
     distance = 2.0 * radius + 1.0
     rotation = np.stack([right, -up, -direction])  # OpenCV axes: x right, y down, z forward
     E = np.eye(4)
     E[:3, :3] = rotation
     E[:3, 3] = -rotation @ (centre + distance * direction)
-    s = tile / (2.0 * radius)
-    K = np.array([[s, 0, (tile - 1) / 2], [0, s, (tile - 1) / 2], [0, 0, 1]])
-    return Camera(tile, tile, K, E, "orthographic", distance - radius * 1.01, distance + radius * 1.01, radius,
-                  radius, name=name)
+    sx, sy = tile / (2.0 * extents)
+    K = np.array([[sx, 0, (tile - 1) / 2], [0, sy, (tile - 1) / 2], [0, 0, 1]])
+    return Camera(tile, tile, K, E, "orthographic", distance - radius * 1.01, distance + radius * 1.01,
+                  float(extents[0]), float(extents[1]), name=name)
 
 
 def render_octahedral_impostor(renderer: CoverageRenderer, tree: TreeMesh, frames: int = OCTAHEDRAL_FRAMES,
@@ -232,15 +253,21 @@ def render_octahedral_impostor(renderer: CoverageRenderer, tree: TreeMesh, frame
         raise ImpostorError(f"tree {tree.name!r} has no vertices to make an impostor from")
     # Rounded as the files record them, so the shader's frames are the rendered ones to the last bit.
     centre = np.round(0.5 * (points.min(axis=0) + points.max(axis=0)), 6)
-    radius = float(np.round(max(np.linalg.norm(points - centre, axis=1).max(), 1e-3) * _RADIUS_MARGIN, 6))
+    relative = points - centre
+    radius, half_width, half_height = (
+        float(np.round(max(float(extent), 1e-3) * _BOUNDS_MARGIN, 6))
+        for extent in (np.linalg.norm(relative, axis=1).max(), np.hypot(relative[:, 0], relative[:, 1]).max(),
+                       np.abs(relative[:, 2]).max()))
     side = frames * tile
     albedo = np.zeros((side, side, 4), np.uint8)
     normal = np.zeros((side, side, 3), np.uint8)
     directions = frame_directions(frames)
+    extents = frame_extents(directions, half_width, half_height)
     renderer.load(tree)
     for gy in range(frames):
         for gx in range(frames):
-            camera = _frame_camera(centre, radius, directions[gy, gx], tile, f"octahedral_{gx}_{gy}")
+            camera = _frame_camera(centre, radius, extents[gy, gx], directions[gy, gx], tile,
+                                   f"octahedral_{gx}_{gy}")
             rows, cols = slice(gy * tile, (gy + 1) * tile), slice(gx * tile, (gx + 1) * tile)
             albedo[rows, cols], normal[rows, cols] = atlas_tile(camera, renderer.part_depths(camera, False), tree)
-    return OctahedralAtlas(albedo, normal, centre, radius, frames, tile)
+    return OctahedralAtlas(albedo, normal, centre, radius, half_width, half_height, frames, tile)

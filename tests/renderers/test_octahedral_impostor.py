@@ -11,7 +11,7 @@ import pytest
 from renderers.camera import view_direction
 from renderers.impostor import CoverageRenderer, ImpostorError, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import (MAX_ATLAS_PX, between_frame_azimuths, frame_axes, frame_directions,
-                                           frame_weights, octahedral_decode, octahedral_encode,
+                                           frame_extents, frame_weights, octahedral_decode, octahedral_encode,
                                            render_octahedral_impostor)
 from species.tree_mesh import MeshPart, TreeMesh
 
@@ -121,16 +121,24 @@ def test_the_atlas_holds_every_frame_in_its_tile(atlas):
     assert atlas.albedo.shape == (FRAMES * TILE, FRAMES * TILE, 4) and atlas.normal.shape == (FRAMES * TILE,) * 2 + (3,)
     assert set(np.unique(atlas.albedo[..., 3])) == {0, 255}
     assert all(_frame_alpha(atlas, gx, gy).any() for gx in range(FRAMES) for gy in range(FRAMES))
-    farthest = np.linalg.norm(np.array([-0.25, 0.25, 0.0]) - [0.825, 0.0, 2.0])  # a foot of the post
-    assert np.isclose(atlas.radius, 1.02 * farthest, rtol=1e-3)
+    farthest = np.array([-0.25, 0.25, 0.0]) - [0.825, 0.0, 2.0]  # a foot of the post
+    assert np.isclose(atlas.radius, 1.02 * np.linalg.norm(farthest), rtol=1e-3)
+    assert np.isclose(atlas.half_width, 1.02 * np.hypot(1.9 - 0.825, 0.4), rtol=1e-3)  # the block's outer edge
+    assert np.isclose(atlas.half_height, 1.02 * 2.0, rtol=1e-3)
+
+
+def test_a_tile_spans_the_bounding_cylinder_as_its_frame_sees_it():
+    extents = frame_extents(np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8]]), 1.0, 3.0)
+    assert np.allclose(extents, [[1.0, 3.0], [1.0, 1.0], [1.0, 0.8 + 3.0 * 0.6]])
 
 
 def _tile_position(atlas, gx: int, gy: int, point) -> np.ndarray:
     """(column, row) where a world point (metres) lies in frame (gx, gy)'s tile, in texels (continuous)."""
-    right, up = frame_axes(frame_directions(atlas.frames)[gy, gx])
+    direction = frame_directions(atlas.frames)[gy, gx]
+    right, up = frame_axes(direction)
     relative = np.asarray(point, np.float64) - atlas.centre
-    scale = atlas.tile / (2 * atlas.radius)
-    return np.array([relative @ right * scale, -(relative @ up) * scale]) + atlas.tile / 2
+    scale = atlas.tile / (2 * frame_extents(direction, atlas.half_width, atlas.half_height))
+    return np.array([relative @ right * scale[0], -(relative @ up) * scale[1]]) + atlas.tile / 2
 
 
 @pytest.mark.parametrize("frame, side", [((FRAMES - 1, 0), 1),  # from -Y: +X to the image right
@@ -153,8 +161,9 @@ def test_a_horizon_frame_sees_the_block_from_its_side(atlas, frame, side):
 def test_the_frame_looking_down_sees_the_block_toward_plus_x(atlas):
     alpha = _frame_alpha(atlas, FRAMES // 2, FRAMES // 2)
     rows, cols = np.nonzero(alpha)
-    x = (cols + 0.5 - atlas.tile / 2) * 2 * atlas.radius / atlas.tile + atlas.centre[0]
-    y = (atlas.tile / 2 - rows - 0.5) * 2 * atlas.radius / atlas.tile + atlas.centre[1]
+    texel = 2 * atlas.half_width / atlas.tile  # looking down, the tile spans the cylinder's width both ways
+    x = (cols + 0.5 - atlas.tile / 2) * texel + atlas.centre[0]
+    y = (atlas.tile / 2 - rows - 0.5) * texel + atlas.centre[1]
     assert x.max() == pytest.approx(1.9, abs=0.25) and x.min() == pytest.approx(-0.25, abs=0.25)
     assert np.abs(y).max() < 0.6  # the block's and the post's few decimetres across
 
@@ -176,8 +185,9 @@ def test_frames_and_atlas_sizes_out_of_range_are_refused(renderer, frames, tile,
 def test_the_quad_faces_the_front_view_with_its_frame(atlas):
     quad = atlas.mesh()
     assert quad.n_faces == 2 and quad.n_vertices == 4
-    assert np.allclose(quad.vertices[:, 1], atlas.centre[1])
-    assert np.allclose(np.abs(quad.vertices[:, [0, 2]] - atlas.centre[[0, 2]]), atlas.radius, rtol=1e-5)
+    assert np.allclose(quad.vertices[:, 1], atlas.centre[1])  # facing the view from -Y, spanning its tile
+    assert np.allclose(np.abs(quad.vertices[:, 0] - atlas.centre[0]), atlas.half_width, rtol=1e-5)
+    assert np.allclose(np.abs(quad.vertices[:, 2] - atlas.centre[2]), atlas.half_height, rtol=1e-5)
     gx, gy = atlas.static_frame
     assert (gx, gy) == (FRAMES - 1, 0)
     assert np.allclose(np.sort(np.unique(quad.uvs[:, 0])), [gx / FRAMES, (gx + 1) / FRAMES])
