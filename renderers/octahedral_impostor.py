@@ -124,8 +124,9 @@ class OctahedralAtlas:
     """An octahedral impostor (module docstring for the mapping and the atlas layout).
 
     albedo : (N T, N T, 4) uint8 sRGB + alpha (255 where the tree covers the texel, not grown).
-    normal : (N T, N T, 3) uint8 tangent-space normals of each frame (+x image right, +y image up, +z toward
-             the frame's camera); flat off the tree.
+    normal : (ceil(N T / 2),) * 2 + (3,) uint8 tangent-space normals of each frame (+x image right, +y image
+             up, +z toward the frame's camera; flat off the tree), every other texel of the albedo's grid: the
+             same layout at half the resolution (shading needs less detail than the alpha; a quarter of the file).
     centre : (3,) float64 metres, Z up, the tree's box centre.
     radius : metres, the bounding sphere's radius about the centre (the drawn quad's half side).
     half_width, half_height : metres, the bounding cylinder about the vertical axis through the centre (each
@@ -174,7 +175,8 @@ class OctahedralAtlas:
     def layout(self) -> dict:
         """The layout the files record (GLB extras, USD custom data, asset.json): JSON-able, metres, Z up."""
         return {"kind": self.kind, "mapping": MAPPING, "frames": int(self.frames), "tile_px": int(self.tile),
-                "atlas_px": int(self.frames * self.tile), "centre_m": [float(v) for v in self.centre],
+                "atlas_px": int(self.frames * self.tile), "normal_px": int(self.normal.shape[0]),
+                "centre_m": [float(v) for v in self.centre],
                 "radius_m": float(self.radius), "half_width_m": float(self.half_width),
                 "half_height_m": float(self.half_height), "up_axis": "Z", "static_frame": list(self.static_frame),
                 "frame_direction": "frame (gx, gy) at tile column gx, tile row gy from the top views from "
@@ -270,4 +272,5 @@ def render_octahedral_impostor(renderer: CoverageRenderer, tree: TreeMesh, frame
                                    f"octahedral_{gx}_{gy}")
             rows, cols = slice(gy * tile, (gy + 1) * tile), slice(gx * tile, (gx + 1) * tile)
             albedo[rows, cols], normal[rows, cols] = atlas_tile(camera, renderer.part_depths(camera, False), tree)
-    return OctahedralAtlas(albedo, normal, centre, radius, half_width, half_height, frames, tile)
+    return OctahedralAtlas(albedo, np.ascontiguousarray(normal[::2, ::2]), centre, radius, half_width, half_height,
+                           frames, tile)

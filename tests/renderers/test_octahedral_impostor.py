@@ -118,7 +118,7 @@ def test_frame_axes_are_right_handed_and_image_up_is_world_up_at_the_horizon():
 
 
 def test_the_atlas_holds_every_frame_in_its_tile(atlas):
-    assert atlas.albedo.shape == (FRAMES * TILE, FRAMES * TILE, 4) and atlas.normal.shape == (FRAMES * TILE,) * 2 + (3,)
+    assert atlas.albedo.shape == (FRAMES * TILE, FRAMES * TILE, 4) and atlas.normal.shape == (FRAMES * TILE // 2,) * 2 + (3,)
     assert set(np.unique(atlas.albedo[..., 3])) == {0, 255}
     assert all(_frame_alpha(atlas, gx, gy).any() for gx in range(FRAMES) for gy in range(FRAMES))
     farthest = np.array([-0.25, 0.25, 0.0]) - [0.825, 0.0, 2.0]  # a foot of the post
