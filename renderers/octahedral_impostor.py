@@ -14,8 +14,8 @@ the top, N x N tiles of T px.
 Drawing: the quad faces the camera, spanning the bounding sphere, [-radius, radius], about the centre; a view
 direction picks the three frames of the grid triangle holding its hemi-octahedral point (barycentric weights),
 each sampled where the pixel's ray crosses that frame's plane (through the centre, normal d), and the blended
-alpha is tested at 0.5.
-The wind example's shader does this; `OctahedralAtlas.coverage` casts the same rays in numpy.
+alpha is tested at 0.5. The wind example's shader does this; `OctahedralAtlas.coverage` casts the same rays in
+numpy.
 """
 from __future__ import annotations
 
@@ -30,8 +30,8 @@ from .camera import Camera
 from .impostor import CoverageRenderer, ImpostorError, atlas_tile, pixel_rays, plane_coordinates
 
 __all__ = ["OctahedralAtlas", "render_octahedral_impostor", "octahedral_encode", "octahedral_decode",
-           "frame_directions", "frame_axes", "frame_extents", "frame_weights", "between_frame_azimuths", "OCTAHEDRAL_FRAMES",
-           "FRAMES_RANGE", "MAX_ATLAS_PX", "MAPPING"]
+           "frame_directions", "frame_axes", "frame_extents", "frame_weights", "between_frame_azimuths",
+           "OCTAHEDRAL_FRAMES", "FRAMES_RANGE", "MAX_ATLAS_PX", "MAPPING"]
 
 OCTAHEDRAL_FRAMES = 12  # frames per side by default: horizon frames 5.2 to 10.4 deg apart in azimuth
 FRAMES_RANGE = (4, 32)

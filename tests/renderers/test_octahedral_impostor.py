@@ -118,7 +118,8 @@ def test_frame_axes_are_right_handed_and_image_up_is_world_up_at_the_horizon():
 
 
 def test_the_atlas_holds_every_frame_in_its_tile(atlas):
-    assert atlas.albedo.shape == (FRAMES * TILE, FRAMES * TILE, 4) and atlas.normal.shape == (FRAMES * TILE // 2,) * 2 + (3,)
+    side = FRAMES * TILE
+    assert atlas.albedo.shape == (side, side, 4) and atlas.normal.shape == (side // 2, side // 2, 3)
     assert set(np.unique(atlas.albedo[..., 3])) == {0, 255}
     assert all(_frame_alpha(atlas, gx, gy).any() for gx in range(FRAMES) for gy in range(FRAMES))
     farthest = np.array([-0.25, 0.25, 0.0]) - [0.825, 0.0, 2.0]  # a foot of the post
@@ -151,7 +152,8 @@ def test_a_horizon_frame_sees_the_block_from_its_side(atlas, frame, side):
     assert np.sign(np.round(block[0] - post_column)) == side
     # The block's texels: in its rows, beside the post's columns (those covered 1 m up, where only the post is).
     rows = np.zeros(atlas.tile, bool)
-    rows[int(_tile_position(atlas, *frame, [0, 0, 2.9])[1]) + 1:int(_tile_position(atlas, *frame, [0, 0, 2.1])[1])] = True
+    top, bottom = (int(_tile_position(atlas, *frame, [0, 0, z])[1]) for z in (2.9, 2.1))
+    rows[top + 1:bottom] = True
     post_columns = alpha[int(_tile_position(atlas, *frame, [0, 0, 1.0])[1])]
     found_rows, found_columns = np.nonzero(alpha & rows[:, None] & ~post_columns[None, :])
     assert len(found_rows) >= 4  # from +X, only the block's edges beside the post
