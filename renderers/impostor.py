@@ -20,8 +20,8 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 from .alpha_coverage import triangle_coverage
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, normals_from_depth,
-                   single_sample_renderer_class)
+from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, single_sample_renderer_class,
+                   tangent_space_normals)
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
@@ -346,15 +346,12 @@ def atlas_tile(camera: Camera, parts: PartDepths, tree: TreeMesh) -> tuple[np.nd
     alpha 255 on the covered texels (not grown), and normals (T, T, 3) uint8 in tangent space (+x along u, +y
     image up, +z toward the viewer; flat (128, 128, 255) off the tree), from the rendered depth."""
     depth, mask, _ = combine_parts(parts)
-    camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
-    tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
     covered = mask > 0
     tile_albedo = np.zeros((*mask.shape, 4), np.uint8)
     tile_albedo[mask == 1, :3] = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
     tile_albedo[mask == 2, :3] = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
     tile_albedo[covered, 3] = 255
-    tile_normal = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
-    return tile_albedo, np.clip(tile_normal, 0, 255).astype(np.uint8)
+    return tile_albedo, tangent_space_normals(camera, depth, covered)
 
 
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:
