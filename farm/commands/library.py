@@ -56,10 +56,14 @@ def _load(args):
 
 
 def _print_floors(folder: str, progress: bool) -> None:
-    from farm.library.quality import FLOOR_MARGIN, library_floors
+    from farm.library.catalog import refresh_catalog_tables
+    from farm.library.quality import FLOOR_MARGIN, library_floors, store_floors
+    from farm.storage import Location
     from farm.table import format_table
 
     floors = library_floors(folder, progress=progress)
+    store_floors(Location.resolve(folder), floors)
+    refresh_catalog_tables(folder)  # the catalog's iou_floor column now holds them
     rows = [[f.asset, f.level, f.switch_px, f"{f.iou:.3f}", f"{f.floor:.3f}", f"{f.margin:+.3f}",
              "meets" if f.meets else "misses"] for f in floors]
     print(format_table(["asset", "level", "switch px", "least IoU", "half-pixel floor", "margin",

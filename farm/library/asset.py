@@ -14,16 +14,12 @@ from renderers.alpha_coverage import coverage_tree, opaque_fraction
 from renderers.framing import framing_points
 from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostor, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import render_octahedral_impostor
-from renderers.twig_atlas import TWIG_ATLAS_MAX_TEXELS, render_twig_atlas
 from species.studio.collision import collision_capsules
-from species.studio.lod import metres_per_pixel
-from species.studio.twig_cards import TwigAtlas
-from species.tree_mesh import MeshPart, TreeMesh
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 from species.studio.wind import WIND_LAYOUT, wind_attributes
 
 from ..tree_chain import stage_rngs
-from .lod_fit import fit_lods
+from .lod_fit import drawn_cover, fit_lods, settle_twigs
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
            "twig_albedos",
@@ -181,10 +177,8 @@ def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float
         if level.name == "IMPOSTOR":
             draw = atlas.coverage  # the crossed planes cut by their alpha, or the octahedral frames the view blends
         else:
-            cover = coverage_tree(level.mesh, lod0_fraction, card_fraction)
-            if level.twigs is not None:
-                runs = twig_atlas.opaque_runs(level.twig_index)
-                cover = TreeMesh(bark=MeshPart.concatenate([cover.bark, runs]), leaves=cover.leaves, name=cover.name)
+            runs = twig_atlas.opaque_runs(level.twig_index) if level.twigs is not None else None
+            cover = drawn_cover(level.mesh, lod0_fraction, card_fraction, runs)
             draw = lambda camera: renderer.coverage(cover, camera)  # noqa: E731
         keys = [(azimuth, level.switch_px) for azimuth in QUALITY_AZIMUTHS]
         level.iou = [silhouette_iou(references[key], closed_silhouette(draw(cameras[key]))) for key in keys]
@@ -205,23 +199,18 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("lods"):
         lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
-        lods = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
-                        card_fraction)
+        fitted = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
+                          card_fraction)
     with timer.stage("twigs"):
-        twig_levels = [k for k, lod in enumerate(lods) if lod.twigs is not None]
-        twig_atlas = None
-        if twig_levels:
-            layout = TwigAtlas.pack([lods[k].twigs for k in twig_levels],
-                                    [metres_per_pixel(skeleton, int(spec.switch_px[k])) for k in twig_levels],
-                                    TWIG_ATLAS_MAX_TEXELS)
-            twig_atlas = render_twig_atlas(renderer, layout, lod0_cover)
+        lods, twig_atlas, twig_slots = settle_twigs(fitted, skeleton, lod0_cover, renderer, lod0_fraction,
+                                                    card_fraction)
     with timer.stage("wind"):
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
         for k, (lod, px) in enumerate(zip(lods, spec.switch_px)):
             level = LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
                               *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px))
-            if k in twig_levels:
-                level.twig_index = twig_levels.index(k)
+            if twig_slots[k] >= 0:
+                level.twig_index = twig_slots[k]
                 level.twigs = twig_atlas.layout.card_part(level.twig_index)
                 # Each card sways with the LOD0 branch it grows from nearest the trunk.
                 level.twig_wind, level.twig_pivot = wind_attributes(skeleton, level.twigs.vertices,

@@ -18,12 +18,14 @@ from ..storage import Location, sha256_hex
 from ..tree_chain import to_json
 from .blender_catalog import DEFAULT_CATALOG, write_blender_library
 from .previews import gallery_html
+from .quality import stored_floors
 from .records import (BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
                       library_asset_ids, read_library_spec)
 from .spec import LibrarySpec
 from .wind_viewer import write_wind_viewer
 
-__all__ = ["catalog_rows", "write_catalog", "validate_library", "quality_shortfalls", "CATALOG_COLUMNS",
+__all__ = ["catalog_rows", "write_catalog", "refresh_catalog_tables", "validate_library", "quality_shortfalls",
+           "CATALOG_COLUMNS",
            "IOU_TARGET"]
 
 # Silhouette IoU against LOD0 every level should reach at its switch size (issue 11's target).
@@ -31,7 +33,7 @@ IOU_TARGET = 0.9
 
 CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_m", "crown_radius_m",
                    "level_names", "triangles", "switch_px", "iou_min", "iou_mean", "file_sizes_json", "files_json",
-                   "tags", "thumbnail", "turntable", "glb_bytes", "glb_bytes_without_instancing")
+                   "tags", "thumbnail", "turntable", "glb_bytes", "glb_bytes_without_instancing", "iou_floor")
 
 
 def catalog_rows(location: Location, spec: LibrarySpec) -> list[dict]:
@@ -43,6 +45,7 @@ def catalog_rows(location: Location, spec: LibrarySpec) -> list[dict]:
             continue  # a failed tree: the manifest's failures name it
         record = json.loads(location.read_bytes(path))
         levels = record["levels"]
+        floors = stored_floors(location, record["id"])  # measured by `farm library validate --quality`
         rows.append({
             "id": record["id"], "species": record["species"], "generator": record["generator"],
             "seed": int(record["seed"]), "params_json": to_json(record["params"]),
@@ -55,6 +58,7 @@ def catalog_rows(location: Location, spec: LibrarySpec) -> list[dict]:
             "glb_bytes": record["sizes"].get("glb"), "glb_bytes_without_instancing":
                 record["sizes"].get("glb_without_instancing"),
             "files": record["files"], "blender": record.get("blender", "not asked"),
+            "iou_floor": [floors.get(lv["name"]) for lv in levels],
         })
     return rows
 
@@ -70,7 +74,7 @@ def _parquet_bytes(rows: list[dict]) -> bytes:
                         ("iou_min", pa.list_(pa.float64())), ("iou_mean", pa.list_(pa.float64())),
                         ("file_sizes_json", pa.string()), ("files_json", pa.string()), ("tags", pa.list_(pa.string())),
                         ("thumbnail", pa.string()), ("turntable", pa.string()), ("glb_bytes", pa.int64()),
-                        ("glb_bytes_without_instancing", pa.int64())])
+                        ("glb_bytes_without_instancing", pa.int64()), ("iou_floor", pa.list_(pa.float64()))])
     table = pa.Table.from_pylist([{k: r[k] for k in CATALOG_COLUMNS} for r in rows], schema=schema)
     sink = io.BytesIO()
     pq.write_table(table, sink, compression="zstd", write_statistics=False)
@@ -81,10 +85,7 @@ def write_catalog(location: Location, spec: LibrarySpec) -> dict:
     """Write catalog.parquet, catalog.json, previews/<species>.png, the wind example (wind_viewer), index.html
     (and blender/<species>.blend when asked and available); returns {"assets": n, "blender": status}."""
     rows = catalog_rows(location, spec)
-    location.write_atomic("catalog.parquet", _parquet_bytes(rows))
-    location.write_atomic("catalog.json", json.dumps(
-        [{k: (json.loads(r[k]) if k.endswith("_json") else r[k]) for k in CATALOG_COLUMNS} for r in rows],
-        indent=1, sort_keys=True).encode())
+    _write_tables(location, rows)
     by_species: dict[str, list[dict]] = {}
     for row in rows:
         by_species.setdefault(row["species"], []).append(row)
@@ -115,6 +116,20 @@ def write_catalog(location: Location, spec: LibrarySpec) -> dict:
     if failed:
         blender += f"; FBX export failed for {failed} asset(s) (`farm library validate` names them)"
     return {"assets": len(rows), "blender": blender}
+
+
+def _write_tables(location: Location, rows: list[dict]) -> None:
+    location.write_atomic("catalog.parquet", _parquet_bytes(rows))
+    location.write_atomic("catalog.json", json.dumps(
+        [{k: (json.loads(r[k]) if k.endswith("_json") else r[k]) for k in CATALOG_COLUMNS} for r in rows],
+        indent=1, sort_keys=True).encode())
+
+
+def refresh_catalog_tables(path: str) -> None:
+    """Rewrite catalog.parquet and catalog.json of a finished library from its records (after floors are stored);
+    previews, gallery and Blender files are left as they are."""
+    location = Location.resolve(path)
+    _write_tables(location, catalog_rows(location, read_library_spec(location)))
 
 
 def validate_library(path: str) -> list[Problem]:

@@ -7,14 +7,21 @@ CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. O
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import numpy as np
+
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
 from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
+from renderers.twig_atlas import TWIG_ATLAS_MAX_TEXELS, render_twig_atlas
 from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
-from species.studio.lod import LodBudgetError, TreeLods
+from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
+from species.studio.twig_cards import TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "level_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS"]
+__all__ = ["fit_lods", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
+           "TWIG_CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
 # card). A simplified branch draws more silhouette per triangle than a merged leaf card on a sparse crown and less
@@ -34,16 +41,43 @@ _FIRST_GAIN_LEVEL = 2
 # (renderers.impostor.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test. One view
 # chooses the shares two perpendicular ones would, for less (docs/library.md).
 CALIBRATION_AZIMUTHS = (33.75,)
+# A twig card shows its branches as they lie from its front and pressed flat from the side, so a level with twig
+# cards is judged from four azimuths (the first as above, then every 90 deg; all 22.5 deg off the quality ones):
+# from one, a level whose cards face that view wins and loses elsewhere (lsystem_fractal_plant's LOD3: .765 from
+# 33.75 deg, .383 from the worst quality azimuth).
+TWIG_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 90.0 * k for k in range(4))
+
+
+@dataclass(frozen=True, eq=False)
+class FittedLevel:
+    """One level's two fitted candidates and what they were judged by.
+
+    plain, plain_score : the best level without twig cards and its least IoU from TWIG_CALIBRATION_AZIMUTHS
+                         (-1.0 when there is no twig candidate to compare it with).
+    twigs, twig_score  : the best level with twig cards (None, -1.0 when none could be built), scored from the
+                         same azimuths with exact card textures.
+    switch_px, cameras, references : the level's switch size, the cameras of TWIG_CALIBRATION_AZIMUTHS and
+                         LOD0's closed silhouettes through them.
+    """
+
+    plain: object
+    plain_score: float
+    twigs: object
+    twig_score: float
+    switch_px: int
+    cameras: list
+    references: list
 
 
 def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_fraction: float,
-             card_fraction: float) -> list:
-    """One LodLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
+             card_fraction: float) -> list[FittedLevel]:
+    """One FittedLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
     from LOD2 on, at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same
-    way. Then the bark share climbs again with the dropped branches drawn as twig cards (`twig_cover`), and the
-better of the two wins. A level costs six to twelve builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
+    way. Then the bark share climbs again, from there, with the dropped branches drawn as twig cards (scored as
+    `level_cover` draws them: exact card textures); `settle_twigs` makes the final choice once the atlas exists. A
+    level costs six to twelve builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
@@ -54,9 +88,15 @@ better of the two wins. A level costs six to twelve builds, not one per pair. Bu
     levels = []
     for level, (budget, px) in enumerate(zip(budgets, switch_px), 1):
         px = int(px)
-        cameras = [switch_camera(points, azimuth, px) for azimuth in CALIBRATION_AZIMUTHS]
-        references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
+        views = {azimuth: switch_camera(points, azimuth, px) for azimuth in TWIG_CALIBRATION_AZIMUTHS}
+        references = {azimuth: closed_silhouette(renderer.coverage(lod0_cover, camera))
+                      for azimuth, camera in views.items()}
         tried: dict[tuple[int, int, bool], tuple[float, object]] = {}
+
+        def judged(lod, azimuths) -> float:
+            cover = level_cover(lod, lod0_cover, leaf_fraction, card_fraction)
+            return min(silhouette_iou(references[a], closed_silhouette(renderer.coverage(cover, views[a])))
+                       for a in azimuths)
 
         def score(share: int, gain: int, twigs: bool = False) -> float:
             if (share, gain, twigs) not in tried:
@@ -70,9 +110,8 @@ better of the two wins. A level costs six to twelve builds, not one per pair. Bu
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
                     tried[share, gain, twigs] = (-1.0, None)
                     return -1.0
-                cover = level_cover(lod, lod0_cover, leaf_fraction, card_fraction)
-                tried[share, gain, twigs] = (min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
-                                                 for reference, camera in zip(references, cameras)), lod)
+                tried[share, gain, twigs] = (judged(lod, TWIG_CALIBRATION_AZIMUTHS if twigs else CALIBRATION_AZIMUTHS),
+                                             lod)
             return tried[share, gain, twigs][0]
 
         share = _climb(lambda index: score(index, default_gain), start, len(BARK_SHARE_SCALES))
@@ -82,12 +121,15 @@ better of the two wins. A level costs six to twelve builds, not one per pair. Bu
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
             gain = _climb(lambda index: score(share, index), default_gain, len(CARD_AREA_GAINS))
+        plain = tried[share, gain, False][1]
         twig_share = _climb(lambda index: score(index, default_gain, True), share, len(BARK_SHARE_SCALES))
-        best = (share, gain, False)
-        if score(twig_share, default_gain, True) > score(*best):
-            best = (twig_share, default_gain, True)
-        levels.append(tried[best][1])
-        start = best[0]
+        twig_score, twig_lod = tried[twig_share, default_gain, True]
+        # Twig cards look different from every side: both candidates are compared from all the twig azimuths.
+        plain_score = judged(plain, TWIG_CALIBRATION_AZIMUTHS) if twig_lod is not None else -1.0
+        levels.append(FittedLevel(plain, plain_score, twig_lod, twig_score, px,
+                                  [views[a] for a in TWIG_CALIBRATION_AZIMUTHS],
+                                  [references[a] for a in TWIG_CALIBRATION_AZIMUTHS]))
+        start = share
     return levels
 
 
@@ -102,6 +144,46 @@ def level_cover(lod, lod0_cover: TreeMesh, leaf_fraction: float, card_fraction: 
     return TreeMesh(bark=MeshPart.concatenate([cover.bark, flat.bark]),
                     leaves=MeshPart.concatenate([cover.leaves, flat.leaves]), bark_color=cover.bark_color,
                     leaf_color=cover.leaf_color, name=cover.name)
+
+
+def drawn_cover(lod_mesh: TreeMesh, leaf_fraction: float, card_fraction: float, twig_runs=None) -> TreeMesh:
+    """What a built level shows, for opaque coverage passes: its tubes and leaf cards cut to their tiles' opaque
+    share, and its twig cards as the atlas draws them (`TwigAtlasImage.opaque_runs`, when it has any)."""
+    cover = coverage_tree(lod_mesh, leaf_fraction, card_fraction)
+    if twig_runs is None:
+        return cover
+    return TreeMesh(bark=MeshPart.concatenate([cover.bark, twig_runs]), leaves=cover.leaves, name=cover.name)
+
+
+def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, renderer, leaf_fraction: float,
+                 card_fraction: float):
+    """The final levels and the twig atlas (None without twig levels). Levels whose twig candidate beat the plain
+    one with exact textures get their cards into one atlas (`TwigAtlas.pack`, a texel per screen pixel at each
+    switch size within TWIG_ATLAS_MAX_TEXELS); each is judged again as the atlas draws it, and one that now loses
+    to its plain candidate falls back to it, the atlas made again without it, until every twig level left wins.
+    Returns (levels [LodLevel], twig atlas image, twig level index per level: -1 without cards)."""
+    use = [f.twigs is not None and f.twig_score > f.plain_score for f in fitted]
+    while True:
+        chosen = [k for k, wanted in enumerate(use) if wanted]
+        if not chosen:
+            return [f.plain for f in fitted], None, [-1] * len(fitted)
+        layout = TwigAtlas.pack([fitted[k].twigs.twigs for k in chosen],
+                                [metres_per_pixel(skeleton, fitted[k].switch_px) for k in chosen],
+                                TWIG_ATLAS_MAX_TEXELS)
+        image = render_twig_atlas(renderer, layout, lod0_cover)
+        losing = []
+        for index, k in enumerate(chosen):
+            level = fitted[k]
+            cover = drawn_cover(level.twigs.mesh, leaf_fraction, card_fraction, image.opaque_runs(index))
+            drawn = min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
+                        for reference, camera in zip(level.references, level.cameras))
+            if drawn <= level.plain_score:
+                losing.append(k)
+        if not losing:
+            slots = [chosen.index(k) if k in chosen else -1 for k in range(len(fitted))]
+            return [f.twigs if k in chosen else f.plain for k, f in enumerate(fitted)], image, slots
+        for k in losing:
+            use[k] = False
 
 
 def _climb(score, start: int, count: int) -> int:

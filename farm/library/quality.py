@@ -9,8 +9,8 @@ FLOOR_MARGIN. `level_floors` also gives the floors of LOD0 turned by given angle
 shows between its views), for `benchmarks/bench_silhouette_floor.py`.
 
 The floors cost extra renders (two per azimuth and level), so a build stores only the IoU per level;
-`farm library validate DIR --quality` rebuilds each asset's LOD0 (same species, seed and spec: the same bytes)
-and reports floor and margin per level.
+`farm library validate DIR --quality` rebuilds each asset's LOD0 (same species, seed and spec: the same bytes),
+reports floor and margin per level, and stores them (`quality/<id>.json`, read into the catalog's `iou_floor`).
 """
 from __future__ import annotations
 
@@ -21,7 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["SHIFT_PX", "FLOOR_MARGIN", "LevelFloor", "level_floors", "asset_floors", "library_floors"]
+__all__ = ["SHIFT_PX", "FLOOR_MARGIN", "LevelFloor", "level_floors", "asset_floors", "library_floors",
+           "floors_record_path", "store_floors", "stored_floors"]
 
 SHIFT_PX = 0.5
 FLOOR_MARGIN = 0.02
@@ -106,3 +107,29 @@ def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
     finally:
         renderer.close()
     return floors
+
+
+def floors_record_path(ident: str) -> str:
+    """Where a library folder keeps the floors measured for asset `ident`."""
+    return f"quality/{ident}.json"
+
+
+def store_floors(location, floors: list[LevelFloor]) -> None:
+    """Write each asset's measured floors (`quality/<id>.json`, atomically): per level its switch size, least IoU,
+    half-pixel floor, margin and whether it meets the target, with SHIFT_PX and FLOOR_MARGIN."""
+    by_asset: dict[str, dict] = {}
+    for floor in floors:
+        by_asset.setdefault(floor.asset, {})[floor.level] = {
+            "switch_px": floor.switch_px, "iou_min": round(floor.iou, 6), "floor": round(floor.floor, 6),
+            "margin": round(floor.margin, 6), "meets": bool(floor.meets)}
+    for ident, levels in by_asset.items():
+        record = {"id": ident, "shift_px": SHIFT_PX, "floor_margin": FLOOR_MARGIN, "levels": levels}
+        location.write_atomic(floors_record_path(ident), json.dumps(record, indent=1, sort_keys=True).encode())
+
+
+def stored_floors(location, ident: str) -> dict[str, float]:
+    """{level name: half-pixel floor} stored for asset `ident` ({} when never measured)."""
+    path = floors_record_path(ident)
+    if not location.exists(path):
+        return {}
+    return {name: level["floor"] for name, level in json.loads(location.read_bytes(path))["levels"].items()}

@@ -313,6 +313,18 @@ def test_validate_quality_reports_every_level_beside_its_half_pixel_floor(librar
     assert farm_main(["library", "validate", str(library), "--quality", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert "half-pixel floor" in out and f"{sum(f.meets for f in floors)} of {len(floors)} levels within" in out
+    # The floors are stored and read into the catalog: None for LOD0, the measured floor for every later level.
+    import pyarrow.parquet as pq
+
+    stored = {(f.asset, f.level): f.floor for f in floors}
+    for row in json.loads((library / "catalog.json").read_text()):
+        assert row["iou_floor"][0] is None
+        for name, floor in zip(row["level_names"][1:], row["iou_floor"][1:]):
+            assert floor == pytest.approx(stored[row["id"], name], abs=1e-6)
+    table = pq.read_table(library / "catalog.parquet")
+    assert table.column("iou_floor").to_pylist() == [r["iou_floor"] for r in json.loads(
+        (library / "catalog.json").read_text())]
+    assert farm_main(["library", "validate", str(library), "--quiet"]) == 0  # asset files untouched
     assert farm_main(["library", "add", str(library), "--species", "maple", "--seed", "3", "--quality"]) == 2
 
 

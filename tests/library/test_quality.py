@@ -204,7 +204,7 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     lod0 = species.build_mesh(skeleton, params)
     lod0_fraction, card_fraction = leaf_fractions(leaf_atlas((0.2, 0.5, 0.1), 64))
     cover = coverage_tree(lod0, lod0_fraction)
-    chosen = fit_lods(skeleton, lod0, cover, (0.4, 0.12), (512, 256), renderer, lod0_fraction, card_fraction)[1]
+    chosen = fit_lods(skeleton, lod0, cover, (0.4, 0.12), (512, 256), renderer, lod0_fraction, card_fraction)[1].plain
     share0 = lod0.bark.n_faces / lod0.n_faces
     points = framing_points(lod0)
 
