@@ -54,6 +54,7 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 def main(names: list[str]) -> None:
     from farm.library.asset import build_asset
     from farm.library.job import run_library, write_asset_files
+    from farm.library.quality import FLOOR_MARGIN, asset_floors
     from farm.library.spec import parse_library_spec
     from farm.storage import Location
     from farm.tree_chain import StageTimer, tree_seed
@@ -62,7 +63,7 @@ def main(names: list[str]) -> None:
     spec = parse_library_spec({"species": {n: 1 for n in names}, "formats": ["glb", "usd", "obj", "collision"],
                                "texture_size": 256, "impostor_tile": 128})
     renderer = CoverageRenderer(64)
-    stages, figures = [], []
+    stages, figures, floors = [], [], {}
     with tempfile.TemporaryDirectory() as tmp:
         location = Location.resolve(tmp)
         # A worker pays its imports (pxr alone about 0.3 s) and GL set-up once, on its first asset: time that
@@ -77,7 +78,8 @@ def main(names: list[str]) -> None:
             record = write_asset_files(asset, location, spec, renderer, timer)
             stages.append(timer.seconds)
             figures.append((name, record))
-    keys = ["grow", "lods", "wind", "textures", "impostor", "quality", "glb", "usd", "obj", "previews", "write"]
+            floors[name] = {f.level: f for f in asset_floors(asset, renderer)}  # after the timing: extra renders
+    keys = ["grow", "lods", "twigs", "wind", "textures", "impostor", "quality", "glb", "usd", "obj", "previews", "write"]
     print(f"{'species':22s}" + "".join(f"{k:>9s}" for k in keys) + f"{'total':>8s}{'w/o qual':>9s}")
     for (name, _), sec in zip(figures, stages):
         total = sum(sec.values())
@@ -87,14 +89,17 @@ def main(names: list[str]) -> None:
     print(f"median s/asset {np.median(totals):.2f} (target < 1 s without Blender outputs; 'w/o qual' drops the"
           f" IoU measurement)")
     print("\nLevels: triangles (share of LOD0; budget 0.40/0.12/0.04, impostor <= 16 tris), min IoU over 8 azimuths"
-          " at the switch size (cards shrunk to their alpha coverage; target >= 0.9); * = misses a target")
+          " at the switch size (cards shrunk to their alpha coverage; target >= 0.9), the half-pixel floor and the"
+          f" margin to it (issue 26: margin >= -{FLOOR_MARGIN}); * = misses a target, ! = misses the floor target")
     for name, record in figures:
         budgets = {"LOD1": 0.40, "LOD2": 0.12, "LOD3": 0.04}
         cells = []
         for lv in record["levels"][1:]:
             over = lv["share_of_lod0"] > budgets.get(lv["name"], 1.0) or (lv["name"] == "IMPOSTOR" and lv["triangles"] > 16)
+            floor = floors[name][lv["name"]]
             cells.append(f"{lv['name']} {lv['triangles']} ({lv['share_of_lod0']:.3f}{'*' if over else ''})"
-                         f" IoU {lv['iou_min']:.3f}{'*' if lv['iou_min'] < 0.9 else ''}")
+                         f" IoU {lv['iou_min']:.3f}{'*' if lv['iou_min'] < 0.9 else ''}"
+                         f" floor {floor.floor:.3f} {floor.margin:+.3f}{'' if floor.meets else '!'}")
         print(f"  {name:20s} LOD0 {record['levels'][0]['triangles']} | " + " | ".join(cells))
     print("\nGLB bytes with / without leaf instancing")
     for name, record in figures:

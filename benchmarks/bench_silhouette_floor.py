@@ -46,11 +46,13 @@ def main(names: list[str]) -> None:
     from renderers.impostor import CoverageRenderer
 
     renderer = CoverageRenderer(64)  # one EGL context for every size: the viewport follows the camera
-    rows = {}
+    rows, seconds = {}, {}
     level_names = switch_sizes = None
     for name in tqdm(names, desc="presets", unit="tree"):
         spec = parse_library_spec({"species": {name: 1}})
-        asset = build_asset(name, tree_seed(0, 0), spec, renderer, StageTimer())
+        timer = StageTimer()
+        asset = build_asset(name, tree_seed(0, 0), spec, renderer, timer)
+        seconds[name] = timer.seconds
         lod0_fraction, _ = leaf_fractions(asset.leaf_atlases["summer"])
         cover = coverage_tree(asset.lod0, lod0_fraction)
         points = framing_points(asset.lod0)
@@ -78,6 +80,18 @@ def main(names: list[str]) -> None:
         counts = (table >= IOU_TARGET).sum(axis=0)
         print(" | ".join(f"{v:>13}" for v in [level_name, *(f"{m:.3f}" for m in table.mean(axis=0)),
                                                *(int(c) for c in counts), within]))
+    print_stage_seconds(seconds)
+
+
+def print_stage_seconds(seconds: dict[str, dict[str, float]]) -> None:
+    """Seconds of each build stage per preset (one process, warm after the first), and their medians."""
+    keys = list(dict.fromkeys(k for sec in seconds.values() for k in sec))
+    print("\nSeconds per stage of `build_asset` (files not written)")
+    print(f"{'preset':28s}" + "".join(f"{k:>9s}" for k in keys) + f"{'total':>8s}")
+    for name, sec in seconds.items():
+        print(f"{name:28s}" + "".join(f"{sec.get(k, 0.0):9.3f}" for k in keys) + f"{sum(sec.values()):8.2f}")
+    print(f"{'median':28s}" + "".join(f"{np.median([s.get(k, 0.0) for s in seconds.values()]):9.3f}" for k in keys)
+          + f"{np.median([sum(s.values()) for s in seconds.values()]):8.2f}")
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ from species.studio.pbr_textures import leaf_atlas
 from species.skeleton import Skeleton
 from species.tree_mesh import MeshPart, TreeMesh
 
-REPRESENTATIVE = ["maple", "pine", "cherry", "douglas_fir", "sc_young_sapling", "lsystem_monopodial"]
 
 
 @pytest.fixture(scope="module")
@@ -179,14 +178,46 @@ def test_dense_crowns_reach_the_target_at_every_switch(name, renderer):
     assert min(worst.values()) >= IOU_TARGET, worst
 
 
-@pytest.mark.xfail(strict=True, reason="issue 11 target not met yet: sparse and needle crowns fall below 0.9 "
-                                        "at LOD2/LOD3 and the impostor (see benchmarks/bench_library.py)")
-@pytest.mark.parametrize("name", REPRESENTATIVE)
-def test_silhouette_iou_reaches_the_target_at_every_switch(name, renderer):
-    spec = parse_library_spec({"species": {name: 1}, "texture_size": 64, "impostor_tile": 64})
-    asset = build_asset(name, tree_seed(0, 0), spec, renderer, StageTimer())
-    worst = {level.name: min(level.iou) for level in asset.levels[1:]}
-    assert min(worst.values()) >= IOU_TARGET, worst
+# Issue 26's target, per preset, as benchmarks/bench_silhouette_floor.py measured it (tree_seed(0, 0), default
+# spec). The presets whose worst level misses its half-pixel floor by more than 0.04 are listed and not run here
+# (about 3 s each, 32 of them: the bench measures them, and a preset that comes to meet the target moves out of
+# this list into the strict test); those within 0.02 of the line either way may fall on either side on another
+# CPU's rasteriser. Every other preset must meet the target.
+FLOOR_MISSES = {"bonsai", "maple", "sassafras", "sc_birch_oval", "sc_broad_oak", "sc_columnar_poplar",
+                "sc_cypress_column", "sc_dense_beech", "sc_dome_shrub", "sc_excurrent_leader", "sc_fir",
+                "sc_flat_acacia", "sc_lobed_cloud", "sc_multistem_shrub", "sc_open_fruit_tree", "sc_round_maple",
+                "sc_self_pruning_forest_tree", "sc_shadow_conifer", "sc_shadow_oak", "sc_spruce",
+                "sc_superquadric_lobes", "sc_sympodial_candelabra", "sc_sympodial_lilac", "sc_umbrella_pine",
+                "sc_vase_elm", "sc_weeping_willow", "sc_young_sapling", "lsystem_abop_tree", "lsystem_bush",
+                "lsystem_fractal_plant", "lsystem_monopodial", "lsystem_sympodial"}
+FLOOR_BORDERLINE = {"black_oak", "lombardy_poplar", "palm", "lsystem_dichotomous"}
+
+
+def _floor_case(name: str):
+    if name in FLOOR_MISSES:
+        return pytest.param(name, marks=pytest.mark.xfail(run=False, reason="issue 26: below the half-pixel floor "
+                                                                             "(benchmarks/bench_silhouette_floor.py)"))
+    if name in FLOOR_BORDERLINE:
+        return pytest.param(name, marks=pytest.mark.xfail(strict=False, reason="issue 26: within 0.02 of the line"))
+    return name
+
+
+def _preset_names() -> list[str]:
+    import species
+
+    return [preset.name for preset in species.list_presets()]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", [_floor_case(name) for name in _preset_names()])
+def test_every_level_is_within_its_half_pixel_floor(name, renderer):
+    from farm.library.quality import FLOOR_MARGIN, asset_floors
+
+    asset = build_asset(name, tree_seed(0, 0), parse_library_spec({"species": {name: 1}}), renderer, StageTimer())
+    floors = asset_floors(asset, renderer)
+    assert [f.level for f in floors] == ["LOD1", "LOD2", "LOD3", "IMPOSTOR"]
+    missed = {f.level: f"IoU {f.iou:.3f} vs floor {f.floor:.3f}" for f in floors if not f.meets}
+    assert not missed, f"{name}: more than {FLOOR_MARGIN} below the half-pixel floor: {missed}"
 
 
 def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches_lod0_better(renderer):
