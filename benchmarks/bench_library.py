@@ -1,7 +1,7 @@
 """Seconds per library asset on one core, per stage (grow, LODs, impostor, quality, textures, GLB, USD, OBJ,
 previews, Blender outputs if available), GLB size with/without instancing, IoU per level, and 1 vs 2 workers.
 
-Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_library.py [SPECIES ...]
+Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_library.py [SPECIES ...] [--no-scaling]
 Reference: Sapling alone takes 1.85 s median to grow one mesh (no LODs); target < 1 s per asset without Blender.
 IoU rule (renderers/alpha_coverage.py): every leaf and cluster card drawn as its two triangles shrunk about its
 centre to the opaque share of its alpha tile, in unculled depth-only passes; the impostor cut by its atlas alpha.
@@ -40,6 +40,7 @@ Seeds are tree_seed(0, position in the list): compare figures only between runs 
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import sys
@@ -51,8 +52,9 @@ import numpy as np
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
-def main(names: list[str]) -> None:
+def main(names: list[str], scaling: bool = True) -> None:
     from farm.library.asset import build_asset
+    from farm.library.gltf_asset import glb_size
     from farm.library.job import run_library, write_asset_files
     from farm.library.quality import FLOOR_MARGIN, asset_floors
     from farm.library.spec import parse_library_spec
@@ -105,7 +107,16 @@ def main(names: list[str]) -> None:
     for name, record in figures:
         s = record["sizes"]
         print(f"  {name:20s} {s['glb']:>10d} / {s['glb_without_instancing']:>10d}  ({s['glb'] / s['glb_without_instancing']:.2f}x)")
+    print("\nGLB bytes with twig cards / the same asset without them (issue 26: the twig atlas may grow the GLB by at "
+          "most 25 %)")
+    for i, name in enumerate(names):
+        with_twigs = glb_size(build_asset(name, tree_seed(0, i), spec, renderer, StageTimer()))
+        with plain_levels_only():
+            without = glb_size(build_asset(name, tree_seed(0, i), spec, renderer, StageTimer()))
+        print(f"  {name:20s} {with_twigs:>10d} / {without:>10d}  ({100 * (with_twigs / without - 1):+.1f} %)")
     print("\nReference: Sapling grows one mesh in 1.85 s median (no LODs); target: full asset < 1 s per tree on one core")
+    if not scaling:
+        return
     # Long enough that actor start-up (a few seconds per worker) does not hide the scaling.
     small = parse_library_spec({"species": {n: 4 for n in _SCALING_SPECIES}, "formats": ["glb", "usd"],
                                 "texture_size": 64, "impostor_tile": 32, "shard_size": 2})
@@ -128,9 +139,23 @@ def main(names: list[str]) -> None:
     print(f"speed-up with 2 workers: {elapsed[1] / elapsed[2]:.2f}x (2 cores)")
 
 
+@contextlib.contextmanager
+def plain_levels_only():
+    """Within it, `build_asset` keeps every level's plain candidate (no twig cards), for the size comparison."""
+    import farm.library.asset as asset_module
+
+    real = asset_module.settle_twigs
+    asset_module.settle_twigs = lambda fitted, *args: ([f.plain for f in fitted], None, [-1] * len(fitted))
+    try:
+        yield
+    finally:
+        asset_module.settle_twigs = real
+
+
 _WARM_UP = "bonsai"
 _SCALING_SPECIES = ("palm", "sc_young_sapling", "sassafras", "lsystem_monopodial")
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or ["maple", "pine", "cherry", "palm", "sc_young_sapling", "lsystem_monopodial", "sassafras",
-                          "douglas_fir", "balsam_fir"])
+    arguments = [a for a in sys.argv[1:] if a != "--no-scaling"]
+    main(arguments or ["maple", "pine", "cherry", "palm", "sc_young_sapling", "lsystem_monopodial", "sassafras",
+                       "douglas_fir", "balsam_fir"], scaling="--no-scaling" not in sys.argv[1:])

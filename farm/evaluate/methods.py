@@ -81,7 +81,7 @@ class EvalSettings:
     cloud_outlier_fraction: float = 0.02
     cloud_wedge_deg: float = 30.0
     photo_views: int = 10
-    photo_size: int = 320
+    photo_size: int = 400
     photo_samples: int = 4
     seed: int = 0
 

@@ -15,6 +15,9 @@ from species.tree_mesh import MeshPart
 PHOTO_VIEWS = 10
 PHOTO_STEP_DEG = 10.0   # SIFT on a tree needs small steps: at 60 degrees apart almost nothing matches
 PHOTO_SIZE = 320
+# The photos without cameras.json are larger: with estimated poses, SfM on 320 px renders left 72-99 points on
+# the tree on one machine for every seed tried (100 needed), 400 px renders enough for every seed.
+BARE_PHOTO_SIZE = 400
 
 
 @pytest.fixture(scope="session")
@@ -28,18 +31,23 @@ def photos(photo_tree, tmp_path_factory):
     """Ten 320 px Cycles renders (4 samples) of the tree in winter (no leaves) on a textured ground, 10 degrees
     apart, with cameras.json. In leaf, 14 % of the points SfM places above the ground land on the tree at this size;
     leafless, about 70 % of those near the tree (docs/reconstruct.md)."""
+    return _orbit(photo_tree, PHOTO_SIZE, tmp_path_factory.mktemp("photos"))
+
+
+def _orbit(photo_tree, size: int, folder):
     _, mesh = photo_tree
     mesh = dataclasses.replace(mesh, leaves=MeshPart.empty())
     points = mesh.bark.vertices
-    cameras = [perspective_camera(points, k * PHOTO_STEP_DEG, 15.0 if k % 2 else 8.0, PHOTO_SIZE)
+    cameras = [perspective_camera(points, k * PHOTO_STEP_DEG, 15.0 if k % 2 else 8.0, size)
                for k in range(PHOTO_VIEWS)]
-    return render_photos(mesh.to_glb(), cameras, tmp_path_factory.mktemp("photos"), samples=4)
+    return render_photos(mesh.to_glb(), cameras, folder, samples=4)
 
 
 @pytest.fixture(scope="session")
-def bare_photos(photos, tmp_path_factory):
-    """The same photos alone, as a camera gives them: no cameras.json, depth or masks."""
+def bare_photos(photo_tree, tmp_path_factory):
+    """The same orbit at BARE_PHOTO_SIZE, alone as a camera gives it: no cameras.json, depth or masks."""
+    rendered = _orbit(photo_tree, BARE_PHOTO_SIZE, tmp_path_factory.mktemp("bare-renders"))
     folder = tmp_path_factory.mktemp("bare-photos")
-    for image in photos.images:
+    for image in rendered.images:
         shutil.copy(image, folder / image.name)
     return folder
