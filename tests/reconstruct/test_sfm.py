@@ -106,3 +106,9 @@ def test_cameras_json_errors(tmp_path):
 def test_settings_are_checked(bad, message):
     with pytest.raises(PhotoError, match=message):
         SfmSettings(**bad)
+
+
+@pytest.mark.parametrize("attempts", [0, 21, 2.5, True])
+def test_mapping_attempts_out_of_range_are_refused(attempts):
+    with pytest.raises(PhotoError, match="mapping_attempts"):
+        SfmSettings(mapping_attempts=attempts)
