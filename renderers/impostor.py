@@ -15,13 +15,12 @@ from typing import ClassVar
 import numpy as np
 
 from species.errors import TreefarmError
-from species.meshing.textures import linear_to_srgb
-from species.tree_mesh import MeshPart, TreeMesh
+from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .alpha_coverage import triangle_coverage
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, single_sample_renderer_class,
-                   tangent_space_normals)
+from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
+                   single_sample_renderer_class, tangent_space_normals)
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
@@ -123,8 +122,7 @@ class ImpostorAtlas:
             u0, u1 = col / width, (col + self.tile) / width
             v1, v0 = 1.0 - row / height, 1.0 - (row + self.tile) / height  # image rows run down, v runs up
             uvs.append([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
-        faces = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(len(self.azimuths))[:, None, None])
-        return MeshPart(vertices.reshape(-1, 3), faces.reshape(-1, 3), np.repeat(normal, 4, axis=0),
+        return MeshPart(vertices.reshape(-1, 3), quad_faces(len(self.azimuths)), np.repeat(normal, 4, axis=0),
                         np.asarray(uvs, np.float64).reshape(-1, 2))
 
 
@@ -346,12 +344,7 @@ def atlas_tile(camera: Camera, parts: PartDepths, tree: TreeMesh) -> tuple[np.nd
     alpha 255 on the covered texels (not grown), and normals (T, T, 3) uint8 in tangent space (+x along u, +y
     image up, +z toward the viewer; flat (128, 128, 255) off the tree), from the rendered depth."""
     depth, mask, _ = combine_parts(parts)
-    covered = mask > 0
-    tile_albedo = np.zeros((*mask.shape, 4), np.uint8)
-    tile_albedo[mask == 1, :3] = np.round(linear_to_srgb(np.asarray(tree.bark_color)) * 255).astype(np.uint8)
-    tile_albedo[mask == 2, :3] = np.round(linear_to_srgb(np.asarray(tree.leaf_color)) * 255).astype(np.uint8)
-    tile_albedo[covered, 3] = 255
-    return tile_albedo, tangent_space_normals(camera, depth, covered)
+    return mask_albedo(mask, tree.bark_color, tree.leaf_color), tangent_space_normals(camera, depth, mask > 0)
 
 
 def pixel_rays(camera: Camera) -> tuple[np.ndarray, np.ndarray]:

@@ -21,12 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from species.meshing.textures import linear_to_srgb
 from species.tree_mesh import TreeMesh
 
 from .camera import Camera
 
 __all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "tangent_space_normals",
-           "silhouette_map",
+           "mask_albedo", "silhouette_map",
            "envelope_silhouette_map", "closed_mask", "use_headless_gl", "single_sample_renderer_class", "LEAVES",
            "ENVELOPE_CLOSING_256", "ENVELOPE_SIGMA_256"]
 
@@ -123,6 +124,17 @@ def normals_from_depth(camera: Camera, depth: np.ndarray) -> np.ndarray:
     out = np.clip((n + 1.0) * 127.5, 0, 255).astype(np.uint8)
     out[z <= 0] = 0
     return out
+
+
+def mask_albedo(mask: np.ndarray, bark_color, leaf_color) -> np.ndarray:
+    """(H, W, 4) uint8 sRGB + alpha of a part mask (`combine_parts`: 1 bark, 2 leaves): bark texels in
+    `bark_color`, leaf texels in `leaf_color` (linear RGB in [0, 1]) with alpha 255, the rest transparent; leaf
+    texels too when `leaf_color` is None."""
+    image = np.zeros(mask.shape + (4,), np.uint8)
+    for part, colour in ((1, bark_color), (2, leaf_color)):
+        if colour is not None:
+            image[mask == part] = (*np.round(linear_to_srgb(np.asarray(colour)) * 255).astype(np.uint8), 255)
+    return image
 
 
 def tangent_space_normals(camera: Camera, depth: np.ndarray, covered: np.ndarray) -> np.ndarray:

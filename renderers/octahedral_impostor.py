@@ -24,7 +24,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from species.tree_mesh import MeshPart, TreeMesh
+from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .camera import Camera
 from .impostor import CoverageRenderer, ImpostorError, atlas_tile, pixel_rays, plane_coordinates
@@ -170,7 +170,7 @@ class OctahedralAtlas:
         n = self.frames
         uvs = np.stack([(gx + 0.5 * (corners[:, 0] + 1.0)) / n, 1.0 - (gy + 1.0 - 0.5 * (corners[:, 1] + 1.0)) / n],
                        axis=1)
-        return MeshPart(vertices, np.array([[0, 1, 2], [0, 2, 3]]), np.tile(_STATIC_DIRECTION, (4, 1)), uvs)
+        return MeshPart(vertices, quad_faces(1), np.tile(_STATIC_DIRECTION, (4, 1)), uvs)
 
     def layout(self) -> dict:
         """The layout the files record (GLB extras, USD custom data, asset.json): JSON-able, metres, Z up."""

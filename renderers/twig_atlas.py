@@ -7,15 +7,15 @@ and the process's CoverageRenderer. Out: `TwigAtlasImage`, and the alpha-tested 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-from species.meshing.textures import linear_to_srgb
 from species.studio.twig_cards import TwigAtlas
-from species.tree_mesh import MeshPart, TreeMesh
+from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .camera import Camera
-from .maps import LEAVES, PartDepths, combine_parts, tangent_space_normals
+from .maps import LEAVES, PartDepths, combine_parts, mask_albedo, tangent_space_normals
 
 __all__ = ["TwigAtlasImage", "render_twig_atlas", "TWIG_ATLAS_MAX_TEXELS"]
 
@@ -45,9 +45,17 @@ class TwigAtlasImage:
     def opaque_runs(self, level: int) -> MeshPart:
         """The opaque texels of `layout.levels[level]`'s cards as world-space quads, one per run of opaque texels
         along an atlas row (two triangles each): a pixel centre falls in them exactly where an alpha test at 0.5
-        with nearest-texel sampling keeps the card, so opaque depth-only passes measure the cards as drawn."""
+        with nearest-texel sampling keeps the card, so opaque depth-only passes measure the cards as drawn.
+        Worked out once per level (the fit and the quality figures both draw them)."""
+        return self._level_runs[level]
+
+    @cached_property
+    def _level_runs(self) -> tuple[MeshPart, ...]:
+        return tuple(self._runs(level) for level in range(len(self.layout.levels)))
+
+    def _runs(self, level: int) -> MeshPart:
         layout = self.layout
-        card = layout.card_index()
+        card = layout.card_index
         first, last = layout.first[level], layout.first[level + 1]
         keep = self.opaque & (card >= first) & (card < last)
         padded = np.pad(keep, ((0, 0), (1, 1)))
@@ -58,18 +66,14 @@ class TwigAtlasImage:
         edges = np.stack([np.stack([begin, rows + 1], 1), np.stack([end, rows + 1], 1),
                           np.stack([end, rows], 1), np.stack([begin, rows], 1)], axis=1).reshape(-1, 2)
         corners = layout.from_atlas(edges, np.repeat(owner, 4))
-        faces = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(len(rows))[:, None, None]).reshape(-1, 3)
+        faces = quad_faces(len(rows))
         normals = np.repeat(np.concatenate([cards.axes[:, 2] for cards in layout.levels])[owner], 4, axis=0)
         return MeshPart(corners, faces, normals, np.zeros((len(corners), 2)))
 
     def albedo(self, bark_color, leaf_color) -> np.ndarray:
         """(H, W, 4) uint8 sRGB + alpha: bark texels in `bark_color`, leaf texels in `leaf_color` (linear RGB in
         [0, 1]), or transparent when `leaf_color` is None (a bare season keeps the twigs only)."""
-        image = np.zeros(self.mask.shape + (4,), np.uint8)
-        image[self.mask == 1] = (*np.round(linear_to_srgb(np.asarray(bark_color)) * 255).astype(np.uint8), 255)
-        if leaf_color is not None:
-            image[self.mask == 2] = (*np.round(linear_to_srgb(np.asarray(leaf_color)) * 255).astype(np.uint8), 255)
-        return image
+        return mask_albedo(self.mask, bark_color, leaf_color)
 
 
 def render_twig_atlas(renderer, layout: TwigAtlas, lod0_cover: TreeMesh) -> TwigAtlasImage:

@@ -14,7 +14,7 @@ from .errors import TreefarmError
 from .geometry.tangents import vertex_tangents
 from .geometry.vectors import column_bounds
 
-__all__ = ["MeshPart", "TreeMesh", "MeshError", "MESH_WRITERS"]
+__all__ = ["MeshPart", "TreeMesh", "MeshError", "MESH_WRITERS", "quad_faces"]
 
 
 class MeshError(TreefarmError):
@@ -24,6 +24,12 @@ class MeshError(TreefarmError):
 # File writers by format name ("glb", "obj"): species.meshing registers them when `species` is imported, so the
 # writers depend on this type and not the reverse.
 MESH_WRITERS: dict[str, Callable[["TreeMesh"], Any]] = {}
+
+
+def quad_faces(count: int) -> np.ndarray:
+    """(2 count, 3) int64 faces of `count` quads stored four corners each, in order round the quad: two
+    triangles (0, 1, 2), (0, 2, 3) per quad, counter-clockwise when the corners are."""
+    return (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(count)[:, None, None]).reshape(-1, 3)
 
 
 @dataclass(frozen=True, eq=False)

@@ -6,6 +6,7 @@ In: species name, tree seed, LibrarySpec, the process's CoverageRenderer and a S
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -22,7 +23,6 @@ from ..tree_chain import stage_rngs
 from .lod_fit import drawn_cover, fit_lods, settle_twigs
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
-           "twig_albedos",
            "measure_chain"]
 
 
@@ -86,6 +86,18 @@ class LibraryAsset:
     def lod0(self):
         return self.levels[0].mesh
 
+    @cached_property
+    def twig_albedos(self) -> dict[str, np.ndarray]:
+        """(H, W, 4) uint8 twig atlas albedo per season (SEASONS order), made once for every file that embeds or
+        writes them: the species' bark colour on bark texels and the season's leaf colour on leaf texels; `bare`
+        keeps the twigs and cuts the leaves away. {} without twig cards."""
+        if self.twig_atlas is None:
+            return {}
+        leaf = self.lod0.leaf_color
+        return {season: self.twig_atlas.albedo(self.lod0.bark_color,
+                                               None if season == "bare" else season_leaf_colour(season, leaf))
+                for season in SEASONS}
+
     def metadata(self) -> dict:
         """JSON-able facts about the asset (catalog row without file entries)."""
         lod0_tris = self.levels[0].n_triangles
@@ -130,18 +142,6 @@ def _level_wind(skeleton, mesh, original_node: np.ndarray | None):
     else:
         leaf_wind, leaf_pivot = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
     return bark_wind, bark_pivot, leaf_wind, leaf_pivot
-
-
-def twig_albedos(asset: "LibraryAsset") -> dict[str, np.ndarray]:
-    """(H, W, 4) uint8 twig atlas albedo per season (SEASONS order): the species' bark colour on bark texels and
-    the season's leaf colour on leaf texels; `bare` keeps the twigs and cuts the leaves away. {} without twig
-    cards."""
-    if asset.twig_atlas is None:
-        return {}
-    leaf = asset.lod0.leaf_color
-    return {season: asset.twig_atlas.albedo(asset.lod0.bark_color,
-                                            None if season == "bare" else season_leaf_colour(season, leaf))
-            for season in SEASONS}
 
 
 def leaf_alphas(atlas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

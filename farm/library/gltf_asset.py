@@ -19,7 +19,7 @@ from species.studio.pbr_textures import SEASONS
 from species.studio.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 
-from .asset import LibraryAsset, leaf_instances, twig_albedos
+from .asset import LibraryAsset, leaf_instances
 from .png_cache import PngCache
 
 __all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
@@ -83,7 +83,7 @@ def _materials(writer: GlbWriter, asset: LibraryAsset, pngs: PngCache) -> dict[s
     if asset.twig_atlas is not None:
         # Twig cluster cards: one atlas of bark and leaf texels, recoloured per season (bare keeps the twigs).
         normal = texture("twig_normal", asset.twig_atlas.normal, CLAMP_TO_EDGE)
-        for season, image in twig_albedos(asset).items():
+        for season, image in asset.twig_albedos.items():
             out[f"twigs_{season}"] = writer.material({
                 "name": f"twigs_{season}", "alphaMode": "MASK", "alphaCutoff": 0.5, "doubleSided": True,
                 "pbrMetallicRoughness": {

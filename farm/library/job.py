@@ -23,7 +23,7 @@ from ..manifest import JOB_RECORD
 from ..pipeline import run_job
 from ..storage import Location, sha256_hex
 from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
-from .asset import LibraryAsset, build_asset, twig_albedos
+from .asset import LibraryAsset, build_asset
 from .catalog import write_catalog
 from .gltf_asset import asset_to_glb, glb_size
 from .png_cache import PngCache
@@ -84,7 +84,7 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
                 put(f"texture_{name}", relative, pngs.encode(images[name]))
             if asset.twig_atlas is not None:
                 put("texture_twig_normal", TWIG_TEXTURE_FILES["twig_normal"], pngs.encode(asset.twig_atlas.normal))
-                for season, image in twig_albedos(asset).items():
+                for season, image in asset.twig_albedos.items():
                     put(f"texture_twig_atlas_{season}", TWIG_TEXTURE_FILES[f"twig_atlas_{season}"],
                         pngs.encode(image, palette=True))
     if "glb" in spec.formats:

@@ -7,9 +7,8 @@ CoverageRenderer, the opaque shares of a single-leaf card and of a clump card. O
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
-
-import numpy as np
 
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
@@ -152,18 +151,20 @@ def level_cover(lod, lod0_cover: TreeMesh, leaf_fraction: float, card_fraction: 
     if lod.twigs is None:
         return cover
     flat = lod.twigs.flattened(lod0_cover)
-    return TreeMesh(bark=MeshPart.concatenate([cover.bark, flat.bark]),
-                    leaves=MeshPart.concatenate([cover.leaves, flat.leaves]), bark_color=cover.bark_color,
-                    leaf_color=cover.leaf_color, name=cover.name)
+    return _with_faces(cover, flat.bark, flat.leaves)
 
 
 def drawn_cover(lod_mesh: TreeMesh, leaf_fraction: float, card_fraction: float, twig_runs=None) -> TreeMesh:
     """What a built level shows, for opaque coverage passes: its tubes and leaf cards cut to their tiles' opaque
     share, and its twig cards as the atlas draws them (`TwigAtlasImage.opaque_runs`, when it has any)."""
     cover = coverage_tree(lod_mesh, leaf_fraction, card_fraction)
-    if twig_runs is None:
-        return cover
-    return TreeMesh(bark=MeshPart.concatenate([cover.bark, twig_runs]), leaves=cover.leaves, name=cover.name)
+    return cover if twig_runs is None else _with_faces(cover, twig_runs)
+
+
+def _with_faces(cover: TreeMesh, bark: MeshPart, leaves: MeshPart | None = None) -> TreeMesh:
+    """`cover` with more faces drawn as bark and, when given, as leaves (coverage passes draw both alike)."""
+    return dataclasses.replace(cover, bark=MeshPart.concatenate([cover.bark, bark]),
+                               leaves=cover.leaves if leaves is None else MeshPart.concatenate([cover.leaves, leaves]))
 
 
 def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, renderer, leaf_fraction: float,

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import TreefarmError
 from ..skeleton import Skeleton
-from ..tree_mesh import MeshPart, TreeMesh
+from ..tree_mesh import MeshPart, TreeMesh, quad_faces
 from ..geometry.topology import depth_levels, node_depths
 from .leaf_clusters import cluster_axes
 
@@ -62,7 +62,6 @@ def twig_labels(skeleton: Skeleton, kept_branch: np.ndarray, max_depth: int | No
 class TwigCards:
     """Cards standing for the dropped branches of one level.
 
-    card_of_branch : (B,) int64, the card a branch is drawn on (-1: kept as a tube).
     origin         : (C, 3) float64 metres, each card's corner at its (0, 0) texel.
     axes           : (C, 3, 3) float64, rows u (across the tile), v (up the tile), normal; right-handed.
     extent         : (C, 2) float64 metres along u and v.
@@ -71,7 +70,6 @@ class TwigCards:
     bark_card, leaf_card   : (F,) int64 their card.
     """
 
-    card_of_branch: np.ndarray
     origin: np.ndarray
     axes: np.ndarray
     extent: np.ndarray
@@ -104,10 +102,9 @@ class TwigCards:
             offset = np.einsum("ij,ij->i", points - self.origin[card], normal)
             flat = (points - offset[:, None] * normal).astype(np.float32)
             parts.append(MeshPart(flat, np.arange(len(flat), dtype=np.int32).reshape(-1, 3),
-                                  np.repeat(normal, 1, axis=0).astype(np.float32), np.zeros((len(flat), 2), np.float32)))
+                                  normal.astype(np.float32), np.zeros((len(flat), 2), np.float32)))
         return TreeMesh(bark=parts[0], leaves=parts[1], bark_color=lod0.bark_color, leaf_color=lod0.leaf_color,
                         name=f"{lod0.name}_twigs")
-
 
 
 def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray) -> TwigCards:
@@ -138,10 +135,9 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray) -> TwigCa
     pad = _CARD_MARGIN * np.maximum(high - low, 1e-6)
     low, high = low - pad, high + pad
     origin = mean + np.einsum("ck,cki->ci", low, frame[:, :2])
-    card_of_branch = labels.copy()
     branch = np.full(n, np.iinfo(np.int64).max)
     np.minimum.at(branch, labels[labels >= 0], np.flatnonzero(labels >= 0))
-    return TwigCards(card_of_branch, origin, frame, high - low, branch, bark_faces, bark_card[bark_faces],
+    return TwigCards(origin, frame, high - low, branch, bark_faces, bark_card[bark_faces],
                      leaf_faces, leaf_card[leaf_faces])
 
 
@@ -194,14 +190,17 @@ class TwigAtlas:
         """(L + 1,) int64, where each level's cards start in the atlas's numbering."""
         return np.concatenate([[0], np.cumsum([len(cards) for cards in self.levels])]).astype(np.int64)
 
-    def _joined(self, name: str) -> np.ndarray:
-        return np.concatenate([getattr(cards, name) for cards in self.levels])
+    @cached_property
+    def _cards(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """origin, axes and extent of every card in the atlas's numbering (see TwigCards)."""
+        return tuple(np.concatenate([getattr(cards, name) for cards in self.levels])
+                     for name in ("origin", "axes", "extent"))
 
     def to_atlas(self, points: np.ndarray, card: np.ndarray) -> np.ndarray:
         """(P, 3) float64 atlas-space points (column, row, depth; texels) of world points (P, 3) metres on cards
         (P,) int (atlas numbering): columns run along u, rows down the tile against v (image rows), depth along
         the normal away from TWIG_DEPTH_OFFSET."""
-        origin, axes, extent = self._joined("origin"), self._joined("axes"), self._joined("extent")
+        origin, axes, extent = self._cards
         local = np.einsum("pj,pij->pi", np.asarray(points, np.float64) - origin[card], axes[card])
         local /= self.texel[card, None]
         column = self.offset[card, 0] + TWIG_PADDING_TEXELS + local[:, 0]
@@ -211,18 +210,19 @@ class TwigAtlas:
     def from_atlas(self, edges: np.ndarray, card: np.ndarray) -> np.ndarray:
         """(P, 3) float64 world points (metres) on cards (P,) int (atlas numbering) of atlas texel-edge coordinates
         (P, 2) (column, row; texel (c, r) spans [c, c + 1] x [r, r + 1]): the inverse of `to_atlas` on the card."""
-        origin, axes, extent = self._joined("origin"), self._joined("axes"), self._joined("extent")
+        origin, axes, extent = self._cards
         edges = np.asarray(edges, np.float64)
         texel = self.texel[card]
         u = (edges[:, 0] - self.offset[card, 0] - TWIG_PADDING_TEXELS) * texel
         v = (self.offset[card, 1] + TWIG_PADDING_TEXELS - edges[:, 1]) * texel + extent[card, 1]
         return origin[card] + u[:, None] * axes[card, 0] + v[:, None] * axes[card, 1]
 
+    @cached_property
     def card_index(self) -> np.ndarray:
         """(H, W) int64 atlas image of the card each texel's tile belongs to (-1 between tiles)."""
         width, height = self.size
         index = np.full((height, width), -1, np.int64)
-        extent = self._joined("extent") if self.levels else np.zeros((0, 2))
+        extent = self._cards[2] if self.levels else np.zeros((0, 2))
         tiles = np.ceil(extent / self.texel[:, None]).astype(np.int64) + 2 * TWIG_PADDING_TEXELS
         for card, ((column, row), (w, h)) in enumerate(zip(self.offset, tiles)):  # per card, not per texel
             index[row:row + h, column:column + w] = card
@@ -254,8 +254,7 @@ class TwigAtlas:
         placed = self.to_atlas(corners, card)[:, :2] + 0.5  # texel edges, not centres
         width, height = self.size
         uvs = np.stack([placed[:, 0] / width, 1.0 - placed[:, 1] / height], axis=1)
-        faces = (np.array([[0, 1, 2], [0, 2, 3]])[None] + 4 * np.arange(len(cards))[:, None, None]).reshape(-1, 3)
-        return MeshPart(corners, faces, np.repeat(cards.axes[:, 2], 4, axis=0), uvs,
+        return MeshPart(corners, quad_faces(len(cards)), np.repeat(cards.axes[:, 2], 4, axis=0), uvs,
                         {"branch": np.repeat(cards.branch, 4).astype(np.int32)})
 
 

@@ -26,7 +26,7 @@ def rendered():
 
 def test_atlas_marks_bark_and_leaf_texels_inside_tiles_only(rendered):
     _, image = rendered
-    index = image.layout.card_index()
+    index = image.layout.card_index
     assert set(np.unique(image.mask)) <= {0, 1, 2} and (image.mask == 1).any()
     assert not image.opaque[index < 0].any()
     assert image.normal.shape[:2] == tuple(-(-n // 2) for n in image.mask.shape)

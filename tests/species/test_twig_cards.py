@@ -71,7 +71,7 @@ def test_atlas_tiles_do_not_overlap_and_map_back_to_the_card(sapling, kept):
     skeleton, lod0 = sapling
     cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
     atlas = TwigAtlas.pack([cards], [0.01], 64 * 64 * 64)
-    index = atlas.card_index()
+    index = atlas.card_index
     assert index.shape == (atlas.size[1], atlas.size[0])
     tiles = np.bincount(index[index >= 0], minlength=len(cards))
     expected = np.prod(np.ceil(cards.extent / atlas.texel[:, None]) + 2 * TWIG_PADDING_TEXELS, axis=1)
