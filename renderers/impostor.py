@@ -15,6 +15,7 @@ from typing import ClassVar
 import numpy as np
 
 from species.errors import TreefarmError
+from species.geometry import plane_sectors
 from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .alpha_coverage import triangle_coverage
@@ -281,18 +282,13 @@ def sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int, axis_radius: 
     # Plane p's line in the ground plane is at angle line0 + p * 180 / planes (it turns with its azimuth).
     right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
     line0 = np.degrees(np.arctan2(right[1], right[0]))
-    width = 180.0 / planes
     groups = {}
     for kind, part in (("bark", tree.bark), ("leaves", tree.leaves)):
         if part.n_faces == 0:
             continue
         centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
         angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
-        position = ((angle - line0 + 0.5 * width) % 180.0) / width
-        sector = np.floor(position).astype(np.int64) % planes
-        across = position - np.floor(position)  # 0..1 across the sector
-        neighbour = np.where(across < 0.5, sector - 1, sector + 1) % planes
-        shared = np.abs(across - 0.5) > 0.5 - overlap
+        sector, neighbour, shared = plane_sectors(angle - line0, planes, overlap)
         axis = np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius
         if kind == "bark" and order is not None:
             axis |= np.asarray(order)[part.faces[:, 0]] == 0

@@ -17,10 +17,22 @@ from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 from .camera import Camera
 from .maps import LEAVES, PartDepths, combine_parts, mask_albedo, tangent_space_normals
 
-__all__ = ["TwigAtlasImage", "render_twig_atlas", "TWIG_ATLAS_MAX_TEXELS"]
+__all__ = ["TwigAtlasImage", "render_twig_atlas", "twig_atlas_texels", "TWIG_ATLAS_MAX_TEXELS",
+           "TWIG_TEXELS_PER_TRIANGLE"]
 
-# The atlas holds at most this many texels (512 x 512): beyond it every card's texels grow alike.
-TWIG_ATLAS_MAX_TEXELS = 512 * 512
+# The atlas holds at most TWIG_TEXELS_PER_TRIANGLE texels per LOD0 triangle, at least 128 x 128 and at most
+# TWIG_ATLAS_MAX_TEXELS; beyond it every card's texels grow alike. Its images then stay in proportion to the
+# asset's geometry (45 presets: at most +N % of the GLB; README, "Performance"), while the crossed cards of a dense
+# crown keep about a texel per screen pixel (sc_round_maple's LOD1 and LOD2: .816/.836 at a fixed 512 x 512,
+# .874/.895 with 1024 x 1024).
+TWIG_ATLAS_MAX_TEXELS = 1024 * 1024
+TWIG_TEXELS_PER_TRIANGLE = 40
+_MIN_TEXELS = 128 * 128
+
+
+def twig_atlas_texels(lod0_triangles: int) -> int:
+    """The most texels a twig atlas may hold for an asset whose LOD0 has `lod0_triangles` triangles."""
+    return int(min(TWIG_ATLAS_MAX_TEXELS, max(_MIN_TEXELS, TWIG_TEXELS_PER_TRIANGLE * int(lod0_triangles))))
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,4 +106,8 @@ def render_twig_atlas(renderer, layout: TwigAtlas, lod0_cover: TreeMesh) -> Twig
     parts = PartDepths({"bark": renderer.group_depth(camera, ("bark",)), LEAVES: renderer.group_depth(camera, (LEAVES,))})
     depth, mask, _ = combine_parts(parts)
     # The normals at half the atlas's resolution (a quarter of the file): shading needs less detail than alpha.
-    return TwigAtlasImage(layout, mask, tangent_space_normals(camera, depth, mask > 0)[::2, ::2])
+    # They are worked out from every second texel's depth, through the camera of that coarser grid.
+    half = Camera(-(-width // 2), -(-height // 2), np.diag([0.5, 0.5, 1.0]), np.eye(4), "orthographic", near, far,
+                  width / 2, height / 2, name="twig_atlas_normals")
+    coarse = depth[::2, ::2]
+    return TwigAtlasImage(layout, mask, tangent_space_normals(half, coarse, mask[::2, ::2] > 0))

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
 from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
-from renderers.twig_atlas import TWIG_ATLAS_MAX_TEXELS, render_twig_atlas
+from renderers.twig_atlas import render_twig_atlas, twig_atlas_texels
 from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
 from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
 from species.studio.twig_cards import TwigAtlas
@@ -171,7 +171,7 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
                  card_fraction: float):
     """The final levels and the twig atlas (None without twig levels). Levels whose twig candidate beat the plain
     one with exact textures get their cards into one atlas (`TwigAtlas.pack`, a texel per screen pixel at each
-    switch size within TWIG_ATLAS_MAX_TEXELS); each is judged again as the atlas draws it, and one that now loses
+    switch size within `twig_atlas_texels`); each is judged again as the atlas draws it, and one that now loses
     to its plain candidate falls back to it, the atlas made again without it, until every twig level left wins.
     Returns (levels [LodLevel], twig atlas image, twig level index per level: -1 without cards)."""
     use = [f.twigs is not None and f.twig_score > f.plain_score for f in fitted]
@@ -181,7 +181,7 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
             return [f.plain for f in fitted], None, [-1] * len(fitted)
         layout = TwigAtlas.pack([fitted[k].twigs.twigs for k in chosen],
                                 [metres_per_pixel(skeleton, fitted[k].switch_px) for k in chosen],
-                                TWIG_ATLAS_MAX_TEXELS)
+                                twig_atlas_texels(lod0_cover.n_faces))
         image = render_twig_atlas(renderer, layout, lod0_cover)
         losing = []
         for index, k in enumerate(chosen):

@@ -1,5 +1,5 @@
 """Geometry over plain arrays shared by every generator: rotations, curve frames, polyline simplification,
-pipe-model radii, tree topology (depths, depth-by-depth sweeps), unit vectors and a mesh's tangent frames for
+pipe-model radii, faces split among crossed planes, tree topology (depths, depth-by-depth sweeps), unit vectors and a mesh's tangent frames for
 normal maps.
 """
 from __future__ import annotations
@@ -9,6 +9,7 @@ from .rotations import (apply, declination, euler_xyz, from_euler_xyz, premul, r
 from .frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
 from .polyline_simplify import simplification_keys
 from .radii import pipe_model_radii
+from .sectors import plane_sectors
 from .tangents import DEGENERATE_UV_SINE, vertex_tangents
 from .topology import depth_levels, node_depths
 from .vectors import MIN_LENGTH, column_bounds, unit_vectors, unit_vectors_and_lengths
@@ -17,6 +18,6 @@ __all__ = [
     "rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
     "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
     "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths",
-    "depth_levels", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH", "vertex_tangents",
+    "depth_levels", "plane_sectors", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH", "vertex_tangents",
     "DEGENERATE_UV_SINE",
 ]

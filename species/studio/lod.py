@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import TreefarmError
 from ..meshing.tubes_and_cards import CARD_FACES, DEFAULT_RADIAL_SEGMENTS, bark_part, leaf_part
 from .leaf_clusters import CLUSTER_AREA_GAIN, LeafCards
-from .twig_cards import TwigCards, twig_cards, twig_labels
+from .twig_cards import TWIG_CARD_PLANES, TwigCards, twig_cards, twig_labels
 from ..geometry.polyline_simplify import simplification_keys
 from ..geometry.topology import depth_levels, node_depths
 from ..skeleton import Skeleton
@@ -340,7 +340,7 @@ class TreeLods:
     def __init__(self, skeleton: Skeleton, lod0: TreeMesh):
         self.skeleton, self.lod0 = skeleton, lod0
         self.barks: dict[tuple, tuple] = {}  # (level, target, switch px, bark share) -> fitted bark
-        self._twigs: dict[tuple, TwigCards] = {}  # (kept branches, depth) -> cards
+        self._twigs: dict[tuple, TwigCards] = {}  # (kept branches, depth, planes) -> cards
         self._kept_leaf_cards: dict[bytes, LeafCards] = {}  # kept branches -> their leaves, prepared to cluster
 
     @cached_property
@@ -352,20 +352,23 @@ class TreeLods:
         return LeafCards(self.skeleton.leaves)
 
     def twig_cards(self, kept_branch: np.ndarray, room: int) -> TwigCards:
-        """Twig cards for the branches not kept ((B,) bool), split as finely as TWIG_DEPTHS allows within `room`
-        triangles; LodBudgetError when not even one card per dropped subtree fits."""
-        for depth in TWIG_DEPTHS:
-            labels = twig_labels(self.skeleton, kept_branch, depth)
-            if _CARD_TRIANGLES * (int(labels.max(initial=-1)) + 1) <= room:
-                key = (kept_branch.tobytes(), depth)
-                if key not in self._twigs:
-                    self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels)
-                return self._twigs[key]
+        """Twig cards for the branches not kept ((B,) bool) within `room` triangles: TWIG_CARD_PLANES crossed cards
+        per cluster, clusters split as finely as TWIG_DEPTHS allows; where not even one crossed pair per dropped
+        subtree fits, one card per cluster; LodBudgetError when not even that fits."""
+        for planes in dict.fromkeys((TWIG_CARD_PLANES, 1)):
+            for depth in TWIG_DEPTHS:
+                labels = twig_labels(self.skeleton, kept_branch, depth)
+                if _CARD_TRIANGLES * planes * (int(labels.max(initial=-1)) + 1) <= room:
+                    key = (kept_branch.tobytes(), depth, planes)
+                    if key not in self._twigs:
+                        self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels, planes)
+                    return self._twigs[key]
         raise LodBudgetError(f"{room} triangles leave no room for one twig card per dropped subtree")
 
     def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
               card_area_gain: float = CLUSTER_AREA_GAIN, twigs: bool = False) -> LodLevel:
-        """`build_lod` of this tree."""
+        """`build_lod` of this tree; with `twigs`, the branches the level drops are drawn as twig cards
+        (`TreeLods.twig_cards`) instead of going to the leaf clusters."""
         skeleton, lod0 = self.skeleton, self.lod0
         if not 1 <= level <= len(LOD_SIDES):
             raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")

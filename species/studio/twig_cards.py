@@ -15,11 +15,12 @@ import numpy as np
 from ..errors import TreefarmError
 from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh, quad_faces
+from ..geometry.sectors import plane_sectors
 from ..geometry.topology import depth_levels, node_depths
 from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
-           "TWIG_DEPTH_OFFSET"]
+           "TWIG_DEPTH_OFFSET", "TWIG_CARD_PLANES", "TWIG_AXIS_SHARE", "TWIG_SECTOR_OVERLAP"]
 
 # Empty texels around each card's tile, so a sampled mip or a bilinear tap never reads its neighbour.
 TWIG_PADDING_TEXELS = 2
@@ -27,6 +28,19 @@ TWIG_PADDING_TEXELS = 2
 TWIG_DEPTH_OFFSET = 1.0e4
 # Extra share of the card beyond its faces on each side (texel rounding is added on top).
 _CARD_MARGIN = 0.02
+# Cards per twig cluster, crossed on the cluster's principal axis. A single card shows its twigs exactly from the
+# front and pressed to a line from the side; two crossed cards keep a bushy cluster's width from every side, for
+# twice the triangles per cluster (45 presets, mean least IoU LOD1/LOD2/LOD3 .866/.798/.752 with one card,
+# .873/.817/.768 with two; docs/library.md, "Twig cards").
+TWIG_CARD_PLANES = 2
+# At most this many planes per cluster (as many as the impostor has).
+_MAX_PLANES = 8
+# Crossed cards share faces as the impostor's planes do (renderers.impostor.AXIS_SHARE, SECTOR_OVERLAP): those
+# within this share of the cluster's reach from its axis go on every plane (seen between the planes, the axis
+# would otherwise come only from cards nearly edge-on), and those in this outer share of a sector on both planes
+# beside it. Chosen on six presets' LOD1-LOD3 against 0 and 0.3 for both.
+TWIG_AXIS_SHARE = 0.2
+TWIG_SECTOR_OVERLAP = 0.15
 
 
 class TwigCardError(TreefarmError):
@@ -66,7 +80,8 @@ class TwigCards:
     axes           : (C, 3, 3) float64, rows u (across the tile), v (up the tile), normal; right-handed.
     extent         : (C, 2) float64 metres along u and v.
     branch         : (C,) int64, the LOD0 branch each card's faces grow from nearest the trunk (wind follows it).
-    bark_faces, leaf_faces : (F,) int64 indices of LOD0's bark / leaf faces each card stands for, and
+    bark_faces, leaf_faces : (F,) int64 indices of LOD0's bark / leaf faces each card stands for (a face near
+                             the axis of crossed cards is listed once per card it is drawn on), and
     bark_card, leaf_card   : (F,) int64 their card.
     """
 
@@ -107,38 +122,77 @@ class TwigCards:
                         name=f"{lod0.name}_twigs")
 
 
-def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray) -> TwigCards:
-    """Cards for branch labels of `twig_labels`: each card lies in the plane of the two widest spreads of its LOD0
-    faces (bark vertices of its branches, corners of their leaf cards) and spans them, plus a small margin."""
+def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: int = TWIG_CARD_PLANES) -> TwigCards:
+    """Cards for branch labels of `twig_labels`, `planes` per label (1 to 8), crossed on the principal axis
+    of its LOD0 faces (bark vertices of its branches, corners of their leaf cards): the first in the plane of
+    their two widest spreads, the others turned about that axis by 180 / planes degrees each. Each face goes to
+    the plane it lies nearest (`plane_sectors`), faces near a sector's edge or near the axis to more than one
+    (TWIG_SECTOR_OVERLAP, TWIG_AXIS_SHARE); each card spans its faces, plus a small margin. A card seen edge-on
+    shows its faces pressed flat: with two planes, a bushy subtree keeps its width from every side (TWIG_CARD_PLANES).
+    Cards are numbered label by label, plane by plane; a plane no face lies nearest has none."""
+    if isinstance(planes, bool) or not isinstance(planes, (int, np.integer)) or not 1 <= planes <= _MAX_PLANES:
+        raise TwigCardError(f"twig card planes {planes!r} are invalid: allowed an integer in [1, {_MAX_PLANES}]")
     labels = np.asarray(labels, np.int64)
     n = int(labels.max(initial=-1)) + 1
-    bark_branch = np.asarray(lod0.bark.attributes["branch"], np.int64)[lod0.bark.faces[:, 0]]
-    leaf_branch = skeleton.branch_id[np.asarray(lod0.leaves.attributes["node"], np.int64)[lod0.leaves.faces[:, 0]]] \
-        if lod0.leaves.n_faces else np.zeros(0, np.int64)
-    bark_card, leaf_card = labels[bark_branch], labels[leaf_branch]
-    bark_faces, leaf_faces = np.flatnonzero(bark_card >= 0), np.flatnonzero(leaf_card >= 0)
-    points = np.concatenate([lod0.bark.vertices[lod0.bark.faces[bark_faces]].reshape(-1, 3),
-                             lod0.leaves.vertices[lod0.leaves.faces[leaf_faces]].reshape(-1, 3)]).astype(np.float64)
-    point_card = np.concatenate([np.repeat(bark_card[bark_faces], 3), np.repeat(leaf_card[leaf_faces], 3)])
-    if n and np.bincount(point_card, minlength=n).min() == 0:
+    # Labels per vertex (a face's vertices share its branch): the spreads are taken over vertices, not face corners.
+    bark_vertex_label = labels[np.asarray(lod0.bark.attributes["branch"], np.int64)]
+    leaf_vertex_label = labels[skeleton.branch_id[np.asarray(lod0.leaves.attributes["node"], np.int64)]] \
+        if lod0.leaves.n_vertices else np.zeros(0, np.int64)
+    bark_label, leaf_label = bark_vertex_label[lod0.bark.faces[:, 0]], leaf_vertex_label[lod0.leaves.faces[:, 0]]
+    bark_faces, leaf_faces = np.flatnonzero(bark_label >= 0), np.flatnonzero(leaf_label >= 0)
+    face_label = [bark_label[bark_faces], leaf_label[leaf_faces]]
+    vertex_label = np.concatenate([bark_vertex_label, leaf_vertex_label])
+    on_card = vertex_label >= 0
+    if n and np.bincount(vertex_label[on_card], minlength=n).min() == 0:
         raise TwigCardError("a twig card has no LOD0 faces: its branches drew nothing")
-    mean, axes = cluster_axes(points, point_card, n)
-    # Rows: u along the principal axis, v along the second, normal along the least spread; right-handed.
+    vertices = np.concatenate([lod0.bark.vertices, lod0.leaves.vertices]).astype(np.float64)
+    mean, axes = cluster_axes(vertices[on_card], vertex_label[on_card], n)
+    # Rows: u along the principal axis, v along the second, normal along the least spread; right-handed. Plane p
+    # turns v and the normal about u by p * 180 / planes degrees.
     u, v = axes[:, :, 2], axes[:, :, 1]
     normal = np.cross(u, v)
-    frame = np.stack([u, v, normal], axis=1)
-    local = np.einsum("pj,pij->pi", points - mean[point_card], frame[point_card])
-    low = np.full((n, 2), np.inf)
-    high = np.full((n, 2), -np.inf)
-    np.minimum.at(low, point_card, local[:, :2])
-    np.maximum.at(high, point_card, local[:, :2])
+    turn = np.radians(np.arange(planes) * (180.0 / planes))
+    turned_v = np.cos(turn)[None, :, None] * v[:, None] + np.sin(turn)[None, :, None] * normal[:, None]
+    frame = np.stack([np.broadcast_to(u[:, None], turned_v.shape), turned_v,
+                      np.cross(u[:, None], turned_v)], axis=2).reshape(n * planes, 3, 3)
+    faces, cards = [], []
+    for part, face, label in zip((lod0.bark, lod0.leaves), (bark_faces, leaf_faces), face_label):
+        if planes == 1:
+            faces.append(face)
+            cards.append(label)
+            continue
+        rel = np.asarray(part.vertices, np.float64)[part.faces[face]].mean(axis=1) - mean[label]
+        across, out = np.einsum("fi,fi->f", rel, v[label]), np.einsum("fi,fi->f", rel, normal[label])
+        sector, neighbour, shared = plane_sectors(np.degrees(np.arctan2(out, across)), planes, TWIG_SECTOR_OVERLAP)
+        radius = np.hypot(across, out)
+        reach = np.zeros(n)
+        np.maximum.at(reach, label, radius)
+        axis = radius <= TWIG_AXIS_SHARE * reach[label]
+        on_plane = [axis | (sector == p) | (shared & (neighbour == p)) for p in range(planes)]
+        faces.append(np.concatenate([face[chosen] for chosen in on_plane]))
+        cards.append(np.concatenate([label[chosen] * planes + p for p, chosen in enumerate(on_plane)]))
+    # A plane no face lies nearest (a flat cluster, a lone leaf) gets no card: the others are renumbered.
+    drawn = np.bincount(np.concatenate(cards), minlength=n * planes) > 0
+    renumber = np.cumsum(drawn) - 1
+    cards = [renumber[card] for card in cards]
+    frame, card_mean = frame[drawn], np.repeat(mean, planes, axis=0)[drawn]
+    points = np.concatenate([part.vertices[part.faces[face]].reshape(-1, 3)
+                             for part, face in zip((lod0.bark, lod0.leaves), faces)]).astype(np.float64)
+    point_card = np.concatenate([np.repeat(card, 3) for card in cards])
+    rel = points - card_mean[point_card]
+    low, high = np.full((2, len(frame)), np.inf), np.full((2, len(frame)), -np.inf)
+    for k in range(2):  # one axis at a time: 1-D ufunc.at is many times faster than 2-D
+        local = np.einsum("pi,pi->p", rel, frame[point_card, k])
+        np.minimum.at(low[k], point_card, local)
+        np.maximum.at(high[k], point_card, local)
+    low, high = low.T, high.T
     pad = _CARD_MARGIN * np.maximum(high - low, 1e-6)
     low, high = low - pad, high + pad
-    origin = mean + np.einsum("ck,cki->ci", low, frame[:, :2])
+    origin = card_mean + np.einsum("ck,cki->ci", low, frame[:, :2])
     branch = np.full(n, np.iinfo(np.int64).max)
     np.minimum.at(branch, labels[labels >= 0], np.flatnonzero(labels >= 0))
-    return TwigCards(origin, frame, high - low, branch, bark_faces, bark_card[bark_faces],
-                     leaf_faces, leaf_card[leaf_faces])
+    return TwigCards(origin, frame, high - low, np.repeat(branch, planes)[drawn], faces[0], cards[0], faces[1],
+                     cards[1])
 
 
 @dataclass(frozen=True, eq=False)

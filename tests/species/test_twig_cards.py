@@ -51,11 +51,17 @@ def test_labels_of_the_wrong_shape_are_refused(sapling):
         twig_labels(sapling[0], np.ones(3, bool), None)
 
 
-def test_cards_hold_their_faces_pressed_flat_inside_the_card(sapling, kept):
+@pytest.mark.parametrize("planes", [1, 2])
+def test_cards_hold_their_faces_pressed_flat_inside_the_card(sapling, kept, planes):
     skeleton, lod0 = sapling
-    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
-    dropped_bark = ~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]]
-    assert len(cards.bark_faces) == dropped_bark.sum()
+    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None), planes)
+    dropped_bark = np.flatnonzero(~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]])
+    # Every dropped face is drawn, on one card of its own cluster or (crossed, near a sector edge or the axis) on
+    # each of them.
+    assert np.array_equal(np.unique(cards.bark_faces), dropped_bark)
+    copies = np.bincount(cards.bark_faces)[dropped_bark]
+    assert copies.min() == 1 and copies.max() == planes
+    assert len(np.unique(np.stack([cards.bark_faces, cards.bark_card]), axis=1).T) == len(cards.bark_faces)
     flat = cards.flattened(lod0)
     for part, card in ((flat.bark, cards.bark_card), (flat.leaves, cards.leaf_card)):
         card = np.repeat(card, 3)
@@ -65,6 +71,44 @@ def test_cards_hold_their_faces_pressed_flat_inside_the_card(sapling, kept):
         assert (local[:, :2] >= -1e-4).all() and (local[:, :2] <= cards.extent[card] + 1e-4).all()
     assert np.allclose(np.einsum("cij,ckj->cik", cards.axes, cards.axes), np.eye(3), atol=1e-9)
     assert np.allclose(np.linalg.det(cards.axes), 1.0)
+
+
+def test_crossed_cards_share_their_clusters_axis_and_take_the_faces_nearest_them(sapling, kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, None)
+    cards = twig_cards(skeleton, lod0, labels, 2)
+    face_label = labels[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[cards.bark_faces, 0]]]
+    card_label = np.full(len(cards), -1)
+    card_label[cards.bark_card] = face_label
+    assert len(cards) <= 2 * (labels.max() + 1)
+    # Both planes of a cluster cross on its principal axis, at right angles.
+    pairs = [np.flatnonzero(card_label == label) for label in range(labels.max() + 1)]
+    pairs = [pair for pair in pairs if len(pair) == 2]
+    assert len(pairs) > 10
+    for a, b in pairs:
+        assert np.allclose(np.abs(cards.axes[a, 0] @ cards.axes[b, 0]), 1.0, atol=1e-9)
+        assert abs(cards.axes[a, 2] @ cards.axes[b, 2]) < 1e-9
+    # A face drawn on one plane only lies nearer that plane than the other plane of its cluster.
+    centroid = lod0.bark.vertices[lod0.bark.faces[cards.bark_faces]].mean(axis=1).astype(np.float64)
+    single = np.bincount(cards.bark_faces)[cards.bark_faces] == 1
+    partner = {a: b for pair in pairs for a, b in (pair, pair[::-1])}
+    checked = 0
+    for face, card in zip(np.flatnonzero(single), cards.bark_card[single]):
+        if card not in partner:
+            continue
+        other = partner[card]
+        own = abs((centroid[face] - cards.origin[card]) @ cards.axes[card, 2])
+        far = abs((centroid[face] - cards.origin[other]) @ cards.axes[other, 2])
+        assert own <= far + 1e-9
+        checked += 1
+    assert checked > 100
+
+
+@pytest.mark.parametrize("planes", [0, 9, True, 1.5])
+def test_plane_counts_out_of_range_are_refused(sapling, kept, planes):
+    skeleton, lod0 = sapling
+    with pytest.raises(TwigCardError, match="twig card planes"):
+        twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None), planes)
 
 
 def test_atlas_tiles_do_not_overlap_and_map_back_to_the_card(sapling, kept):
