@@ -339,7 +339,7 @@ class TreeLods:
 
     def __init__(self, skeleton: Skeleton, lod0: TreeMesh):
         self.skeleton, self.lod0 = skeleton, lod0
-        self.barks: dict[tuple, tuple] = {}  # (level, target, switch px, bark share) -> fitted bark
+        self.barks: dict[tuple, tuple] = {}  # (level, target, switch px, bark share[, "twigs"]) -> fitted bark
         self._twigs: dict[tuple, TwigCards] = {}  # (kept branches, depth, planes) -> cards
         self._kept_leaf_cards: dict[bytes, LeafCards] = {}  # kept branches -> their leaves, prepared to cluster
 
@@ -389,7 +389,13 @@ class TreeLods:
         key = (level, target, int(switch_px), float(bark_share))
         if key not in self.barks:  # the bark does not depend on the cards' gain: fitted once per share
             self.barks[key] = _fit_bark(self, level, budget, target, int(switch_px), bark_share)
-        simplified, original, leaf_anchor, bark = self.barks[key]
+        if twigs and self.barks[key][4]:
+            # The fallback bark took the whole budget: with twig cards, it keeps to its share instead (down to the
+            # trunk alone), and the cards draw what it drops.
+            key = key + ("twigs",)
+            if key not in self.barks:
+                self.barks[key] = _fit_bark(self, level, budget, target, int(switch_px), bark_share, keep_share=True)
+        simplified, original, leaf_anchor, bark, _ = self.barks[key]
         leaf_budget = target - bark.n_faces
         leaf_cards, cards_made = self.leaf_cards, None
         if twigs:
@@ -433,9 +439,12 @@ def build_lod(skeleton: Skeleton, lod0: TreeMesh, level: int, budget: float, swi
     return TreeLods(skeleton, lod0).build(level, budget, switch_px, bark_share, card_area_gain)
 
 
-def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px: int, bark_share: float):
-    """(simplified skeleton widened, original_node, leaf_anchor, bark MeshPart) of a level whose bark may take
-    `bark_share` of `target` triangles, leaving at least one card for the leaves; LodBudgetError if nothing fits."""
+def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px: int, bark_share: float,
+              keep_share: bool = False):
+    """(simplified skeleton widened, original_node, leaf_anchor, bark MeshPart, fell_back) of a level whose bark
+    may take `bark_share` of `target` triangles, leaving at least one card for the leaves; LodBudgetError if
+    nothing fits. fell_back: True when no screen tolerance fitted and the fallback below was taken; there the bark
+    may take all but one card, unless `keep_share` holds it to its share (twig cards draw the rest)."""
     skeleton, total0 = lods.skeleton, lods.lod0.n_faces
     sides = LOD_SIDES[level - 1]
     min_leaf_tris = _CARD_TRIANGLES if skeleton.n_leaves else 0
@@ -449,9 +458,13 @@ def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px:
         # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones
         # pruned like branches; the leaves go into the few cluster cards left.
         sides = (3,) * len(sides)
-        bark_target = target - min_leaf_tris
+        if not keep_share:
+            bark_target = target - min_leaf_tris
         chosen = _fit_bark_by_steps(skeleton, sides, bark_target, LOD_NODE_STEPS[level - 1],
                                     max(_MAX_NODE_STEP, int(skeleton.depth.max()) + 1), ((1, False), (1, True)))
+        fell_back = True
+    else:
+        fell_back = False
     if chosen is None:
         raise LodBudgetError(f"LOD{level} budget {budget:.3f} x {total0} LOD0 triangles = {target} leaves no "
                              f"room for the trunk alone; raise the LOD{level} budget")
@@ -459,4 +472,4 @@ def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px:
     branch_sides, coned = _branch_sides(simplified, sides, metres_per_px)
     simplified = _widened(simplified, branch_sides)
     bark = bark_part(simplified, min_segments=3, branch_sides=branch_sides, tip_cones=coned)
-    return simplified, original, leaf_anchor, bark
+    return simplified, original, leaf_anchor, bark, fell_back

@@ -137,3 +137,22 @@ def test_a_texel_budget_coarsens_the_finest_level_first(sapling, kept):
     assert np.allclose(atlas.texel[n:], coarse)  # the coarse level keeps its texels
     assert (atlas.texel[:n] > fine).all()
     assert atlas.size[0] * atlas.size[1] <= 2 * 20_000
+
+
+def test_a_twig_level_keeps_the_fallback_bark_to_its_share_and_draws_the_rest_as_cards(sapling):
+    skeleton, lod0 = sapling
+    lods = TreeLods(skeleton, lod0)
+    share = 0.5 * lod0.bark.n_faces / lod0.n_faces
+    plain = lods.build(3, 0.04, 128, bark_share=share)
+    target = next(key[1] for key in lods.barks if key[3] == share)
+    assert next(fit[4] for key, fit in lods.barks.items() if key[3] == share)  # no screen tolerance fitted
+    assert plain.mesh.bark.n_faces > share * target  # the plain fallback takes the cards' room
+    twigs = lods.build(3, 0.04, 128, bark_share=share, twigs=True)
+    assert twigs.mesh.bark.n_faces <= share * target < plain.mesh.bark.n_faces
+    assert len(twigs.twigs) > 0 and twigs.n_triangles <= target
+    # The trunk is kept; every branch it drops is on a card.
+    assert 0 in twigs.original_node
+    kept = np.zeros(skeleton.n_branches, bool)
+    kept[skeleton.branch_id[twigs.original_node]] = True
+    dropped_bark = np.flatnonzero(~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]])
+    assert np.array_equal(np.unique(twigs.twigs.bark_faces), dropped_bark)
