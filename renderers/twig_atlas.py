@@ -22,8 +22,8 @@ __all__ = ["TwigAtlasImage", "render_twig_atlas", "twig_atlas_texels", "TWIG_ATL
 
 # The atlas holds at most TWIG_TEXELS_PER_TRIANGLE texels per LOD0 triangle, at least 128 x 128 and at most
 # TWIG_ATLAS_MAX_TEXELS; beyond it every card's texels grow alike. Its images then stay in proportion to the
-# asset's geometry (45 presets: at most +N % of the GLB; README, "Performance"), while the crossed cards of a dense
-# crown keep about a texel per screen pixel (sc_round_maple's LOD1 and LOD2: .816/.836 at a fixed 512 x 512,
+# asset's geometry (the 33 presets with twig cards: at most 14.2 % of the GLB without them; README, "Performance"),
+# while the crossed cards of a dense crown keep about a texel per screen pixel (sc_round_maple's LOD1 and LOD2: .816/.836 at a fixed 512 x 512,
 # .874/.895 with 1024 x 1024).
 TWIG_ATLAS_MAX_TEXELS = 1024 * 1024
 TWIG_TEXELS_PER_TRIANGLE = 40
@@ -109,5 +109,4 @@ def render_twig_atlas(renderer, layout: TwigAtlas, lod0_cover: TreeMesh) -> Twig
     # They are worked out from every second texel's depth, through the camera of that coarser grid.
     half = Camera(-(-width // 2), -(-height // 2), np.diag([0.5, 0.5, 1.0]), np.eye(4), "orthographic", near, far,
                   width / 2, height / 2, name="twig_atlas_normals")
-    coarse = depth[::2, ::2]
-    return TwigAtlasImage(layout, mask, tangent_space_normals(half, coarse, mask[::2, ::2] > 0))
+    return TwigAtlasImage(layout, mask, tangent_space_normals(half, depth[::2, ::2], mask[::2, ::2] > 0))

@@ -1,6 +1,6 @@
 """Geometry over plain arrays shared by every generator: rotations, curve frames, polyline simplification,
-pipe-model radii, faces split among crossed planes, tree topology (depths, depth-by-depth sweeps), unit vectors and a mesh's tangent frames for
-normal maps.
+pipe-model radii, faces split among crossed planes, tree topology (depths, depth-by-depth sweeps), unit vectors
+and a mesh's tangent frames for normal maps.
 """
 from __future__ import annotations
 
@@ -18,6 +18,6 @@ __all__ = [
     "rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
     "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
     "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths",
-    "depth_levels", "plane_sectors", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH", "vertex_tangents",
-    "DEGENERATE_UV_SINE",
+    "depth_levels", "plane_sectors", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH",
+    "vertex_tangents", "DEGENERATE_UV_SINE",
 ]

@@ -444,7 +444,8 @@ def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px:
     """(simplified skeleton widened, original_node, leaf_anchor, bark MeshPart, fell_back) of a level whose bark
     may take `bark_share` of `target` triangles, leaving at least one card for the leaves; LodBudgetError if
     nothing fits. fell_back: True when no screen tolerance fitted and the fallback below was taken; there the bark
-    may take all but one card, unless `keep_share` holds it to its share (twig cards draw the rest)."""
+    may take all but one card. `keep_share` (for a share whose screen-tolerance search already failed) goes
+    straight to the fallback and holds it to its share: twig cards draw the rest."""
     skeleton, total0 = lods.skeleton, lods.lod0.n_faces
     sides = LOD_SIDES[level - 1]
     min_leaf_tris = _CARD_TRIANGLES if skeleton.n_leaves else 0
@@ -452,7 +453,8 @@ def _fit_bark(lods: TreeLods, level: int, budget: float, target: int, switch_px:
     if skeleton.n_leaves:
         bark_target = min(bark_target, target - min_leaf_tris)
     metres_per_px = metres_per_pixel(skeleton, switch_px)
-    chosen = _fit_bark_by_tolerance(skeleton, lods.node_keys, sides, bark_target, metres_per_px)
+    chosen = None if keep_share else _fit_bark_by_tolerance(skeleton, lods.node_keys, sides, bark_target,
+                                                            metres_per_px)
     if chosen is None:
         # Fallback, as an artist would for a far tree: 3-sided tubes, the bark may take all but one card's
         # share, nodes thinned down to branch ends, first-order branches only, then the trunk's split clones

@@ -157,10 +157,6 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
                       np.cross(u[:, None], turned_v)], axis=2).reshape(n * planes, 3, 3)
     faces, cards = [], []
     for part, face, label in zip((lod0.bark, lod0.leaves), (bark_faces, leaf_faces), face_label):
-        if planes == 1:
-            faces.append(face)
-            cards.append(label)
-            continue
         rel = np.asarray(part.vertices, np.float64)[part.faces[face]].mean(axis=1) - mean[label]
         across, out = np.einsum("fi,fi->f", rel, v[label]), np.einsum("fi,fi->f", rel, normal[label])
         sector, neighbour, shared = plane_sectors(np.degrees(np.arctan2(out, across)), planes, TWIG_SECTOR_OVERLAP)
