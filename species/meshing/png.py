@@ -30,8 +30,14 @@ def png_bytes(image: np.ndarray, compress_level: int = 9, palette: bool = False)
         raise ParameterError("compress_level", compress_level, "an integer in [0, 9]")
     buffer = io.BytesIO()
     if palette:
-        texels = image.reshape(-1, image.shape[2])
-        colours, index = np.unique(texels, axis=0, return_inverse=True)
+        # One integer per texel, channels big-endian, so its order is the rows' lexicographic order (same
+        # palette as a row-wise unique, which took about 0.9 s on a 1024 x 580 atlas against 0.03 s for this).
+        channels = image.shape[2]
+        keys = np.zeros(image.shape[:2], np.uint32)
+        for c in range(channels):
+            keys |= image[..., c].astype(np.uint32) << np.uint32(8 * (channels - 1 - c))
+        unique_keys, index = np.unique(keys.ravel(), return_inverse=True)
+        colours = ((unique_keys[:, None] >> (8 * np.arange(channels - 1, -1, -1, dtype=np.uint32))) & 0xFF)
         if len(colours) <= 256:
             indexed = Image.fromarray(index.reshape(image.shape[:2]).astype(np.uint8), mode="P")
             indexed.putpalette(colours[:, :3].astype(np.uint8).tobytes())
