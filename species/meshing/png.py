@@ -31,14 +31,15 @@ def png_bytes(image: np.ndarray, compress_level: int = 9, palette: bool = False)
     buffer = io.BytesIO()
     if palette:
         # One integer per texel, channels big-endian, so its order is the rows' lexicographic order (same
-        # palette as a row-wise unique, which took about 0.9 s on a 1024 x 580 atlas against 0.03 s for this).
+        # palette as a row-wise unique, which took about 0.9 s on a 1024 x 580 atlas against 0.01 s for this).
         channels = image.shape[2]
         keys = np.zeros(image.shape[:2], np.uint32)
         for c in range(channels):
             keys |= image[..., c].astype(np.uint32) << np.uint32(8 * (channels - 1 - c))
-        unique_keys, index = np.unique(keys.ravel(), return_inverse=True)
-        colours = ((unique_keys[:, None] >> (8 * np.arange(channels - 1, -1, -1, dtype=np.uint32))) & 0xFF)
-        if len(colours) <= 256:
+        unique_keys = np.sort(np.unique(keys, sorted=False))  # hashed, then the few colours sorted
+        if len(unique_keys) <= 256:
+            index = np.searchsorted(unique_keys, keys)
+            colours = (unique_keys[:, None] >> (8 * np.arange(channels - 1, -1, -1, dtype=np.uint32))) & 0xFF
             indexed = Image.fromarray(index.reshape(image.shape[:2]).astype(np.uint8), mode="P")
             indexed.putpalette(colours[:, :3].astype(np.uint8).tobytes())
             extra = {"transparency": colours[:, 3].astype(np.uint8).tobytes()} if image.shape[2] == 4 else {}
