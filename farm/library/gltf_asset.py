@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from species.geometry import vertex_tangents
+from species.geometry import unit_quaternions, vertex_tangents
 from species.meshing.gltf import CLAMP_TO_EDGE, REPEAT, TRIANGLES, Z_UP_TO_Y_UP, GlbWriter, z_up_to_y_up
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
 from species.studio.pbr_textures import SEASONS
@@ -29,15 +29,6 @@ SCREEN_HEIGHT_PX = 1080
 EXTENSIONS = ["EXT_mesh_gpu_instancing", "KHR_materials_variants", "MSFT_lod"]
 # Instanced card meshes, `<level>_<kind>_card`, named as the USD's PointInstancer prototypes (`leaf`, `clump`).
 CARD_MESH_KINDS = {"leaves": "leaf", "clumps": "clump"}
-
-
-def _quaternions(rotation: np.ndarray) -> np.ndarray:
-    """(M, 4) float32 unit quaternions (x, y, z, w) of rotation matrices (M, 3, 3)."""
-    from scipy.spatial.transform import Rotation
-
-    quat = Rotation.from_matrix(rotation).as_quat()
-    quat[quat[:, 3] < 0] *= -1.0  # one sign per rotation, so the bytes do not depend on scipy's choice
-    return (quat / np.linalg.norm(quat, axis=1, keepdims=True)).astype(np.float32)
 
 
 def _primitive(writer: GlbWriter, vertices, normals, uvs, faces, material: int, extra: dict | None = None,
@@ -201,7 +192,8 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
                           variant_maps)
         attributes = {
             "TRANSLATION": writer.floats(translation[chosen] @ Z_UP_TO_Y_UP.T, "VEC3", None),
-            "ROTATION": writer.floats(_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]), "VEC4", None),
+            "ROTATION": writer.floats(unit_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]).astype(np.float32), "VEC4",
+                                       None),
             "SCALE": writer.floats(scale[chosen], "VEC3", None),
             "_WIND": writer.floats(level.leaf_wind[chosen], "VEC4", None),
             "_WIND_PIVOT": writer.floats(z_up_to_y_up(level.leaf_pivot[chosen]), "VEC3", None),

@@ -12,6 +12,7 @@ import tempfile
 
 import numpy as np
 
+from species.geometry import unit_quaternions
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
 from species.studio.lod import card_clumps
 from species.studio.pbr_textures import SEASONS
@@ -120,7 +121,6 @@ PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
     """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
-    from scipy.spatial.transform import Rotation
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
     card = MeshPart(LEAF_CARD_CORNERS, CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), CARD_UVS)
@@ -135,8 +135,7 @@ def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
     translation, rotation, scale = leaf_instances(level.skeleton)
-    quat = Rotation.from_matrix(rotation).as_quat()  # x, y, z, w
-    quat[quat[:, 3] < 0] *= -1.0
+    quat = unit_quaternions(rotation)  # x, y, z, w
     instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.searchsorted(kinds, clumps).astype(np.int32)))
     instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
     instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))

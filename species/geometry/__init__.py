@@ -5,7 +5,7 @@ and a mesh's tangent frames for normal maps.
 from __future__ import annotations
 
 from .rotations import (apply, declination, euler_xyz, from_euler_xyz, premul, rot_axis, rot_x, rot_y, rot_z,
-    tilt_frames, track_frames, zxz)
+    tilt_frames, track_frames, unit_quaternions, zxz)
 from .frames import FrameError, parallel_transport_frames, polyline_tangents, rotation_minimizing_frames
 from .polyline_simplify import simplification_keys
 from .radii import pipe_model_radii
@@ -19,5 +19,5 @@ __all__ = [
     "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
     "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths",
     "depth_levels", "plane_sectors", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "MIN_LENGTH",
-    "vertex_tangents", "DEGENERATE_UV_SINE",
+    "vertex_tangents", "DEGENERATE_UV_SINE", "unit_quaternions",
 ]

@@ -10,7 +10,7 @@ import numpy as np
 from .vectors import row_norms
 
 __all__ = ["rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
-           "euler_xyz", "from_euler_xyz"]
+           "euler_xyz", "from_euler_xyz", "unit_quaternions"]
 
 
 def _batch(angle) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,3 +165,14 @@ def from_euler_xyz(angles: np.ndarray) -> np.ndarray:
     m[:, 1, 0], m[:, 1, 1], m[:, 1, 2] = sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx
     m[:, 2, 0], m[:, 2, 1], m[:, 2, 2] = -sy, cy * sx, cy * cx
     return m
+
+
+def unit_quaternions(rotations: np.ndarray) -> np.ndarray:
+    """(N, 4) float64 unit quaternions (x, y, z, w), w >= 0 (one sign per rotation, so written bytes do not depend
+    on scipy's choice), of proper rotation matrices (N, 3, 3). The matrices are taken as valid: scipy's default
+    re-orthogonalises each by an SVD first, 0.28 s for pine's 68k leaf cards against 0.003 s."""
+    from scipy.spatial.transform import Rotation
+
+    quat = Rotation.from_matrix(np.asarray(rotations, np.float64), assume_valid=True).as_quat()
+    quat[quat[:, 3] < 0] *= -1.0
+    return quat / np.linalg.norm(quat, axis=1, keepdims=True)

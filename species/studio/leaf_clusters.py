@@ -147,7 +147,8 @@ def cluster_axes(points: np.ndarray, labels: np.ndarray, n: int, with_variance: 
     mean = np.stack([np.bincount(labels, weights=points[:, k], minlength=n) for k in range(3)], axis=1)
     mean /= count[:, None]
     rel = points - mean[labels]
-    outer = (rel[:, :, None] * rel[:, None, :]).reshape(-1, 9)
-    cov = np.stack([np.bincount(labels, weights=outer[:, k], minlength=n) for k in range(9)], axis=1)
-    variance, axes = np.linalg.eigh(cov.reshape(n, 3, 3) / count[:, None, None])
+    cov = np.empty((n, 3, 3))
+    for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)):  # symmetric: six sums, not nine
+        cov[:, i, j] = cov[:, j, i] = np.bincount(labels, weights=rel[:, i] * rel[:, j], minlength=n)
+    variance, axes = np.linalg.eigh(cov / count[:, None, None])
     return (mean, axes, variance) if with_variance else (mean, axes)
