@@ -16,7 +16,7 @@ from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
 from renderers.twig_atlas import render_twig_atlas, twig_atlas_texels
 from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
 from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
-from species.studio.twig_cards import TwigAtlas
+from species.studio.twig_cards import TWIG_CARD_PLANES, TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
 __all__ = ["fit_lods", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
@@ -45,6 +45,15 @@ CALIBRATION_AZIMUTHS = (33.75,)
 # quality ones): from one, a level whose cards face that view wins and loses elsewhere (lsystem_fractal_plant's
 # LOD3: .765 from 33.75 deg, .383 from the worst quality azimuth).
 TWIG_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 90.0 * k for k in range(2))
+# The farthest level's twig cards may have up to this many planes per cluster (its few clusters are whole
+# subtrees, seen from between two planes), and two rules are tried there: the crossed pairs at the finest depth
+# with more planes where the room allows, and as many planes as fit on coarser clusters; the calibration keeps the
+# better (45 presets, mean least LOD3 IoU .769 -> .778, sc_multistem_shrub .69 -> .80, sc_spruce .70 -> .77; with
+# planes first alone, sc_cypress_column fell .60 -> .50; docs/library.md).
+FAR_TWIG_PLANES = 8
+# Twig rules a level is fitted with: (max planes, planes first) for nearer levels, then for the farthest.
+_NEAR_TWIG_RULES = ((TWIG_CARD_PLANES, False),)
+_FAR_TWIG_RULES = ((FAR_TWIG_PLANES, False), (FAR_TWIG_PLANES, True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,8 +84,9 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
     from LOD2 on, at that share, the cluster cards' area gain climbs CARD_AREA_GAINS from the default the same
     way. Then the bark share climbs again, from there, with the dropped branches drawn as twig cards (scored as
-    `level_cover` draws them: exact card textures); `settle_twigs` makes the final choice once the atlas exists. A
-    level costs six to twelve builds, not one per pair. Budgets LOD0's own proportion cannot meet raise
+    `level_cover` draws them: exact card textures; at the farthest level once per rule of _FAR_TWIG_RULES, the
+    best kept); `settle_twigs` makes the final choice once the atlas exists. A level costs six to twelve builds
+    (the farthest up to about twenty), not one per pair. Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
@@ -97,13 +107,17 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             return min(silhouette_iou(references[a], closed_silhouette(renderer.coverage(cover, views[a])))
                        for a in azimuths)
 
-        def score(share: int, gain: int, twigs: bool = False) -> float:
+        rules = _FAR_TWIG_RULES if level == len(budgets) else _NEAR_TWIG_RULES
+
+        def score(share: int, gain: int, twigs: int = 0) -> float:
+            """twigs: 0 plain, k > 0 twig cards by rules[k - 1]."""
             if (share, gain, twigs) not in tried:
                 scale = BARK_SHARE_SCALES[share]
                 try:
                     bark_share = None if share == full_share else min(scale * lod0_share, 1.0)
+                    max_planes, planes_first = rules[twigs - 1] if twigs else (TWIG_CARD_PLANES, False)
                     lod = lods.build(level, budget, px, bark_share=bark_share, card_area_gain=CARD_AREA_GAINS[gain],
-                                     twigs=twigs)
+                                     twigs=bool(twigs), twig_planes=max_planes, planes_first=planes_first)
                 except LodBudgetError:
                     if share == full_share and not twigs:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
@@ -114,28 +128,33 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             return tried[share, gain, twigs][0]
 
         share = _climb(lambda index: score(index, default_gain), start, len(BARK_SHARE_SCALES))
-        if tried[share, default_gain, False][1] is None:  # nothing but LOD0's proportion could be built
+        if tried[share, default_gain, 0][1] is None:  # nothing but LOD0's proportion could be built
             score(full_share, default_gain)
             share = full_share
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
             gain = _climb(lambda index: score(share, index), default_gain, len(CARD_AREA_GAINS))
-        plain = tried[share, gain, False][1]
+        plain = tried[share, gain, 0][1]
         # Twig cards look different from every side: both candidates are compared from all the twig azimuths. The
         # twig climb runs only when cards at the plain level's share already beat it (on most Weber-Penn crowns they
         # do not, and each candidate of a large tree costs more than the plain climb: with a climb from every
         # level the median asset took about 1.3 s instead of 0.7).
         # Where the plain level's bark takes the whole budget, the cards start from the largest share that leaves
-        # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125).
-        twig_share, plain_score = share, -1.0
-        while twig_share > 0 and score(twig_share, default_gain, True) < 0.0:
-            twig_share -= 1
-        if score(twig_share, default_gain, True) >= 0.0:
-            plain_score = judged(plain, TWIG_CALIBRATION_AZIMUTHS)
-            if score(twig_share, default_gain, True) > plain_score:
-                twig_share = _climb(lambda index: score(index, default_gain, True), twig_share,
-                                    len(BARK_SHARE_SCALES))
-        twig_score, twig_lod = tried[twig_share, default_gain, True]
+        # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125). Each twig rule climbs on its
+        # own; the best-scoring is the level's twig candidate.
+        plain_score, twig_score, twig_lod = -1.0, -1.0, None
+        for rule in range(1, len(rules) + 1):
+            twig_share = share
+            while twig_share > 0 and score(twig_share, default_gain, rule) < 0.0:
+                twig_share -= 1
+            if score(twig_share, default_gain, rule) >= 0.0:
+                if plain_score < 0.0:
+                    plain_score = judged(plain, TWIG_CALIBRATION_AZIMUTHS)
+                if score(twig_share, default_gain, rule) > plain_score:
+                    twig_share = _climb(lambda index, rule=rule: score(index, default_gain, rule), twig_share,
+                                        len(BARK_SHARE_SCALES))
+            if tried[twig_share, default_gain, rule][0] > twig_score:
+                twig_score, twig_lod = tried[twig_share, default_gain, rule]
         levels.append(FittedLevel(plain, plain_score, twig_lod, twig_score, px,
                                   [views[a] for a in TWIG_CALIBRATION_AZIMUTHS],
                                   [references[a] for a in TWIG_CALIBRATION_AZIMUTHS]))

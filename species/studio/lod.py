@@ -351,14 +351,26 @@ class TreeLods:
     def leaf_cards(self) -> LeafCards:
         return LeafCards(self.skeleton.leaves)
 
-    def twig_cards(self, kept_branch: np.ndarray, room: int) -> TwigCards:
+    def twig_cards(self, kept_branch: np.ndarray, room: int, max_planes: int = TWIG_CARD_PLANES,
+                   planes_first: bool = False) -> TwigCards:
         """Twig cards for the branches not kept ((B,) bool) within `room` triangles: TWIG_CARD_PLANES crossed cards
-        per cluster, clusters split as finely as TWIG_DEPTHS allows; where not even one crossed pair per dropped
-        subtree fits, one card per cluster; LodBudgetError when not even that fits."""
-        for planes in dict.fromkeys((TWIG_CARD_PLANES, 1)):
+        per cluster, clusters split as finely as TWIG_DEPTHS allows, and more planes, up to `max_planes`, where
+        the room holds them; where not even one crossed pair per dropped subtree fits, one card per cluster;
+        LodBudgetError when not even that fits. `planes_first`: as many planes as fit (`max_planes`, then half
+        as many, ...), clusters as fine as those planes allow (a far level's few clusters seen from between their
+        planes: sc_multistem_shrub's LOD3 .74 with 4 or 8 planes at the finest depth, .80 with 8 on coarser
+        clusters; docs/library.md)."""
+        if planes_first:
+            ladder = [max_planes >> k for k in range(max_planes.bit_length()) if max_planes >> k >= 1]
+        else:
+            ladder = list(dict.fromkeys((TWIG_CARD_PLANES, 1)))
+        for planes in ladder:
             for depth in TWIG_DEPTHS:
                 labels = twig_labels(self.skeleton, kept_branch, depth)
-                if _CARD_TRIANGLES * planes * (int(labels.max(initial=-1)) + 1) <= room:
+                clusters = int(labels.max(initial=-1)) + 1
+                if _CARD_TRIANGLES * planes * clusters <= room:
+                    if not planes_first and planes == TWIG_CARD_PLANES:
+                        planes = max(planes, min(max_planes, room // max(_CARD_TRIANGLES * clusters, 1)))
                     key = (kept_branch.tobytes(), depth, planes)
                     if key not in self._twigs:
                         self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels, planes)
@@ -366,9 +378,11 @@ class TreeLods:
         raise LodBudgetError(f"{room} triangles leave no room for one twig card per dropped subtree")
 
     def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
-              card_area_gain: float = CLUSTER_AREA_GAIN, twigs: bool = False) -> LodLevel:
+              card_area_gain: float = CLUSTER_AREA_GAIN, twigs: bool = False, twig_planes: int = TWIG_CARD_PLANES,
+              planes_first: bool = False) -> LodLevel:
         """`build_lod` of this tree; with `twigs`, the branches the level drops are drawn as twig cards
-        (`TreeLods.twig_cards`) instead of going to the leaf clusters."""
+        (`TreeLods.twig_cards`, with `twig_planes` as its max_planes and `planes_first`) instead of going to the
+        leaf clusters."""
         skeleton, lod0 = self.skeleton, self.lod0
         if not 1 <= level <= len(LOD_SIDES):
             raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
@@ -404,7 +418,8 @@ class TreeLods:
             if kept_branch.all():
                 raise LodBudgetError(f"LOD{level} keeps every branch: no twig cards to draw")
             leaf_kept = kept_branch[skeleton.branch_id[skeleton.leaf_node]]
-            cards_made = self.twig_cards(kept_branch, leaf_budget - (_CARD_TRIANGLES if leaf_kept.any() else 0))
+            cards_made = self.twig_cards(kept_branch, leaf_budget - (_CARD_TRIANGLES if leaf_kept.any() else 0),
+                                         twig_planes, planes_first)
             leaf_budget -= _CARD_TRIANGLES * len(cards_made)
             cache = kept_branch.tobytes()
             if cache not in self._kept_leaf_cards:

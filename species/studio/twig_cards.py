@@ -83,6 +83,7 @@ class TwigCards:
     bark_faces, leaf_faces : (F,) int64 indices of LOD0's bark / leaf faces each card stands for (a face near
                              the axis of crossed cards is listed once per card it is drawn on), and
     bark_card, leaf_card   : (F,) int64 their card.
+    planes         : cards per cluster asked for (1..8; a plane left empty is dropped).
     """
 
     origin: np.ndarray
@@ -93,6 +94,7 @@ class TwigCards:
     bark_card: np.ndarray
     leaf_faces: np.ndarray
     leaf_card: np.ndarray
+    planes: int = TWIG_CARD_PLANES
 
     def __len__(self) -> int:
         return len(self.origin)
@@ -188,7 +190,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     branch = np.full(n, np.iinfo(np.int64).max)
     np.minimum.at(branch, labels[labels >= 0], np.flatnonzero(labels >= 0))
     return TwigCards(origin, frame, high - low, np.repeat(branch, planes)[drawn], faces[0], cards[0], faces[1],
-                     cards[1])
+                     cards[1], int(planes))
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,8 +213,11 @@ class TwigAtlas:
     @classmethod
     def pack(cls, levels, texels, max_texels: int) -> "TwigAtlas":
         """The levels' cards, each level at its texel size in metres (texels (L,)), the finest of them made
-        coarser (to one common size) when the tiles would hold more than `max_texels` texels; shelf packing, tallest tiles first, into a power-of-two
-        width about the square root of their area (at least the widest tile)."""
+        coarser (to one common size) when the tiles would hold more than `max_texels` texels; shelf packing,
+        tallest tiles first, into a power-of-two width about the square root of their area (at least the widest
+        tile). A level of more than TWIG_CARD_PLANES planes per cluster (the far level's, `TreeLods.twig_cards`)
+        keeps its texel size and its tiles come on top of `max_texels`: its extra planes do not coarsen the nearer
+        levels' cards."""
         levels = tuple(levels)
         texel = np.concatenate([np.full(len(cards), float(t)) for cards, t in zip(levels, texels)])
         if np.any(~(texel > 0)):
@@ -220,7 +225,8 @@ class TwigAtlas:
         extent = np.concatenate([cards.extent for cards in levels]) if levels else np.zeros((0, 2))
         if len(extent) == 0:
             return cls(levels, texel, np.zeros((0, 2), np.int64), (1, 1))
-        texel = _coarsest_fitting(extent, texel, max_texels)
+        capped = np.concatenate([np.full(len(cards), cards.planes <= TWIG_CARD_PLANES) for cards in levels])
+        texel[capped] = _coarsest_fitting(extent[capped], texel[capped], max_texels)
         tiles = np.ceil(extent / texel[:, None]).astype(np.int64) + 2 * TWIG_PADDING_TEXELS
         width = int(max(tiles[:, 0].max(), np.sqrt((tiles[:, 0] * tiles[:, 1]).sum() * 1.15)))
         width = 1 << int(np.ceil(np.log2(width)))

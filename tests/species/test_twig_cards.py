@@ -156,3 +156,40 @@ def test_a_twig_level_keeps_the_fallback_bark_to_its_share_and_draws_the_rest_as
     kept[skeleton.branch_id[twigs.original_node]] = True
     dropped_bark = np.flatnonzero(~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]])
     assert np.array_equal(np.unique(twigs.twigs.bark_faces), dropped_bark)
+
+
+def _clusters(cards) -> int:
+    return len(np.unique(np.concatenate([cards.bark_card, cards.leaf_card]) // cards.planes))
+
+
+def test_more_planes_where_the_room_holds_them_and_planes_first_on_coarser_clusters(sapling, kept):
+    skeleton, lod0 = sapling
+    lods = TreeLods(skeleton, lod0)
+    finest = int(twig_labels(skeleton, kept, None).max()) + 1
+    room = 2 * 2 * finest * 3  # three crossed pairs per cluster at the finest depth
+    crossed = lods.twig_cards(kept, room)
+    assert crossed.planes == 2 and len(crossed) <= 2 * finest
+    spread = lods.twig_cards(kept, room, max_planes=8)
+    assert spread.planes == 6 and _clusters(spread) == _clusters(crossed) and len(spread) <= room // 2
+    # Planes first: 8 per cluster, on clusters coarse enough to take them.
+    first = lods.twig_cards(kept, room, max_planes=8, planes_first=True)
+    assert first.planes == 8 and len(first) <= room // 2
+    assert _clusters(first) <= room // (2 * 8) < finest
+    # Too little room for 8 planes per dropped subtree: the next halving that fits.
+    subtrees = int(twig_labels(skeleton, kept, 0).max()) + 1
+    assert lods.twig_cards(kept, 2 * 4 * subtrees, max_planes=8, planes_first=True).planes == 4
+
+
+def test_a_far_level_of_more_planes_does_not_coarsen_the_nearer_ones(sapling, kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, None)
+    near, far = twig_cards(skeleton, lod0, labels, 2), twig_cards(skeleton, lod0, twig_labels(skeleton, kept, 0), 8)
+    crossed_far = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, 0), 2)
+    alone = TwigAtlas.pack([near], [0.002], 20_000)
+    assert (alone.texel > 0.002).all()  # the budget binds
+    with_far = TwigAtlas.pack([near, far], [0.002, 0.008], 20_000)
+    assert np.allclose(with_far.texel[:len(near)], alone.texel)
+    assert np.allclose(with_far.texel[len(near):], 0.008)
+    # Two planes at the far level share the budget as before.
+    shared = TwigAtlas.pack([near, crossed_far], [0.002, 0.008], 20_000)
+    assert (shared.texel[:len(near)] > alone.texel[0]).all()
