@@ -8,6 +8,7 @@ triangles), and (H, W) bool coverage masks and IoU figures at a given screen siz
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from typing import ClassVar
@@ -47,7 +48,8 @@ _ATLAS_COLUMNS = 4
 _PLANE_MARGIN = 1.02
 # The impostor's alpha is the rendered coverage, not grown: at the impostor's switch size a texel is about a
 # screen pixel, and growing sparse crowns (conifer branch tips, isolated clusters) by a texel each way inflates
-# them beyond the tree's closed silhouette (docs/library.md, "Impostor"; `benchmarks/bench_impostor.py`).
+# them beyond the tree's closed silhouette (docs/library.md, "Impostor"; `benchmarks/bench_impostor.py`). The
+# library grows it only where that matches LOD0 better (`ImpostorAtlas.grown`, `farm.library.lod_fit`).
 # Faces this close to the vertical axis (share of the planes' half side) go on every plane. Seen between two
 # planes, the crown's middle would otherwise come only from the planes nearly edge-on to the view, whose texels
 # it samples sparsely: a hole. Faces in this outer share of a sector, on either side, go on the neighbouring plane
@@ -94,6 +96,29 @@ class ImpostorAtlas:
         billboard = self.mesh()
         return triangle_coverage(camera, billboard.vertices, billboard.faces, billboard.uvs,
                                  self.albedo[..., 3] >= 128)
+
+    def grown(self, texels: int) -> "ImpostorAtlas":
+        """This atlas with each tile's opaque texels grown by `texels` 4-neighbour steps, within the tile: a new
+        texel takes the colour of the first opaque neighbour (left, right, up, down), its normal stays flat. What
+        a sparse, thin-branched plant needs at the impostor's switch size, where its twigs fall between the texels
+        a screen pixel samples (`farm.library.lod_fit.fit_impostor` chooses per asset)."""
+        if isinstance(texels, bool) or not isinstance(texels, (int, np.integer)) or not 0 <= texels <= 8:
+            raise ImpostorError(f"impostor alpha growth {texels!r} texels is invalid: allowed an integer in 0..8")
+        albedo = self.albedo.copy()
+        for plane in range(len(self.azimuths)):
+            row, col = self.tile_origin(plane)
+            tile = albedo[row:row + self.tile, col:col + self.tile]  # a view: grown in place
+            for _ in range(int(texels)):
+                opaque = tile[..., 3] >= 128
+                source = tile.copy()
+                for into, taken in (((slice(None), slice(1, None)), (slice(None), slice(None, -1))),
+                                    ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+                                    ((slice(1, None), slice(None)), (slice(None, -1), slice(None))),
+                                    ((slice(None, -1), slice(None)), (slice(1, None), slice(None)))):
+                    fill = ~opaque[into] & (source[taken][..., 3] >= 128)
+                    tile[into][fill] = source[taken][fill]
+                    opaque[into] |= fill
+        return dataclasses.replace(self, albedo=albedo)
 
     def plane_axes(self) -> tuple[np.ndarray, np.ndarray]:
         """(P, 3) right vectors (image u) and (P, 3) normals toward each plane's camera, float64."""

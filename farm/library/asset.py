@@ -20,7 +20,7 @@ from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_l
 from species.studio.wind import WIND_LAYOUT, wind_attributes
 
 from ..tree_chain import stage_rngs
-from .lod_fit import drawn_cover, fit_lods, settle_twigs
+from .lod_fit import drawn_cover, fit_impostor, fit_lods, settle_twigs
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
            "measure_chain"]
@@ -221,7 +221,8 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         if spec.impostor == "octahedral":
             atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
         else:
-            atlas = render_impostor(renderer, lod0_cover, tile=spec.impostor_tile)
+            atlas = fit_impostor(render_impostor(renderer, lod0_cover, tile=spec.impostor_tile), lod0, lod0_cover,
+                                 renderer, spec.switch_px[-1])
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
         levels.append(LevelData("IMPOSTOR", billboard, None, np.zeros((billboard.bark.n_vertices, 4), np.float32),

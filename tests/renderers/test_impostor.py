@@ -55,3 +55,45 @@ def test_faces_near_the_axis_go_on_the_axis_group_alone():
     tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="core")
     member = _memberships(sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, ring)
     assert member[:, planes].all() and not member[:, :planes].any()
+
+
+def _sparse_atlas(rng: np.random.Generator):
+    from renderers.impostor import ImpostorAtlas
+
+    albedo = np.zeros((64, 128, 4), np.uint8)
+    albedo[rng.random((64, 128)) < 0.05] = (10, 200, 30, 255)
+    albedo[rng.random((64, 128)) < 0.02] = (90, 60, 30, 255)
+    normal = np.full((64, 128, 3), (128, 128, 255), np.uint8)
+    return ImpostorAtlas(albedo, normal, np.zeros(3), 1.0, np.arange(8) * 22.5, 32)
+
+
+def test_grown_alpha_takes_each_tiles_4_neighbours_and_their_colours_never_crossing_tiles():
+    atlas = _sparse_atlas(np.random.default_rng(0))
+    grown = atlas.grown(1)
+    assert atlas.grown(0).albedo.tobytes() == atlas.albedo.tobytes()
+    for plane in range(8):
+        row, col = atlas.tile_origin(plane)
+        before = atlas.albedo[row:row + 32, col:col + 32]
+        after = grown.albedo[row:row + 32, col:col + 32]
+        opaque = before[..., 3] >= 128
+        expected = opaque.copy()
+        expected[1:] |= opaque[:-1]
+        expected[:-1] |= opaque[1:]
+        expected[:, 1:] |= opaque[:, :-1]
+        expected[:, :-1] |= opaque[:, 1:]
+        assert np.array_equal(after[..., 3] >= 128, expected)  # nothing from the next tile
+        assert np.array_equal(after[opaque], before[opaque])  # opaque texels keep their colour
+        colours = {tuple(c) for c in before[opaque][:, :3]}
+        assert {tuple(c) for c in after[expected & ~opaque][:, :3]} <= colours
+    assert grown.normal is atlas.normal and grown.tile == atlas.tile
+
+
+def test_alpha_growth_out_of_range_is_refused():
+    import pytest
+
+    from renderers.impostor import ImpostorError
+
+    atlas = _sparse_atlas(np.random.default_rng(1))
+    for texels in (-1, 9, 1.5, True):
+        with pytest.raises(ImpostorError, match="alpha growth"):
+            atlas.grown(texels)
