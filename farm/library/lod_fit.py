@@ -19,7 +19,7 @@ from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
 from species.studio.twig_cards import TWIG_CARD_PLANES, TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "fit_impostor", "IMPOSTOR_GROWTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
+__all__ = ["fit_lods", "fit_impostor", "IMPOSTOR_GROWTHS", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
            "TWIG_CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
@@ -55,11 +55,14 @@ FAR_TWIG_PLANES = 8
 _NEAR_TWIG_RULES = ((TWIG_CARD_PLANES, False),)
 _FAR_TWIG_RULES = ((FAR_TWIG_PLANES, False), (FAR_TWIG_PLANES, True))
 # The crossed impostor's alpha as rendered, or grown by a texel: whichever matches LOD0 better from
-# TWIG_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse, thin-branched
-# plants whose twigs fall between the texels a pixel samples and fattens dense crowns, so it is chosen per asset
-# (least IoU at 64 px over the quality azimuths, 45 presets, 3 grown: lsystem_dichotomous .336 -> .431,
-# sc_sympodial_lilac .855 -> .884; grown everywhere, bonsai .809 -> .762, balsam_fir .440 -> .254; docs/library.md).
+# IMPOSTOR_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse,
+# thin-branched plants whose twigs fall between the texels a pixel samples and fattens dense crowns, so it is chosen
+# per asset (least IoU at 64 px over the quality azimuths: lsystem_dichotomous .336 -> .431, sc_sympodial_lilac
+# .855 -> .884 grown; grown everywhere, bonsai .809 -> .762, balsam_fir .440 -> .254; docs/library.md). Four views,
+# 45 deg apart and 22.5 deg off the quality ones: from the two twig views, lsystem_abop_tree (.799 -> .783) and
+# sc_excurrent_leader (.399 -> .364) were grown for a calibration gain of .015 and .012.
 IMPOSTOR_GROWTHS = (0, 1)
+IMPOSTOR_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 45.0 * k for k in range(4))
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,9 +243,9 @@ def _climb(score, start: int, count: int) -> int:
 
 def fit_impostor(atlas, lod0: TreeMesh, lod0_cover: TreeMesh, renderer, switch_px: int):
     """The crossed impostor `atlas` with its alpha grown by the IMPOSTOR_GROWTHS step that scores best against
-    LOD0 (`lod0_cover` drawn, framed as `lod0`) from TWIG_CALIBRATION_AZIMUTHS at `switch_px`."""
+    LOD0 (`lod0_cover` drawn, framed as `lod0`) from IMPOSTOR_CALIBRATION_AZIMUTHS at `switch_px`."""
     points = framing_points(lod0)
-    cameras = [switch_camera(points, azimuth, int(switch_px)) for azimuth in TWIG_CALIBRATION_AZIMUTHS]
+    cameras = [switch_camera(points, azimuth, int(switch_px)) for azimuth in IMPOSTOR_CALIBRATION_AZIMUTHS]
     references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
     best, best_score = atlas, -1.0
     for texels in IMPOSTOR_GROWTHS:
