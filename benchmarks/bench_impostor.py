@@ -26,19 +26,6 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 VARIANTS = ((0.2, 0.15, 0), (0.04, 0.0, 0), (0.2, 0.0, 0), (0.2, 0.3, 0), (0.2, 0.15, 1))
 
 
-def grown_alpha(albedo: np.ndarray, texels: int) -> np.ndarray:
-    """(H, W) bool opaque texels of an atlas, grown by `texels` texels (4-neighbour steps)."""
-    out = albedo[..., 3] >= 128
-    for _ in range(texels):
-        grown = out.copy()
-        grown[1:] |= out[:-1]
-        grown[:-1] |= out[1:]
-        grown[:, 1:] |= out[:, :-1]
-        grown[:, :-1] |= out[:, 1:]
-        out = grown
-    return out
-
-
 def least_iou(renderer, asset, cover, variant) -> float:
     from renderers.alpha_coverage import triangle_coverage
     from renderers.framing import framing_points
@@ -48,7 +35,8 @@ def least_iou(renderer, asset, cover, variant) -> float:
     axis_share, overlap, texels = variant
     atlas = render_impostor(renderer, cover, tile=asset.impostor.tile, axis_share=axis_share,
                             sector_overlap=overlap)
-    billboard, opaque = atlas.mesh(), grown_alpha(atlas.albedo, texels)
+    grown = atlas.grown(texels)  # within each tile, as the library grows it (`lod_fit.fit_impostor`)
+    billboard, opaque = grown.mesh(), grown.albedo[..., 3] >= 128
     switch_px = asset.levels[-1].switch_px
     points = framing_points(asset.lod0)
     ious = []

@@ -159,16 +159,16 @@ def leaf_fractions(atlas: np.ndarray) -> tuple[float, float]:
 
 
 def measure_chain(renderer, levels: list[LevelData], atlas, lod0_fraction: float, card_fraction: float,
-                  lod0_cover=None, twig_atlas=None) -> None:
+                  lod0_cover=None, twig_atlas=None, points=None) -> None:
     """Fill each level's `iou`: silhouette IoU against LOD0 at the level's switch size from QUALITY_AZIMUTHS,
     both drawn through the same camera in one depth-only pass each, every leaf card shrunk to the opaque share
     of the tile it uses (`lod0_fraction` of the single leaf for LOD0's cards and for LOD cards that are one
     leaf; `card_fraction` of the clump for cards that merge several), the impostor as its atlas shows it
-    (`atlas.coverage`).
+    (`atlas.coverage`); `points`: LOD0's `framing_points`, when the caller has them.
     Each LOD0 reference (azimuth, size) is rendered once."""
     lod0 = levels[0].mesh
     lod0_cover = lod0_cover or coverage_tree(lod0, lod0_fraction)
-    points = framing_points(lod0)
+    points = framing_points(lod0) if points is None else points
     cameras = {(azimuth, level.switch_px): switch_camera(points, azimuth, level.switch_px)
                for level in levels[1:] for azimuth in QUALITY_AZIMUTHS}
     # LOD0 first for every camera, then each level: the renderer uploads each mesh once.
@@ -199,8 +199,9 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         lod0_fraction, card_fraction = leaf_fractions(atlases["summer"])
     with timer.stage("lods"):
         lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
+        points = framing_points(lod0)  # every camera on LOD0 below is framed by these
         fitted = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
-                          card_fraction)
+                          card_fraction, points)
     with timer.stage("twigs"):
         lods, twig_atlas, twig_slots = settle_twigs(fitted, skeleton, lod0_cover, renderer, lod0_fraction,
                                                     card_fraction)
@@ -221,7 +222,7 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         if spec.impostor == "octahedral":
             atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
         else:
-            atlas = fit_impostor(render_impostor(renderer, lod0_cover, tile=spec.impostor_tile), lod0, lod0_cover,
+            atlas = fit_impostor(render_impostor(renderer, lod0_cover, tile=spec.impostor_tile), points, lod0_cover,
                                  renderer, spec.switch_px[-1])
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
@@ -229,6 +230,6 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
                                 np.zeros((billboard.bark.n_vertices, 3), np.float32), empty4, empty3,
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
-        measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas)
+        measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas, points)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
                         levels, atlas, capsules, maps, atlases, twig_atlas)

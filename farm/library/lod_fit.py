@@ -87,7 +87,7 @@ class FittedLevel:
 
 
 def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_fraction: float,
-             card_fraction: float) -> list[FittedLevel]:
+             card_fraction: float, points=None) -> list[FittedLevel]:
     """One FittedLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
@@ -96,10 +96,11 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     `level_cover` draws them: exact card textures; at the farthest level once per rule of _FAR_TWIG_RULES, the
     best kept); `settle_twigs` makes the final choice once the atlas exists. A level costs six to twelve builds
     (the farthest up to about twenty), not one per pair. Budgets LOD0's own proportion cannot meet raise
-    LodBudgetError as `build_lod` does; other shares that cannot be met are skipped."""
+    LodBudgetError as `build_lod` does; other shares that cannot be met are skipped. `points`: LOD0's
+    `framing_points`, when the caller has them."""
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
-    points = framing_points(lod0)
+    points = framing_points(lod0) if points is None else points
     full_share = BARK_SHARE_SCALES.index(1.0)
     default_gain = CARD_AREA_GAINS.index(CLUSTER_AREA_GAIN)
     start = BARK_SHARE_SCALES.index(_FIRST_SCALE)
@@ -241,10 +242,10 @@ def _climb(score, start: int, count: int) -> int:
         best = max(better, key=score)
 
 
-def fit_impostor(atlas, lod0: TreeMesh, lod0_cover: TreeMesh, renderer, switch_px: int):
+def fit_impostor(atlas, points, lod0_cover: TreeMesh, renderer, switch_px: int):
     """The crossed impostor `atlas` with its alpha grown by the IMPOSTOR_GROWTHS step that scores best against
-    LOD0 (`lod0_cover` drawn, framed as `lod0`) from IMPOSTOR_CALIBRATION_AZIMUTHS at `switch_px`."""
-    points = framing_points(lod0)
+    LOD0 (`lod0_cover` drawn, framed by LOD0's `framing_points`) from IMPOSTOR_CALIBRATION_AZIMUTHS at
+    `switch_px`."""
     cameras = [switch_camera(points, azimuth, int(switch_px)) for azimuth in IMPOSTOR_CALIBRATION_AZIMUTHS]
     references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
     best, best_score = atlas, -1.0

@@ -283,7 +283,7 @@ def test_the_impostor_keeps_the_alpha_growth_that_matches_lod0_best_from_the_cal
                    for c in cameras)
 
     scores = [calibration_score(rendered.grown(t)) for t in IMPOSTOR_GROWTHS]
-    chosen = fit_impostor(rendered, asset.lod0, cover, renderer, 64)
+    chosen = fit_impostor(rendered, points, cover, renderer, 64)
     assert calibration_score(chosen) == max(scores)
     assert scores[1] > scores[0]  # grown by a texel here
     assert (chosen.albedo[..., 3] >= 128).sum() > (rendered.albedo[..., 3] >= 128).sum()
