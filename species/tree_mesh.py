@@ -104,6 +104,21 @@ class MeshPart:
         return len(self.faces)
 
     @cached_property
+    def face_corners(self) -> np.ndarray:
+        """(F, 3, 3) float64 metres, the corners of each face: gathered once for the many passes that project a
+        tree's faces (twig cards fitted and pressed flat for every candidate level)."""
+        corners = self.vertices.astype(np.float64)[self.faces]
+        corners.setflags(write=False)
+        return corners
+
+    @cached_property
+    def face_centroids(self) -> np.ndarray:
+        """(F, 3) float64 metres, the mean of each face's corners."""
+        centroids = self.face_corners.mean(axis=1)
+        centroids.setflags(write=False)
+        return centroids
+
+    @cached_property
     def face_areas(self) -> np.ndarray:
         """(F,) float32, square metres."""
         tri = self.vertices[self.faces]

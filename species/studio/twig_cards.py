@@ -113,7 +113,7 @@ class TwigCards:
         parts = []
         for part, faces, card in ((lod0.bark, self.bark_faces, self.bark_card),
                                   (lod0.leaves, self.leaf_faces, self.leaf_card)):
-            points = np.asarray(part.vertices, np.float64)[part.faces[faces]].reshape(-1, 3)
+            points = part.face_corners[faces].reshape(-1, 3)
             card = np.repeat(card, 3)
             normal = self.axes[card, 2]
             offset = np.einsum("ij,ij->i", points - self.origin[card], normal)
@@ -159,7 +159,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
                       np.cross(u[:, None], turned_v)], axis=2).reshape(n * planes, 3, 3)
     faces, cards = [], []
     for part, face, label in zip((lod0.bark, lod0.leaves), (bark_faces, leaf_faces), face_label):
-        rel = np.asarray(part.vertices, np.float64)[part.faces[face]].mean(axis=1) - mean[label]
+        rel = part.face_centroids[face] - mean[label]
         across, out = np.einsum("fi,fi->f", rel, v[label]), np.einsum("fi,fi->f", rel, normal[label])
         sector, neighbour, shared = plane_sectors(np.degrees(np.arctan2(out, across)), planes, TWIG_SECTOR_OVERLAP)
         radius = np.hypot(across, out)
@@ -174,15 +174,15 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     renumber = np.cumsum(drawn) - 1
     cards = [renumber[card] for card in cards]
     frame, card_mean = frame[drawn], np.repeat(mean, planes, axis=0)[drawn]
-    points = np.concatenate([part.vertices[part.faces[face]].reshape(-1, 3)
-                             for part, face in zip((lod0.bark, lod0.leaves), faces)]).astype(np.float64)
-    point_card = np.concatenate([np.repeat(card, 3) for card in cards])
-    rel = points - card_mean[point_card]
+    # Each face's corners in its card's frame, reduced per face before per card (a third of the scattered values).
+    face_card = np.concatenate(cards)
+    rel = np.concatenate([part.face_corners[face] for part, face in zip((lod0.bark, lod0.leaves), faces)]) \
+        - card_mean[face_card][:, None, :]
     low, high = np.full((2, len(frame)), np.inf), np.full((2, len(frame)), -np.inf)
     for k in range(2):  # one axis at a time: 1-D ufunc.at is many times faster than 2-D
-        local = np.einsum("pi,pi->p", rel, frame[point_card, k])
-        np.minimum.at(low[k], point_card, local)
-        np.maximum.at(high[k], point_card, local)
+        local = np.einsum("fci,fi->fc", rel, frame[face_card, k])
+        np.minimum.at(low[k], face_card, local.min(axis=1))
+        np.maximum.at(high[k], face_card, local.max(axis=1))
     low, high = low.T, high.T
     pad = _CARD_MARGIN * np.maximum(high - low, 1e-6)
     low, high = low - pad, high + pad
@@ -292,7 +292,7 @@ class TwigAtlas:
             faces = np.concatenate([getattr(cards, f"{kind}_faces") for cards in self.levels])
             card = np.concatenate([getattr(cards, f"{kind}_card") + start
                                    for cards, start in zip(self.levels, self.first)])
-            points = np.asarray(part.vertices, np.float64)[part.faces[faces]].reshape(-1, 3)
+            points = part.face_corners[faces].reshape(-1, 3)
             placed = self.to_atlas(points, np.repeat(card, 3)).astype(np.float32)
             parts.append(MeshPart(placed, np.arange(len(placed), dtype=np.int32).reshape(-1, 3),
                                   np.tile(np.float32([0, 0, -1]), (len(placed), 1)),
