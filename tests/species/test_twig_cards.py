@@ -128,15 +128,33 @@ def test_atlas_tiles_do_not_overlap_and_map_back_to_the_card(sapling, kept):
     assert np.allclose(atlas.from_atlas(placed[:, :2] + 0.5, card), points, atol=1e-9)
 
 
-def test_a_texel_budget_coarsens_the_finest_level_first(sapling, kept):
+def test_a_texel_budget_coarsens_each_level_by_the_cube_root_of_its_texel_and_area(sapling, kept):
     skeleton, lod0 = sapling
     cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
-    fine, coarse = 0.001, 0.05
-    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], 20_000)
     n = len(cards)
-    assert np.allclose(atlas.texel[n:], coarse)  # the coarse level keeps its texels
-    assert (atlas.texel[:n] > fine).all()
-    assert atlas.size[0] * atlas.size[1] <= 2 * 20_000
+    fine, coarse = 0.001, 0.05
+
+    def padded(texel):  # the texels the budget counts
+        return (np.prod(cards.extent[None] / texel.reshape(2, -1)[..., None] + 2 * TWIG_PADDING_TEXELS,
+                        axis=2)).sum()
+
+    # A budget both levels must give way to: the same cards, so texels in proportion to the asked texel^(1/3).
+    tight = 4_000
+    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], tight)
+    near, far = atlas.texel[:n], atlas.texel[n:]
+    assert np.ptp(near) == 0 and np.ptp(far) == 0  # one texel per level
+    assert near[0] > fine and far[0] > coarse
+    assert far[0] / near[0] == pytest.approx((coarse / fine) ** (1 / 3), rel=1e-9)
+    assert tight * 0.999 <= padded(atlas.texel) <= tight  # the least coarsening that fits
+    # A looser one: the far level is already coarse enough and keeps its texels; the near one gives way alone.
+    loose = 20_000
+    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], loose)
+    assert np.allclose(atlas.texel[n:], coarse) and (atlas.texel[:n] > fine).all()
+    assert loose * 0.999 <= padded(atlas.texel) <= loose
+    assert atlas.size[0] * atlas.size[1] <= 2 * loose
+    # Nothing changes where the tiles fit.
+    roomy = TwigAtlas.pack([cards, cards], [fine * 1000, coarse], 10 ** 9)
+    assert np.allclose(roomy.texel[:n], fine * 1000) and np.allclose(roomy.texel[n:], coarse)
 
 
 def test_a_twig_level_keeps_the_fallback_bark_to_its_share_and_draws_the_rest_as_cards(sapling):
