@@ -113,13 +113,12 @@ class TwigCards:
         parts = []
         for part, faces, card in ((lod0.bark, self.bark_faces, self.bark_card),
                                   (lod0.leaves, self.leaf_faces, self.leaf_card)):
-            points = part.face_corners[faces].reshape(-1, 3)
-            card = np.repeat(card, 3)
+            corners = part.face_corners[faces]  # (F, 3, 3): per face, so each card's values are gathered once
             normal = self.axes[card, 2]
-            offset = np.einsum("ij,ij->i", points - self.origin[card], normal)
-            flat = (points - offset[:, None] * normal).astype(np.float32)
+            offset = np.einsum("fci,fi->fc", corners - self.origin[card][:, None, :], normal)
+            flat = (corners - offset[..., None] * normal[:, None, :]).astype(np.float32).reshape(-1, 3)
             parts.append(MeshPart(flat, np.arange(len(flat), dtype=np.int32).reshape(-1, 3),
-                                  normal.astype(np.float32), np.zeros((len(flat), 2), np.float32)))
+                                  np.repeat(normal.astype(np.float32), 3, axis=0), np.zeros((len(flat), 2), np.float32)))
         return TreeMesh(bark=parts[0], leaves=parts[1], bark_color=lod0.bark_color, leaf_color=lod0.leaf_color,
                         name=f"{lod0.name}_twigs")
 
