@@ -250,3 +250,14 @@ def test_branch_sides_override_the_sides_by_order(random_skeleton):
     for b in np.unique(branch)[:50]:
         ring_vertices = (branch == b).sum() - 1 - (b == 0)  # apex, and the root's base centre
         assert ring_vertices % (sides[b] + 1) == 0
+
+
+def test_face_corners_and_centroids_are_the_faces_vertices_in_float64(random_mesh):
+    for part in (random_mesh.bark, random_mesh.leaves):
+        corners, centroids = part.face_corners, part.face_centroids
+        assert corners.shape == (part.n_faces, 3, 3) and corners.dtype == np.float64
+        assert np.array_equal(corners, part.vertices[part.faces].astype(np.float64))
+        assert np.allclose(centroids, part.vertices[part.faces].mean(axis=1), atol=1e-6)
+        assert part.face_corners is corners  # gathered once per part
+        with pytest.raises(ValueError):
+            corners[0, 0, 0] = 1.0  # shared by every caller: read-only
