@@ -20,11 +20,12 @@ def _ring_of_triangles(count: int, radius: float) -> MeshPart:
                     attributes={"node": np.zeros(len(vertices), np.int32)})
 
 
-def _memberships(groups: dict, planes: int, part: MeshPart) -> np.ndarray:
-    """(F, planes + 1) bool: which plane groups (and, last, the axis group) hold each face, found by centroid."""
+def _memberships(groups: dict, planes: int, part: MeshPart, kind: str = "leaves") -> np.ndarray:
+    """(F, planes + 1) bool: which plane groups (and, last, the axis group) of `kind` hold each face, found by
+    centroid."""
     centroids = part.vertices[part.faces].mean(axis=1)
     member = np.zeros((part.n_faces, planes + 1), bool)
-    for column, name in [(p, f"leaves_{p}") for p in range(planes)] + [(planes, "leaves_axis")]:
+    for column, name in [(p, f"{kind}_{p}") for p in range(planes)] + [(planes, f"{kind}_axis")]:
         if name not in groups:
             continue
         vertices, faces, _ = groups[name]
@@ -55,6 +56,18 @@ def test_faces_near_the_axis_go_on_the_axis_group_alone():
     tree = TreeMesh(bark=MeshPart.empty(), leaves=ring, name="core")
     member = _memberships(sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, ring)
     assert member[:, planes].all() and not member[:, :planes].any()
+
+
+def test_a_trunk_off_the_axis_goes_by_sector_like_the_branches():
+    # Drawn on every plane, each plane would show it at another place: a smear seen from between them.
+    planes = 8
+    ring = _ring_of_triangles(64, 1.0)
+    trunk = MeshPart(ring.vertices, ring.faces, ring.normals, ring.uvs,
+                     attributes={"order": np.zeros(ring.n_vertices, np.uint8)})
+    tree = TreeMesh(bark=trunk, leaves=MeshPart.empty(), name="leaning")
+    member = _memberships(sector_groups(tree, np.array([0.0, 0.0, 1.0]), planes, axis_radius=0.1), planes, trunk,
+                          "bark")
+    assert not member[:, planes].any() and set(member[:, :planes].sum(axis=1)) <= {1, 2}
 
 
 def _sparse_atlas(rng: np.random.Generator):
