@@ -270,8 +270,9 @@ def _plane_frame(tree: TreeMesh) -> tuple[np.ndarray, float, float]:
     centre = 0.5 * (lo + hi)
     order = tree.bark.attributes.get("order")
     if order is not None and (np.asarray(order) == 0).any():
-        # The planes cross on the trunk, which every plane draws: crossing anywhere else would draw the trunk
-        # at a different place on each plane, a smear as wide as the offset between views.
+        # The planes cross on the trunk: its faces near that axis go on every plane (`sector_groups`), and a
+        # crossing anywhere else would draw them at a different place on each plane, a smear as wide as the
+        # offset between views.
         centre[:2] = tree.bark.vertices[np.asarray(order) == 0, :2].astype(np.float64).mean(axis=0)
     rel = points - centre
     radius_xy = float(np.sqrt((rel[:, :2] ** 2).sum(axis=1)).max())
