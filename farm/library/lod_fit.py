@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
 from renderers.impostor import closed_silhouette, silhouette_iou, switch_camera
@@ -19,7 +21,7 @@ from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
 from species.studio.twig_cards import TWIG_CARD_PLANES, TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "fit_impostor", "IMPOSTOR_GROWTHS", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
+__all__ = ["fit_lods", "fit_impostor", "CalibrationViews", "Judgement", "IMPOSTOR_GROWTHS", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
            "TWIG_CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
@@ -65,6 +67,41 @@ IMPOSTOR_GROWTHS = (0, 1)
 IMPOSTOR_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 45.0 * k for k in range(4))
 
 
+class CalibrationViews:
+    """A level's calibration cameras (TWIG_CALIBRATION_AZIMUTHS at its switch size) and LOD0's closed silhouettes
+    through them, each silhouette drawn when first needed."""
+
+    def __init__(self, renderer, lod0_cover: TreeMesh, points, switch_px: int):
+        self.renderer, self.lod0_cover, self.switch_px = renderer, lod0_cover, int(switch_px)
+        self.cameras = [switch_camera(points, azimuth, self.switch_px) for azimuth in TWIG_CALIBRATION_AZIMUTHS]
+        self._references: dict[int, object] = {}
+
+    def iou(self, view: int, cover: TreeMesh) -> float:
+        """Silhouette IoU of `cover` against LOD0 through camera `view`."""
+        if view not in self._references:
+            self._references[view] = closed_silhouette(self.renderer.coverage(self.lod0_cover, self.cameras[view]))
+        found = closed_silhouette(self.renderer.coverage(cover, self.cameras[view]))
+        return silhouette_iou(self._references[view], found)
+
+
+class Judgement:
+    """One candidate's least IoU over the first `views` calibration views, drawn a view at a time and only as far
+    as a comparison needs: once the IoUs drawn fall to a score to beat, the rest cannot lift the least above it.
+    `cover`: a callable giving the candidate's coverage tree (made on the first draw)."""
+
+    def __init__(self, views: CalibrationViews, cover):
+        self.views, self._cover, self.ious = views, cover, []
+
+    def least(self, views: int, beat: float = -np.inf) -> float:
+        """The least IoU over the first `views` views; with `beat`, it may stop early and return an upper bound
+        of it that is at most `beat` (so a strict comparison with `beat` comes out as the full least's would)."""
+        while len(self.ious) < views and min(self.ious, default=np.inf) > beat:
+            if callable(self._cover):
+                self._cover = self._cover()
+            self.ious.append(self.views.iou(len(self.ious), self._cover))
+        return min(self.ious[:views])
+
+
 @dataclass(frozen=True, eq=False)
 class FittedLevel:
     """One level's two fitted candidates and what they were judged by.
@@ -72,9 +109,9 @@ class FittedLevel:
     plain, plain_score : the best level without twig cards and its least IoU from TWIG_CALIBRATION_AZIMUTHS
                          (-1.0 when there is no twig candidate to compare it with).
     twigs, twig_score  : the best level with twig cards (None, -1.0 when none could be built), scored from the
-                         same azimuths with exact card textures.
-    switch_px, cameras, references : the level's switch size, the cameras of TWIG_CALIBRATION_AZIMUTHS and
-                         LOD0's closed silhouettes through them.
+                         same azimuths with exact card textures; where they cannot beat `plain_score`, an upper
+                         bound of their score that is at most `plain_score` (the views left undrawn).
+    switch_px, views   : the level's switch size and its CalibrationViews.
     """
 
     plain: object
@@ -82,8 +119,7 @@ class FittedLevel:
     twigs: object
     twig_score: float
     switch_px: int
-    cameras: list
-    references: list
+    views: CalibrationViews
 
 
 def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_fraction: float,
@@ -95,7 +131,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     way. Then the bark share climbs again, from there, with the dropped branches drawn as twig cards (scored as
     `level_cover` draws them: exact card textures; at the farthest level once per rule of _FAR_TWIG_RULES, the
     best kept); `settle_twigs` makes the final choice once the atlas exists. A level costs six to twelve builds
-    (the farthest up to about twenty), not one per pair. Budgets LOD0's own proportion cannot meet raise
+    (the farthest up to about twenty), not one per pair, and a candidate that cannot beat the one it is compared
+    with is not drawn from its remaining views (`Judgement`). Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped. `points`: LOD0's
     `framing_points`, when the caller has them."""
     lods = TreeLods(skeleton, lod0)
@@ -107,20 +144,13 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     levels = []
     for level, (budget, px) in enumerate(zip(budgets, switch_px), 1):
         px = int(px)
-        views = {azimuth: switch_camera(points, azimuth, px) for azimuth in TWIG_CALIBRATION_AZIMUTHS}
-        references = {azimuth: closed_silhouette(renderer.coverage(lod0_cover, camera))
-                      for azimuth, camera in views.items()}
-        tried: dict[tuple[int, int, bool], tuple[float, object]] = {}
-
-        def judged(lod, azimuths) -> float:
-            cover = level_cover(lod, lod0_cover, leaf_fraction, card_fraction)
-            return min(silhouette_iou(references[a], closed_silhouette(renderer.coverage(cover, views[a])))
-                       for a in azimuths)
-
+        views = CalibrationViews(renderer, lod0_cover, points, px)
+        tried: dict[tuple[int, int, int], tuple[object, Judgement | None]] = {}
         rules = _FAR_TWIG_RULES if level == len(budgets) else _NEAR_TWIG_RULES
 
-        def score(share: int, gain: int, twigs: int = 0) -> float:
-            """twigs: 0 plain, k > 0 twig cards by rules[k - 1]."""
+        def built(share: int, gain: int, twigs: int = 0):
+            """The candidate level (None where it cannot be built); twigs: 0 plain, k > 0 twig cards by
+            rules[k - 1]."""
             if (share, gain, twigs) not in tried:
                 scale = BARK_SHARE_SCALES[share]
                 try:
@@ -131,20 +161,30 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                 except LodBudgetError:
                     if share == full_share and not twigs:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
-                    tried[share, gain, twigs] = (-1.0, None)
-                    return -1.0
-                tried[share, gain, twigs] = (judged(lod, TWIG_CALIBRATION_AZIMUTHS if twigs else CALIBRATION_AZIMUTHS),
-                                             lod)
+                    tried[share, gain, twigs] = (None, None)
+                    return None
+                cover = lambda lod=lod: level_cover(lod, lod0_cover, leaf_fraction, card_fraction)  # noqa: E731
+                tried[share, gain, twigs] = (lod, Judgement(views, cover))
             return tried[share, gain, twigs][0]
 
-        share = _climb(lambda index: score(index, default_gain), start, len(BARK_SHARE_SCALES))
-        if tried[share, default_gain, 0][1] is None:  # nothing but LOD0's proportion could be built
+        def score(share: int, gain: int, twigs: int = 0, beat: float = -np.inf) -> float:
+            """The candidate's least IoU (-1.0 where it cannot be built): plain ones from CALIBRATION_AZIMUTHS,
+            twig ones from TWIG_CALIBRATION_AZIMUTHS; at most `beat` where it cannot beat it (`Judgement`)."""
+            if built(share, gain, twigs) is None:
+                return -1.0
+            count = len(TWIG_CALIBRATION_AZIMUTHS) if twigs else len(CALIBRATION_AZIMUTHS)
+            return tried[share, gain, twigs][1].least(count, beat)
+
+        share = _climb(lambda index, beat=-np.inf: score(index, default_gain, beat=beat), start,
+                       len(BARK_SHARE_SCALES))
+        if built(share, default_gain) is None:  # nothing but LOD0's proportion could be built
             score(full_share, default_gain)
             share = full_share
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
-            gain = _climb(lambda index: score(share, index), default_gain, len(CARD_AREA_GAINS))
-        plain = tried[share, gain, 0][1]
+            gain = _climb(lambda index, beat=-np.inf: score(share, index, beat=beat), default_gain,
+                          len(CARD_AREA_GAINS))
+        plain, plain_judgement = tried[share, gain, 0]
         # Twig cards look different from every side: both candidates are compared from all the twig azimuths. The
         # twig climb runs only when cards at the plain level's share already beat it (on most Weber-Penn crowns they
         # do not, and each candidate of a large tree costs more than the plain climb: with a climb from every
@@ -159,19 +199,18 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             if rule > 1 and twig_score <= plain_score:
                 break
             twig_share = share
-            while twig_share > 0 and score(twig_share, default_gain, rule) < 0.0:
+            while twig_share > 0 and built(twig_share, default_gain, rule) is None:
                 twig_share -= 1
-            if score(twig_share, default_gain, rule) >= 0.0:
+            if built(twig_share, default_gain, rule) is not None:
                 if plain_score < 0.0:
-                    plain_score = judged(plain, TWIG_CALIBRATION_AZIMUTHS)
-                if score(twig_share, default_gain, rule) > plain_score:
-                    twig_share = _climb(lambda index, rule=rule: score(index, default_gain, rule), twig_share,
-                                        len(BARK_SHARE_SCALES))
-            if tried[twig_share, default_gain, rule][0] > twig_score:
-                twig_score, twig_lod = tried[twig_share, default_gain, rule]
-        levels.append(FittedLevel(plain, plain_score, twig_lod, twig_score, px,
-                                  [views[a] for a in TWIG_CALIBRATION_AZIMUTHS],
-                                  [references[a] for a in TWIG_CALIBRATION_AZIMUTHS]))
+                    plain_score = plain_judgement.least(len(TWIG_CALIBRATION_AZIMUTHS))
+                if score(twig_share, default_gain, rule, beat=plain_score) > plain_score:
+                    twig_share = _climb(lambda index, beat=-np.inf, rule=rule: score(index, default_gain, rule, beat),
+                                        twig_share, len(BARK_SHARE_SCALES))
+            found = score(twig_share, default_gain, rule, beat=plain_score)
+            if found > twig_score:
+                twig_score, twig_lod = found, built(twig_share, default_gain, rule)
+        levels.append(FittedLevel(plain, plain_score, twig_lod, twig_score, px, views))
         start = share
     return levels
 
@@ -220,8 +259,7 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
         for index, k in enumerate(chosen):
             level = fitted[k]
             cover = drawn_cover(level.twigs.mesh, leaf_fraction, card_fraction, image.opaque_runs(index))
-            drawn = min(silhouette_iou(reference, closed_silhouette(renderer.coverage(cover, camera)))
-                        for reference, camera in zip(level.references, level.cameras))
+            drawn = Judgement(level.views, cover).least(len(TWIG_CALIBRATION_AZIMUTHS), beat=level.plain_score)
             if drawn <= level.plain_score:
                 losing.append(k)
         if not losing:
@@ -233,10 +271,12 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
 
 def _climb(score, start: int, count: int) -> int:
     """The index in [0, count) reached from `start` by moving to the better-scoring neighbour while one scores
-    higher (strictly: ties stay)."""
+    higher (strictly: ties stay). `score(index, beat)` may return any value at most `beat` for an index that
+    cannot beat it (`Judgement.least`); `score(index)` is the full score."""
     best = start
     while True:
-        better = [i for i in (best - 1, best + 1) if 0 <= i < count and score(i) > score(best)]
+        floor = score(best)
+        better = [i for i in (best - 1, best + 1) if 0 <= i < count and score(i, floor) > floor]
         if not better:
             return best
         best = max(better, key=score)

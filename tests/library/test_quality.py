@@ -264,6 +264,50 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     assert chosen.n_triangles <= 0.12 * lod0.n_faces
 
 
+class _ScriptedViews:
+    """Stands in for CalibrationViews: the IoU of each view is given, and every draw is counted."""
+
+    def __init__(self, ious):
+        self.ious, self.drawn = list(ious), []
+
+    def iou(self, view, cover):
+        self.drawn.append((view, cover))
+        return self.ious[view]
+
+
+def test_a_judgement_draws_a_further_view_only_while_the_candidate_can_still_beat_its_rival():
+    from farm.library.lod_fit import Judgement
+
+    made = []
+    views = _ScriptedViews([0.80, 0.60])
+    judgement = Judgement(views, lambda: made.append("cover") or "cover")
+    assert judgement.least(2, beat=0.85) == 0.80  # the first view already falls to the rival: no second draw
+    assert views.drawn == [(0, "cover")]
+    assert judgement.least(2, beat=0.70) == 0.60  # it may still beat 0.70: the second view is drawn
+    assert judgement.least(2) == 0.60 and judgement.least(1) == 0.80
+    assert views.drawn == [(0, "cover"), (1, "cover")] and made == ["cover"]  # the cover is made once
+
+    for ious in ([0.9, 0.5], [0.5, 0.9], [0.7, 0.7]):
+        for beat in (0.4, 0.5, 0.6, 0.7, 0.8, 0.95):
+            lazy = Judgement(_ScriptedViews(ious), "cover").least(2, beat)
+            assert (lazy > beat) == (min(ious) > beat)  # the comparison comes out as the full least's would
+            assert lazy >= min(ious)
+
+
+def test_the_climb_reaches_the_same_index_with_early_stopping_scores():
+    from farm.library.lod_fit import Judgement, _climb
+
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        ious = rng.uniform(0.3, 1.0, size=(7, 2))
+        full = lambda index, beat=-np.inf: float(ious[index].min())  # noqa: E731
+        judgements = [Judgement(_ScriptedViews(row), "cover") for row in ious]
+        lazy = lambda index, beat=-np.inf: judgements[index].least(2, beat)  # noqa: E731
+        start = int(rng.integers(7))
+        assert _climb(lazy, start, 7) == _climb(full, start, 7)
+        assert sum(len(j.views.drawn) for j in judgements) <= 2 * sum(bool(j.views.drawn) for j in judgements)
+
+
 def test_the_impostor_keeps_the_alpha_growth_that_matches_lod0_best_from_the_calibration_views(renderer):
     from farm.library.asset import leaf_fractions
     from farm.library.lod_fit import IMPOSTOR_CALIBRATION_AZIMUTHS, IMPOSTOR_GROWTHS, fit_impostor
