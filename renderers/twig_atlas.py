@@ -68,8 +68,9 @@ class TwigAtlasImage:
     def _runs(self, level: int) -> MeshPart:
         layout = self.layout
         card = layout.card_index
-        first, last = layout.first[level], layout.first[level + 1]
-        keep = self.opaque & (card >= first) & (card < last)
+        drawn = np.zeros(len(layout.source) + 1, bool)  # the level's tiles (the last entry: between tiles)
+        drawn[layout.source[layout.first[level]:layout.first[level + 1]]] = True
+        keep = self.opaque & drawn[card]
         padded = np.pad(keep, ((0, 0), (1, 1)))
         starts = np.argwhere(padded[:, 1:-1] & ~padded[:, :-2])  # (row, column) where a run begins
         ends = np.argwhere(padded[:, 1:-1] & ~padded[:, 2:])  # and where it ends (row-major, so they pair up)

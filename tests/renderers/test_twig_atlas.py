@@ -50,3 +50,17 @@ def test_opaque_runs_cover_exactly_what_the_alpha_tested_cards_do(rendered):
     assert tested.sum() > 100
     # Identical but for pixel centres on a texel's edge, where the two tests may round apart.
     assert (tested ^ drawn).sum() <= 0.01 * tested.sum()
+
+
+def test_a_level_repeating_the_nearer_level_s_cards_draws_their_tiles_and_only_its_own_beside(rendered):
+    lod0, image = rendered
+    cards = image.layout.levels[0]
+    renderer = CoverageRenderer(64)
+    try:
+        both = render_twig_atlas(renderer, TwigAtlas.pack([cards, cards], [0.01, 0.02], 512 * 512), lod0)
+    finally:
+        renderer.close()
+    assert both.mask.shape == image.mask.shape and np.array_equal(both.mask, image.mask)  # no second copy drawn
+    near, far = both.opaque_runs(0), both.opaque_runs(1)
+    assert np.array_equal(near.vertices, far.vertices) and np.array_equal(near.faces, far.faces)
+    assert np.array_equal(both.layout.card_part(1).uvs, both.layout.card_part(0).uvs)

@@ -1,5 +1,7 @@
 """Twig cluster cards: which branches share a card, cards in the plane of their faces, the atlas layout and its
 inverse (species.studio.twig_cards)."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -138,9 +140,11 @@ def test_a_texel_budget_coarsens_each_level_by_the_cube_root_of_its_texel_and_ar
         return (np.prod(cards.extent[None] / texel.reshape(2, -1)[..., None] + 2 * TWIG_PADDING_TEXELS,
                         axis=2)).sum()
 
-    # A budget both levels must give way to: the same cards, so texels in proportion to the asked texel^(1/3).
+    # Two levels of cards of the same sizes (moved aside: the same cards would share their tiles).
+    moved = dataclasses.replace(cards, origin=cards.origin + 1.0)
+    # A budget both levels must give way to: the same areas, so texels in proportion to the asked texel^(1/3).
     tight = 4_000
-    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], tight)
+    atlas = TwigAtlas.pack([cards, moved], [fine, coarse], tight)
     near, far = atlas.texel[:n], atlas.texel[n:]
     assert np.ptp(near) == 0 and np.ptp(far) == 0  # one texel per level
     assert near[0] > fine and far[0] > coarse
@@ -148,13 +152,59 @@ def test_a_texel_budget_coarsens_each_level_by_the_cube_root_of_its_texel_and_ar
     assert tight * 0.999 <= padded(atlas.texel) <= tight  # the least coarsening that fits
     # A looser one: the far level is already coarse enough and keeps its texels; the near one gives way alone.
     loose = 20_000
-    atlas = TwigAtlas.pack([cards, cards], [fine, coarse], loose)
+    atlas = TwigAtlas.pack([cards, moved], [fine, coarse], loose)
     assert np.allclose(atlas.texel[n:], coarse) and (atlas.texel[:n] > fine).all()
     assert loose * 0.999 <= padded(atlas.texel) <= loose
     assert atlas.size[0] * atlas.size[1] <= 2 * loose
     # Nothing changes where the tiles fit.
-    roomy = TwigAtlas.pack([cards, cards], [fine * 1000, coarse], 10 ** 9)
+    roomy = TwigAtlas.pack([cards, moved], [fine * 1000, coarse], 10 ** 9)
     assert np.allclose(roomy.texel[:n], fine * 1000) and np.allclose(roomy.texel[n:], coarse)
+
+
+def test_a_card_every_level_draws_samples_the_nearest_level_s_tile_and_takes_no_texels_of_its_own(sapling, kept):
+    skeleton, lod0 = sapling
+    cards = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, None))
+    n, budget = len(cards), 6_000
+    alone = TwigAtlas.pack([cards], [0.001], budget)
+    # A farther level of the same cards and a few of its own (moved aside): only those take tiles.
+    extra = dataclasses.replace(cards, origin=cards.origin + 1.0)
+    both = TwigAtlas.pack([cards, _joined(cards, extra, 3)], [0.001, 0.002], budget)
+    assert np.array_equal(both.source[:n], np.arange(n)) and np.array_equal(both.source[n:2 * n], np.arange(n))
+    assert np.array_equal(both.source[2 * n:], np.arange(2 * n, 2 * n + 3))
+    assert np.array_equal(both.texel[n:2 * n], both.texel[:n]) and np.array_equal(both.offset[n:2 * n], both.offset[:n])
+    # The budget holds the tiles drawn: the near level gives way to three more cards, not to a second copy.
+    unshared = TwigAtlas.pack([cards, _joined(extra, extra, 3)], [0.001, 0.002], budget)
+    assert alone.texel[0] <= both.texel[0] < unshared.texel[0]
+    own = both.source == np.arange(len(both.source))
+    padded = np.prod(np.concatenate([cards.extent, cards.extent, extra.extent[:3]])[own] / both.texel[own, None]
+                     + 2 * TWIG_PADDING_TEXELS, axis=1).sum()  # as the budget counts them (before rounding up)
+    assert budget * 0.999 <= padded <= budget
+    index = both.card_index
+    assert set(np.unique(index[index >= 0])) == set(range(n)) | {2 * n, 2 * n + 1, 2 * n + 2}
+    # A shared card's corners map into its source's tile as the source's do.
+    assert np.allclose(both.card_part(1).uvs[:4 * n], both.card_part(0).uvs)
+    # Three levels each twice as coarse: the farthest would sample four times finer than it asked, so it gets
+    # tiles of its own, which the middle level (sharing the nearest's) cannot lend it.
+    three = TwigAtlas.pack([cards, cards, cards], [0.001, 0.002, 0.004], 10 ** 9)
+    assert np.array_equal(three.source, np.concatenate([np.arange(n), np.arange(n), np.arange(2 * n, 3 * n)]))
+    assert np.allclose(three.texel, np.repeat([0.001, 0.001, 0.004], n))
+    # Cards with the same frames but other faces (cards 0 and 1's bark swapped) are not shared.
+    relabel = np.where(cards.bark_card == 0, 1, np.where(cards.bark_card == 1, 0, cards.bark_card))
+    swapped = TwigAtlas.pack([cards, dataclasses.replace(cards, bark_card=relabel)], [0.001, 0.002], budget)
+    assert np.array_equal(swapped.source[n:], np.concatenate([[n, n + 1], np.arange(2, n)]))
+
+
+def _joined(first, second, count: int):
+    """`first`'s cards followed by the first `count` of `second`'s (faces renumbered to their cards)."""
+    def faces(kind):
+        f, c = getattr(second, f"{kind}_faces"), getattr(second, f"{kind}_card")
+        return (np.concatenate([getattr(first, f"{kind}_faces"), f[c < count]]),
+                np.concatenate([getattr(first, f"{kind}_card"), c[c < count] + len(first)]))
+
+    (bark, bark_card), (leaf, leaf_card) = faces("bark"), faces("leaf")
+    return type(first)(*(np.concatenate([getattr(first, name), getattr(second, name)[:count]])
+                         for name in ("origin", "axes", "extent", "branch")), bark, bark_card, leaf, leaf_card,
+                       first.planes)
 
 
 def test_a_twig_level_keeps_the_fallback_bark_to_its_share_and_draws_the_rest_as_cards(sapling):
