@@ -7,7 +7,8 @@ import pytest
 
 import species
 from species.studio.lod import TreeLods
-from species.studio.twig_cards import (TWIG_PADDING_TEXELS, TwigAtlas, TwigCardError, twig_cards, twig_labels)
+from species.studio.twig_cards import (TWIG_CARD_PLANES, TWIG_PADDING_TEXELS, UPRIGHT_PLANES, TwigAtlas,
+                                       TwigCardError, twig_cards, twig_labels)
 
 
 @pytest.fixture(scope="module")
@@ -104,6 +105,31 @@ def test_crossed_cards_share_their_clusters_axis_and_take_the_faces_nearest_them
         assert own <= far + 1e-9
         checked += 1
     assert checked > 100
+
+
+def test_four_planes_or_more_cross_upright_the_first_along_the_widest_spread_in_plan(sapling, kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, 0)
+    cards = twig_cards(skeleton, lod0, labels, UPRIGHT_PLANES)
+    assert UPRIGHT_PLANES > TWIG_CARD_PLANES
+    assert np.allclose(cards.axes[:, 0], [0.0, 0.0, 1.0])  # every plane holds the vertical
+    assert np.allclose(cards.axes[:, 2, 2], 0.0, atol=1e-12)  # so its normal is level
+    crossed = twig_cards(skeleton, lod0, labels, TWIG_CARD_PLANES)
+    assert not np.allclose(crossed.axes[:, 0], [0.0, 0.0, 1.0])  # fewer planes cross on the principal axis
+    # The first plane of the largest cluster lies along the widest spread of its vertices seen from above.
+    branch = np.asarray(lod0.bark.attributes["branch"])
+    largest = np.bincount(labels[branch][labels[branch] >= 0]).argmax()
+    plan = lod0.bark.vertices[labels[branch] == largest][:, :2].astype(np.float64)
+    leaves = labels[skeleton.branch_id[np.asarray(lod0.leaves.attributes["node"])]] == largest
+    plan = np.concatenate([plan, lod0.leaves.vertices[leaves][:, :2]])
+    widest = np.linalg.eigh(np.cov(plan.T, bias=True))[1][:, 1]
+    first = np.flatnonzero(cards.branch == np.flatnonzero(labels == largest).min())[0]
+    assert abs(cards.axes[first, 1, :2] @ widest) == pytest.approx(1.0, abs=1e-6)
+    # Its planes are 180 / 4 deg apart about the vertical.
+    planes = cards.axes[cards.branch == cards.branch[first]]
+    turns = (np.degrees(np.arctan2(planes[:, 1, 1], planes[:, 1, 0])) - np.degrees(
+        np.arctan2(planes[0, 1, 1], planes[0, 1, 0]))) % 45.0
+    assert len(planes) >= 2 and np.minimum(turns, 45.0 - turns).max() < 1e-6
 
 
 @pytest.mark.parametrize("planes", [0, 9, True, 1.5])
@@ -227,7 +253,7 @@ def test_a_twig_level_keeps_the_fallback_bark_to_its_share_and_draws_the_rest_as
 
 
 def _clusters(cards) -> int:
-    return len(np.unique(np.concatenate([cards.bark_card, cards.leaf_card]) // cards.planes))
+    return len(np.unique(cards.branch))  # every plane of a cluster grows from its branch nearest the trunk
 
 
 def test_more_planes_where_the_room_holds_them_and_planes_first_on_coarser_clusters(sapling, kept):
