@@ -21,7 +21,7 @@ from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
            "TWIG_DEPTH_OFFSET", "TWIG_CARD_PLANES", "TWIG_AXIS_SHARE", "TWIG_SECTOR_OVERLAP",
-           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES"]
+           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES", "LEVEL_SPRAY_NORMAL_Z"]
 
 # Empty texels around each card's tile, so a sampled mip or a bilinear tap never reads its neighbour.
 TWIG_PADDING_TEXELS = 2
@@ -43,6 +43,12 @@ _MAX_PLANES = 8
 # .569 -> .678, sc_dense_beech .876 -> .910). Upright from 3 planes: .788 (sc_young_sapling's 3-plane LOD3 .477
 # -> .426); upright at every level: LOD2 .829 -> .820 (sc_cypress_column's tilted sprays .721 -> .613).
 UPRIGHT_PLANES = 4
+# A cluster of fewer planes crosses upright too when it lies about level (the z of its least-spread axis above
+# this, its own plane within about 25 deg of level): crossed on its principal axis, its first plane would be all
+# but edge-on from every side (45 presets, over UPRIGHT_PLANES alone: mean least IoU LOD1/LOD2/LOD3 .887/.829/.790
+# -> .889/.830/.792, within 29/23/25 -> 31/25/27, sc_fir's LOD3 .686 -> .772, sc_dense_beech's .910 -> .876; with
+# tree_seed(7, 0) .888/.825/.779 -> .888/.826/.783). From 0.8 or 0.707 it lost LOD2 or LOD3 on average.
+LEVEL_SPRAY_NORMAL_Z = 0.9
 # Crossed cards share faces as the impostor's planes do (renderers.impostor.AXIS_SHARE, SECTOR_OVERLAP): those
 # within this share of the cluster's reach from its axis go on every plane (seen between the planes, the axis
 # would otherwise come only from cards nearly edge-on), and those in this outer share of a sector on both planes
@@ -140,8 +146,9 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     """Cards for branch labels of `twig_labels`, `planes` per label (1 to 8), crossed on the principal axis
     of its LOD0 faces (bark vertices of its branches, corners of their leaf cards): the first in the plane of
     their two widest spreads, the others turned about that axis by 180 / planes degrees each. UPRIGHT_PLANES
-    or more (a far level's whole subtrees) cross on the vertical through the faces' mean instead, as the
-    impostor's planes do, the first along their widest horizontal spread. Each face goes to
+    or more (a far level's whole subtrees), or a cluster lying about level (LEVEL_SPRAY_NORMAL_Z), cross on the
+    vertical through the faces' mean instead, as the impostor's planes do, the first along their widest
+    horizontal spread. Each face goes to
     the plane it lies nearest (`plane_sectors`), faces near a sector's edge or near the axis to more than one
     (TWIG_SECTOR_OVERLAP, TWIG_AXIS_SHARE); each card spans its faces, plus a small margin. A card seen edge-on
     shows its faces pressed flat: with two planes, a bushy subtree keeps its width from every side (TWIG_CARD_PLANES).
@@ -166,8 +173,12 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     # Rows: u along the principal axis, v along the second, normal along the least spread; right-handed. Plane p
     # turns v and the normal about u by p * 180 / planes degrees.
     u, v = axes[:, :, 2], axes[:, :, 1]
-    if planes >= UPRIGHT_PLANES:  # upright: u vertical, v along the widest horizontal spread
-        u, v = np.tile([0.0, 0.0, 1.0], (n, 1)), _widest_horizontal(vertices[on_card], vertex_label[on_card], n)
+    # Upright (u vertical, v along the widest horizontal spread): every cluster of UPRIGHT_PLANES or more, and a
+    # cluster lying about level (its least spread within LEVEL_SPRAY_NORMAL_Z of vertical).
+    upright = (planes >= UPRIGHT_PLANES) | (np.abs(axes[:, 2, 0]) > LEVEL_SPRAY_NORMAL_Z)
+    if upright.any():
+        u = np.where(upright[:, None], [0.0, 0.0, 1.0], u)
+        v = np.where(upright[:, None], _widest_horizontal(vertices[on_card], vertex_label[on_card], n), v)
     normal = np.cross(u, v)
     turn = np.radians(np.arange(planes) * (180.0 / planes))
     turned_v = np.cos(turn)[None, :, None] * v[:, None] + np.sin(turn)[None, :, None] * normal[:, None]

@@ -7,8 +7,8 @@ import pytest
 
 import species
 from species.studio.lod import TreeLods
-from species.studio.twig_cards import (TWIG_CARD_PLANES, TWIG_PADDING_TEXELS, UPRIGHT_PLANES, TwigAtlas,
-                                       TwigCardError, twig_cards, twig_labels)
+from species.studio.twig_cards import (LEVEL_SPRAY_NORMAL_Z, TWIG_CARD_PLANES, TWIG_PADDING_TEXELS, UPRIGHT_PLANES,
+                                       TwigAtlas, TwigCardError, twig_cards, twig_labels)
 
 
 @pytest.fixture(scope="module")
@@ -130,6 +130,28 @@ def test_four_planes_or_more_cross_upright_the_first_along_the_widest_spread_in_
     turns = (np.degrees(np.arctan2(planes[:, 1, 1], planes[:, 1, 0])) - np.degrees(
         np.arctan2(planes[0, 1, 1], planes[0, 1, 0]))) % 45.0
     assert len(planes) >= 2 and np.minimum(turns, 45.0 - turns).max() < 1e-6
+
+
+def test_a_crossed_pair_lying_about_level_stands_upright_the_others_keep_their_principal_axis(sapling, kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, None)
+    cards = twig_cards(skeleton, lod0, labels, 2)
+    bark_label = labels[np.asarray(lod0.bark.attributes["branch"])]
+    leaf_label = labels[skeleton.branch_id[np.asarray(lod0.leaves.attributes["node"])]]
+    counts = {"upright": 0, "principal": 0}
+    for label in range(labels.max() + 1):
+        points = np.concatenate([lod0.bark.vertices[bark_label == label], lod0.leaves.vertices[leaf_label == label]])
+        spread, axes = np.linalg.eigh(np.cov(points.astype(np.float64).T, bias=True))
+        if spread[1] - spread[0] < 1e-6 * spread[2] or spread[2] - spread[1] < 1e-6 * spread[2]:
+            continue  # no clear least or principal axis: either frame would do
+        own = cards.axes[cards.branch == np.flatnonzero(labels == label).min()]
+        if abs(axes[2, 0]) > LEVEL_SPRAY_NORMAL_Z:
+            assert np.allclose(own[:, 0], [0.0, 0.0, 1.0])
+            counts["upright"] += 1
+        else:
+            assert np.allclose(np.abs(own[:, 0] @ axes[:, 2]), 1.0, atol=1e-6)
+            counts["principal"] += 1
+    assert counts["upright"] > 0 and counts["principal"] > 0
 
 
 @pytest.mark.parametrize("planes", [0, 9, True, 1.5])
