@@ -21,7 +21,7 @@ from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
 from species.studio.twig_cards import TWIG_CARD_PLANES, TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "fit_impostor", "CalibrationViews", "Judgement", "IMPOSTOR_GROWTHS", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
+__all__ = ["fit_lods", "fit_impostor", "CalibrationViews", "Judgement", "climb_ladder", "IMPOSTOR_GROWTHS", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
            "TWIG_CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
@@ -175,14 +175,14 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             count = len(TWIG_CALIBRATION_AZIMUTHS) if twigs else len(CALIBRATION_AZIMUTHS)
             return tried[share, gain, twigs][1].least(count, beat)
 
-        share = _climb(lambda index, beat=-np.inf: score(index, default_gain, beat=beat), start,
+        share = climb_ladder(lambda index, beat=-np.inf: score(index, default_gain, beat=beat), start,
                        len(BARK_SHARE_SCALES))
         if built(share, default_gain) is None:  # nothing but LOD0's proportion could be built
             score(full_share, default_gain)
             share = full_share
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
-            gain = _climb(lambda index, beat=-np.inf: score(share, index, beat=beat), default_gain,
+            gain = climb_ladder(lambda index, beat=-np.inf: score(share, index, beat=beat), default_gain,
                           len(CARD_AREA_GAINS))
         plain, plain_judgement = tried[share, gain, 0]
         # Twig cards look different from every side: both candidates are compared from all the twig azimuths. The
@@ -205,8 +205,9 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                 if plain_score < 0.0:
                     plain_score = plain_judgement.least(len(TWIG_CALIBRATION_AZIMUTHS))
                 if score(twig_share, default_gain, rule, beat=plain_score) > plain_score:
-                    twig_share = _climb(lambda index, beat=-np.inf, rule=rule: score(index, default_gain, rule, beat),
-                                        twig_share, len(BARK_SHARE_SCALES))
+                    twig_share = climb_ladder(
+                        lambda index, beat=-np.inf, rule=rule: score(index, default_gain, rule, beat), twig_share,
+                        len(BARK_SHARE_SCALES))
             found = score(twig_share, default_gain, rule, beat=plain_score)
             if found > twig_score:
                 twig_score, twig_lod = found, built(twig_share, default_gain, rule)
@@ -269,7 +270,7 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
             use[k] = False
 
 
-def _climb(score, start: int, count: int) -> int:
+def climb_ladder(score, start: int, count: int) -> int:
     """The index in [0, count) reached from `start` by moving to the better-scoring neighbour while one scores
     higher (strictly: ties stay). `score(index, beat)` may return any value at most `beat` for an index that
     cannot beat it (`Judgement.least`); `score(index)` is the full score."""

@@ -334,8 +334,8 @@ class TwigAtlas:
         return index
 
     def atlas_tree(self, lod0: TreeMesh) -> TreeMesh:
-        """LOD0's faces of every tile's card placed in atlas space (`to_atlas`), bark and leaves apart, for rendering the
-        atlas with an orthographic camera looking down +depth (pixel centres at integer column, row)."""
+        """LOD0's faces of every tile's card placed in atlas space (`to_atlas`), bark and leaves apart, for rendering
+        the atlas with an orthographic camera looking down +depth (pixel centres at integer column, row)."""
         parts = []
         own = self.source == np.arange(len(self.source))
         for part, kind in ((lod0.bark, "bark"), (lod0.leaves, "leaf")):

@@ -295,7 +295,7 @@ def test_a_judgement_draws_a_further_view_only_while_the_candidate_can_still_bea
 
 
 def test_the_climb_reaches_the_same_index_with_early_stopping_scores():
-    from farm.library.lod_fit import Judgement, _climb
+    from farm.library.lod_fit import Judgement, climb_ladder
 
     rng = np.random.default_rng(5)
     for _ in range(50):
@@ -304,7 +304,7 @@ def test_the_climb_reaches_the_same_index_with_early_stopping_scores():
         judgements = [Judgement(_ScriptedViews(row), "cover") for row in ious]
         lazy = lambda index, beat=-np.inf: judgements[index].least(2, beat)  # noqa: E731
         start = int(rng.integers(7))
-        assert _climb(lazy, start, 7) == _climb(full, start, 7)
+        assert climb_ladder(lazy, start, 7) == climb_ladder(full, start, 7)
         assert sum(len(j.views.drawn) for j in judgements) <= 2 * sum(bool(j.views.drawn) for j in judgements)
 
 
