@@ -148,11 +148,11 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     their two widest spreads, the others turned about that axis by 180 / planes degrees each. UPRIGHT_PLANES
     or more (a far level's whole subtrees), or a cluster lying about level (LEVEL_SPRAY_NORMAL_Z), cross on the
     vertical through the faces' mean instead, as the impostor's planes do, the first along their widest
-    horizontal spread. Each face goes to
-    the plane it lies nearest (`plane_sectors`), faces near a sector's edge or near the axis to more than one
-    (TWIG_SECTOR_OVERLAP, TWIG_AXIS_SHARE); each card spans its faces, plus a small margin. A card seen edge-on
-    shows its faces pressed flat: with two planes, a bushy subtree keeps its width from every side (TWIG_CARD_PLANES).
-    Cards are numbered label by label, plane by plane; a plane no face lies nearest has none."""
+    horizontal spread. Each face goes to the plane it lies nearest (`plane_sectors`), faces near a sector's edge
+    or near the axis to more than one (TWIG_SECTOR_OVERLAP, TWIG_AXIS_SHARE); each card spans its faces, plus a
+    small margin. A card seen edge-on shows its faces pressed flat: with two planes, a bushy subtree keeps its
+    width from every side (TWIG_CARD_PLANES). Cards are numbered label by label, plane by plane; a plane no face
+    lies nearest has none."""
     if isinstance(planes, bool) or not isinstance(planes, (int, np.integer)) or not 1 <= planes <= _MAX_PLANES:
         raise TwigCardError(f"twig card planes {planes!r} are invalid: allowed an integer in [1, {_MAX_PLANES}]")
     labels = np.asarray(labels, np.int64)
