@@ -87,7 +87,8 @@ class CalibrationViews:
 class Judgement:
     """One candidate's least IoU over the first `views` calibration views, drawn a view at a time and only as far
     as a comparison needs: once the IoUs drawn fall to a score to beat, the rest cannot lift the least above it.
-    `cover`: a callable giving the candidate's coverage tree (made on the first draw)."""
+    `cover`: the candidate's coverage tree, or a callable making it (called on the first draw: a candidate never
+    drawn is never made)."""
 
     def __init__(self, views: CalibrationViews, cover):
         self.views, self._cover, self.ious = views, cover, []
@@ -176,14 +177,14 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             return tried[share, gain, twigs][1].least(count, beat)
 
         share = climb_ladder(lambda index, beat=-np.inf: score(index, default_gain, beat=beat), start,
-                       len(BARK_SHARE_SCALES))
+                             len(BARK_SHARE_SCALES))
         if built(share, default_gain) is None:  # nothing but LOD0's proportion could be built
-            score(full_share, default_gain)
+            built(full_share, default_gain)  # raises where even that cannot be
             share = full_share
         gain = default_gain
         if level >= _FIRST_GAIN_LEVEL:
             gain = climb_ladder(lambda index, beat=-np.inf: score(share, index, beat=beat), default_gain,
-                          len(CARD_AREA_GAINS))
+                                len(CARD_AREA_GAINS))
         plain, plain_judgement = tried[share, gain, 0]
         # Twig cards look different from every side: both candidates are compared from all the twig azimuths. The
         # twig climb runs only when cards at the plain level's share already beat it (on most Weber-Penn crowns they

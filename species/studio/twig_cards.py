@@ -322,13 +322,18 @@ class TwigAtlas:
         return origin[card] + u[:, None] * axes[card, 0] + v[:, None] * axes[card, 1]
 
     @cached_property
+    def own_tile(self) -> np.ndarray:
+        """(C,) bool: the cards with a tile of their own (`source` is themselves)."""
+        return self.source == np.arange(len(self.source))
+
+    @cached_property
     def card_index(self) -> np.ndarray:
         """(H, W) int64 atlas image of the card each texel's tile belongs to (its `source`; -1 between tiles)."""
         width, height = self.size
         index = np.full((height, width), -1, np.int64)
         extent = self._cards[2] if self.levels else np.zeros((0, 2))
         tiles = np.ceil(extent / self.texel[:, None]).astype(np.int64) + 2 * TWIG_PADDING_TEXELS
-        for card in np.flatnonzero(self.source == np.arange(len(self.source))):  # per tile, not per texel
+        for card in np.flatnonzero(self.own_tile):  # per tile, not per texel
             (column, row), (w, h) = self.offset[card], tiles[card]
             index[row:row + h, column:column + w] = card
         return index
@@ -337,12 +342,12 @@ class TwigAtlas:
         """LOD0's faces of every tile's card placed in atlas space (`to_atlas`), bark and leaves apart, for rendering
         the atlas with an orthographic camera looking down +depth (pixel centres at integer column, row)."""
         parts = []
-        own = self.source == np.arange(len(self.source))
         for part, kind in ((lod0.bark, "bark"), (lod0.leaves, "leaf")):
             faces = np.concatenate([getattr(cards, f"{kind}_faces") for cards in self.levels])
             card = np.concatenate([getattr(cards, f"{kind}_card") + start
                                    for cards, start in zip(self.levels, self.first)])
-            faces, card = faces[own[card]], card[own[card]]  # a shared tile is drawn once, from its own card
+            drawn = self.own_tile[card]  # a shared tile is drawn once, from its own card
+            faces, card = faces[drawn], card[drawn]
             points = part.face_corners[faces].reshape(-1, 3)
             placed = self.to_atlas(points, np.repeat(card, 3)).astype(np.float32)
             parts.append(MeshPart(placed, np.arange(len(placed), dtype=np.int32).reshape(-1, 3),
