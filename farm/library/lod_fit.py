@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,9 +54,29 @@ TWIG_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 90.0 * k for k in ra
 # better (45 presets, mean least LOD3 IoU .769 -> .778, sc_multistem_shrub .69 -> .80, sc_spruce .70 -> .77; with
 # planes first alone, sc_cypress_column fell .60 -> .50; docs/library.md).
 FAR_TWIG_PLANES = 8
-# Twig rules a level is fitted with: (max planes, planes first) for nearer levels, then for the farthest.
-_NEAR_TWIG_RULES = ((TWIG_CARD_PLANES, False),)
-_FAR_TWIG_RULES = ((FAR_TWIG_PLANES, False), (FAR_TWIG_PLANES, True))
+
+
+class TwigRule(NamedTuple):
+    """How a level's twig candidate is built (`TreeLods.build`): at most `planes` per cluster, as many planes as
+    fit first (`planes_first`) or the finest clusters first, the cards carrying their branches' leaves or bark
+    cards (`leaves` False)."""
+
+    planes: int
+    planes_first: bool = False
+    leaves: bool = True
+
+
+# Twig rules a level is fitted with, for nearer levels, then for the farthest. Bark cards (every dropped branch
+# a crossed pair of its own bark, its leaves left as leaf cards, one per leaf where the budget holds them) suit
+# the near levels of shrubs and saplings, whose tubes would take the budget and whose leaves lose their shape
+# pressed onto cards: 45 presets, LOD1 mean least IoU .889 -> .920, presets within floor - 0.02 31 -> 44
+# (sc_multistem_shrub .823 -> .928, sc_young_sapling .772 -> .889, sc_dome_shrub .819 -> .932; on
+# tree_seed(7, 0) 24 -> 41). At the far level, bark cards won nowhere: its leaves would all be clumps.
+_NEAR_TWIG_RULES = (TwigRule(TWIG_CARD_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
+_FAR_TWIG_RULES = (TwigRule(FAR_TWIG_PLANES), TwigRule(FAR_TWIG_PLANES, planes_first=True))
+# A twig candidate that loses at its starting share while drawing less than this share of its budget is tried a
+# share up, and so on: the bark gets what the cards leave (lsystem_bush's LOD2 .778 -> .826).
+UNDERFILLED = 0.8
 # The crossed impostor's alpha as rendered, or grown by a texel: whichever matches LOD0 better from
 # IMPOSTOR_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse,
 # thin-branched plants whose twigs fall between the texels a pixel samples and fattens dense crowns, so it is chosen
@@ -156,9 +177,10 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                 scale = BARK_SHARE_SCALES[share]
                 try:
                     bark_share = None if share == full_share else min(scale * lod0_share, 1.0)
-                    max_planes, planes_first = rules[twigs - 1] if twigs else (TWIG_CARD_PLANES, False)
+                    rule = rules[twigs - 1] if twigs else TwigRule(TWIG_CARD_PLANES)
                     lod = lods.build(level, budget, px, bark_share=bark_share, card_area_gain=CARD_AREA_GAINS[gain],
-                                     twigs=bool(twigs), twig_planes=max_planes, planes_first=planes_first)
+                                     twigs=bool(twigs), twig_planes=rule.planes, planes_first=rule.planes_first,
+                                     twig_leaves=rule.leaves)
                 except LodBudgetError:
                     if share == full_share and not twigs:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
@@ -191,20 +213,34 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         # do not, and each candidate of a large tree costs more than the plain climb: with a climb from every
         # level the median asset took about 1.3 s instead of 0.7).
         # Where the plain level's bark takes the whole budget, the cards start from the largest share that leaves
-        # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125). Each twig rule climbs on its
-        # own; the best-scoring is the level's twig candidate. A later rule is tried only where the first one's
-        # cards beat the plain level (on a dense Weber-Penn crown they do not, and a large tree's candidate costs
-        # about a second: cherry's lods 2.6 -> 3.8 s when every rule ran).
+        # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125); bark cards start from the
+        # least share. Cards that lose there while leaving part of the budget unused start a share up, and so on
+        # (UNDERFILLED). Each twig rule climbs on its own; the best-scoring is the level's twig candidate. A later
+        # rule is tried only where the first one's cards beat the plain level (on a dense Weber-Penn crown they do
+        # not, and a large tree's candidate costs about a second: cherry's lods 2.6 -> 3.8 s when every rule ran;
+        # bark cards tried there too gained .004 on LOD1's mean, on presets already within their floors).
         plain_score, twig_score, twig_lod = -1.0, -1.0, None
         for rule in range(1, len(rules) + 1):
             if rule > 1 and twig_score <= plain_score:
                 break
-            twig_share = share
-            while twig_share > 0 and built(twig_share, default_gain, rule) is None:
-                twig_share -= 1
+            if rules[rule - 1].leaves:
+                twig_share = share
+                while twig_share > 0 and built(twig_share, default_gain, rule) is None:
+                    twig_share -= 1
+            else:
+                # Bark cards leave the bark little (sc_young_sapling's LOD1: .63 at the plain level's share, .90
+                # at the least share but one).
+                twig_share = 0
+                while twig_share < share and built(twig_share, default_gain, rule) is None:
+                    twig_share += 1
             if built(twig_share, default_gain, rule) is not None:
                 if plain_score < 0.0:
                     plain_score = plain_judgement.least(len(TWIG_CALIBRATION_AZIMUTHS))
+                while (score(twig_share, default_gain, rule, beat=plain_score) <= plain_score
+                       and built(twig_share, default_gain, rule).n_triangles < UNDERFILLED * budget * lod0.n_faces
+                       and twig_share + 1 < len(BARK_SHARE_SCALES)
+                       and built(twig_share + 1, default_gain, rule) is not None):
+                    twig_share += 1
                 if score(twig_share, default_gain, rule, beat=plain_score) > plain_score:
                     twig_share = climb_ladder(
                         lambda index, beat=-np.inf, rule=rule: score(index, default_gain, rule, beat), twig_share,
@@ -254,7 +290,8 @@ def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, rend
         if not chosen:
             return [f.plain for f in fitted], None, [-1] * len(fitted)
         layout = TwigAtlas.pack([fitted[k].twigs.twigs for k in chosen],
-                                [metres_per_pixel(skeleton, fitted[k].switch_px) for k in chosen],
+                                [fitted[k].twigs.twigs.asked_texel(metres_per_pixel(skeleton, fitted[k].switch_px))
+                                 for k in chosen],
                                 twig_atlas_texels(lod0_cover.n_faces))
         image = render_twig_atlas(renderer, layout, lod0_cover)
         losing = []

@@ -352,14 +352,14 @@ class TreeLods:
         return LeafCards(self.skeleton.leaves)
 
     def twig_cards(self, kept_branch: np.ndarray, room: int, max_planes: int = TWIG_CARD_PLANES,
-                   planes_first: bool = False) -> TwigCards:
+                   planes_first: bool = False, leaves: bool = True) -> TwigCards:
         """Twig cards for the branches not kept ((B,) bool) within `room` triangles: TWIG_CARD_PLANES crossed cards
         per cluster, clusters split as finely as TWIG_DEPTHS allows, and more planes, up to `max_planes`, where
         the room holds them; where not even one crossed pair per dropped subtree fits, one card per cluster;
         LodBudgetError when not even that fits. `planes_first`: as many planes as fit (`max_planes`, then half
         as many, ...), clusters as fine as those planes allow (a far level's few clusters seen from between their
         planes: sc_multistem_shrub's LOD3 .74 with 4 or 8 planes at the finest depth, .80 with 8 on coarser
-        clusters; docs/library.md)."""
+        clusters; docs/library.md). Without `leaves`, bark cards (`twig_cards`)."""
         if planes_first:
             ladder = [max_planes >> k for k in range(max_planes.bit_length()) if max_planes >> k >= 1]
         else:
@@ -371,18 +371,19 @@ class TreeLods:
                 if _CARD_TRIANGLES * planes * clusters <= room:
                     if not planes_first and planes == TWIG_CARD_PLANES:
                         planes = max(planes, min(max_planes, room // max(_CARD_TRIANGLES * clusters, 1)))
-                    key = (kept_branch.tobytes(), depth, planes)
+                    key = (kept_branch.tobytes(), depth, planes, leaves)
                     if key not in self._twigs:
-                        self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels, planes)
+                        self._twigs[key] = twig_cards(self.skeleton, self.lod0, labels, planes, leaves)
                     return self._twigs[key]
         raise LodBudgetError(f"{room} triangles leave no room for one twig card per dropped subtree")
 
     def build(self, level: int, budget: float, switch_px: int | None = None, bark_share: float | None = None,
               card_area_gain: float = CLUSTER_AREA_GAIN, twigs: bool = False, twig_planes: int = TWIG_CARD_PLANES,
-              planes_first: bool = False) -> LodLevel:
+              planes_first: bool = False, twig_leaves: bool = True) -> LodLevel:
         """`build_lod` of this tree; with `twigs`, the branches the level drops are drawn as twig cards
         (`TreeLods.twig_cards`, with `twig_planes` as its max_planes and `planes_first`) instead of going to the
-        leaf clusters."""
+        leaf clusters. Without `twig_leaves` they are bark cards: their leaves stay with the leaf cards, which get
+        one card per leaf where the budget holds them, else at least half of what the bark leaves."""
         skeleton, lod0 = self.skeleton, self.lod0
         if not 1 <= level <= len(LOD_SIDES):
             raise LodBudgetError(f"level {level} is unknown: allowed 1..{len(LOD_SIDES)}")
@@ -417,14 +418,20 @@ class TreeLods:
             kept_branch[skeleton.branch_id[original]] = True
             if kept_branch.all():
                 raise LodBudgetError(f"LOD{level} keeps every branch: no twig cards to draw")
-            leaf_kept = kept_branch[skeleton.branch_id[skeleton.leaf_node]]
-            cards_made = self.twig_cards(kept_branch, leaf_budget - (_CARD_TRIANGLES if leaf_kept.any() else 0),
-                                         twig_planes, planes_first)
+            if twig_leaves:
+                leaf_kept = kept_branch[skeleton.branch_id[skeleton.leaf_node]]
+                room = leaf_budget - (_CARD_TRIANGLES if leaf_kept.any() else 0)
+            else:
+                # Bark cards: the leaves stay cards of their own, as on a plain level; where they cannot all
+                # be drawn one card each, the twig cards get at most half of what the bark leaves.
+                room = leaf_budget - min(_CARD_TRIANGLES * len(leaf_cards), (leaf_budget + 1) // 2)
+            cards_made = self.twig_cards(kept_branch, room, twig_planes, planes_first, twig_leaves)
             leaf_budget -= _CARD_TRIANGLES * len(cards_made)
-            cache = kept_branch.tobytes()
-            if cache not in self._kept_leaf_cards:
-                self._kept_leaf_cards[cache] = LeafCards(skeleton.leaves[leaf_kept])
-            leaf_cards, leaf_anchor = self._kept_leaf_cards[cache], leaf_anchor[leaf_kept]
+            if twig_leaves:
+                cache = kept_branch.tobytes()
+                if cache not in self._kept_leaf_cards:
+                    self._kept_leaf_cards[cache] = LeafCards(skeleton.leaves[leaf_kept])
+                leaf_cards, leaf_anchor = self._kept_leaf_cards[cache], leaf_anchor[leaf_kept]
         n_clusters = leaf_budget // _CARD_TRIANGLES if len(leaf_cards) else 0
         if len(leaf_cards) and n_clusters < 1:
             raise LodBudgetError(f"LOD{level} budget {budget:.3f} leaves no room for a leaf card "

@@ -21,7 +21,7 @@ from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
            "TWIG_DEPTH_OFFSET", "TWIG_CARD_PLANES", "TWIG_AXIS_SHARE", "TWIG_SECTOR_OVERLAP",
-           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES", "LEVEL_SPRAY_NORMAL_Z"]
+           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES", "LEVEL_SPRAY_NORMAL_Z", "BUDGETED_TEXELS_PER_PIXEL"]
 
 # Empty texels around each card's tile, so a sampled mip or a bilinear tap never reads its neighbour.
 TWIG_PADDING_TEXELS = 2
@@ -60,6 +60,11 @@ TWIG_SECTOR_OVERLAP = 0.15
 # level's thin twigs fall between its pixel centres (45 presets, sharing every copy: LOD2 mean least IoU .824 ->
 # .829, presets within 19 -> 23; sc_shadow_conifer's LOD3 sharing LOD1's tiles .648 -> .625).
 SHARED_TEXEL_RATIO = 2.0
+# Texels per screen pixel (at the level's switch size) asked of the cards the atlas budget holds: sampled twice,
+# into texels and then into pixels, a twig thinner than a pixel breaks up; at two texels a pixel less of it does
+# (45 presets: LOD2 mean least IoU .833 -> .838, presets within its floor 23 -> 25, sassafras .738 -> .774). The
+# cards outside the budget (bark cards, the far level's many planes) keep one.
+BUDGETED_TEXELS_PER_PIXEL = 2.0
 
 
 class TwigCardError(TreefarmError):
@@ -103,6 +108,8 @@ class TwigCards:
                              the axis of crossed cards is listed once per card it is drawn on), and
     bark_card, leaf_card   : (F,) int64 their card.
     planes         : cards per cluster asked for (1..8; a plane left empty is dropped).
+    leaves         : whether the cards carry their branches' leaves; False for bark cards (no leaf faces: the
+                     level draws those leaves as leaf cards).
     """
 
     origin: np.ndarray
@@ -114,9 +121,21 @@ class TwigCards:
     leaf_faces: np.ndarray
     leaf_card: np.ndarray
     planes: int = TWIG_CARD_PLANES
+    leaves: bool = True
 
     def __len__(self) -> int:
         return len(self.origin)
+
+    @property
+    def budgeted(self) -> bool:
+        """Whether the atlas budget holds these cards' tiles: crossed pairs carrying their leaves. Bark cards (a
+        near level's every dropped branch, thin strips) and a far level's many planes come on top of it, so they
+        do not coarsen the others."""
+        return self.leaves and self.planes <= TWIG_CARD_PLANES
+
+    def asked_texel(self, metres_per_px: float) -> float:
+        """Metres per texel these cards ask at a switch size of `metres_per_px` metres per screen pixel."""
+        return metres_per_px / BUDGETED_TEXELS_PER_PIXEL if self.budgeted else metres_per_px
 
     @cached_property
     def corners(self) -> np.ndarray:
@@ -142,9 +161,11 @@ class TwigCards:
                         name=f"{lod0.name}_twigs")
 
 
-def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: int = TWIG_CARD_PLANES) -> TwigCards:
+def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: int = TWIG_CARD_PLANES,
+               leaves: bool = True) -> TwigCards:
     """Cards for branch labels of `twig_labels`, `planes` per label (1 to 8), crossed on the principal axis
-    of its LOD0 faces (bark vertices of its branches, corners of their leaf cards): the first in the plane of
+    of its LOD0 faces (bark vertices of its branches, corners of their leaf cards; without `leaves`, bark cards:
+    the bark alone, its leaves left to the level's leaf cards): the first in the plane of
     their two widest spreads, the others turned about that axis by 180 / planes degrees each. UPRIGHT_PLANES
     or more (a far level's whole subtrees), or a cluster lying about level (LEVEL_SPRAY_NORMAL_Z), cross on the
     vertical through the faces' mean instead, as the impostor's planes do, the first along their widest
@@ -160,7 +181,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     # Labels per vertex (a face's vertices share its branch): the spreads are taken over vertices, not face corners.
     bark_vertex_label = labels[np.asarray(lod0.bark.attributes["branch"], np.int64)]
     leaf_vertex_label = labels[skeleton.branch_id[np.asarray(lod0.leaves.attributes["node"], np.int64)]] \
-        if lod0.leaves.n_vertices else np.zeros(0, np.int64)
+        if lod0.leaves.n_vertices and leaves else np.full(lod0.leaves.n_vertices, -1, np.int64)
     bark_label, leaf_label = bark_vertex_label[lod0.bark.faces[:, 0]], leaf_vertex_label[lod0.leaves.faces[:, 0]]
     bark_faces, leaf_faces = np.flatnonzero(bark_label >= 0), np.flatnonzero(leaf_label >= 0)
     face_label = [bark_label[bark_faces], leaf_label[leaf_faces]]
@@ -217,7 +238,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     branch = np.full(n, np.iinfo(np.int64).max)
     np.minimum.at(branch, labels[labels >= 0], np.flatnonzero(labels >= 0))
     return TwigCards(origin, frame, high - low, np.repeat(branch, planes)[drawn], faces[0], cards[0], faces[1],
-                     cards[1], int(planes))
+                     cards[1], int(planes), bool(leaves))
 
 
 def _widest_horizontal(points: np.ndarray, labels: np.ndarray, n: int) -> np.ndarray:
@@ -259,9 +280,9 @@ class TwigAtlas:
         its texel times its cards' area, never finer than asked); shelf packing,
         tallest tiles first, into a power-of-two width about the square root of their area (at least the widest
         tile). A card that is the same as one of a nearer level (`_tile_sources`) gets no tile of its own: it
-        samples that card's, at its finer texel, and takes nothing of the budget. A level of more than
-        TWIG_CARD_PLANES planes per cluster (the far level's, `TreeLods.twig_cards`) keeps its texel size and its
-        tiles come on top of `max_texels`: its extra planes do not coarsen the nearer levels' cards."""
+        samples that card's, at its finer texel, and takes nothing of the budget. A level whose cards are not
+        `TwigCards.budgeted` (bark cards; more than TWIG_CARD_PLANES planes per cluster, the far level's) keeps
+        its texel size and its tiles come on top of `max_texels`: they do not coarsen the other levels' cards."""
         levels = tuple(levels)
         texel = np.concatenate([np.full(len(cards), float(t)) for cards, t in zip(levels, texels)])
         if np.any(~(texel > 0)):
@@ -271,7 +292,7 @@ class TwigAtlas:
             return cls(levels, texel, np.zeros((0, 2), np.int64), (1, 1), np.zeros(0, np.int64))
         source = _tile_sources(levels, texels)
         own = source == np.arange(len(source))
-        budgeted = own & np.concatenate([np.full(len(cards), cards.planes <= TWIG_CARD_PLANES) for cards in levels])
+        budgeted = own & np.concatenate([np.full(len(cards), cards.budgeted) for cards in levels])
         level = np.concatenate([np.full(len(cards), k) for k, cards in enumerate(levels)])
         texel[budgeted] = _texels_within(extent[budgeted], texel[budgeted], level[budgeted], max_texels)
         texel = texel[source]

@@ -7,8 +7,9 @@ import pytest
 
 import species
 from species.studio.lod import TreeLods
-from species.studio.twig_cards import (LEVEL_SPRAY_NORMAL_Z, TWIG_CARD_PLANES, TWIG_PADDING_TEXELS, UPRIGHT_PLANES,
-                                       TwigAtlas, TwigCardError, twig_cards, twig_labels)
+from species.studio.twig_cards import (BUDGETED_TEXELS_PER_PIXEL, LEVEL_SPRAY_NORMAL_Z, TWIG_CARD_PLANES,
+                                       TWIG_PADDING_TEXELS, UPRIGHT_PLANES, TwigAtlas, TwigCardError, twig_cards,
+                                       twig_labels)
 
 
 @pytest.fixture(scope="module")
@@ -309,3 +310,56 @@ def test_a_far_level_of_more_planes_does_not_coarsen_the_nearer_ones(sapling, ke
     # Two planes at the far level share the budget as before.
     shared = TwigAtlas.pack([near, crossed_far], [0.002, 0.008], 20_000)
     assert (shared.texel[:len(near)] > alone.texel[0]).all()
+
+
+def test_bark_cards_hold_the_dropped_bark_alone_framed_by_it(sapling, kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, None)
+    with_leaves, bark = twig_cards(skeleton, lod0, labels, 2), twig_cards(skeleton, lod0, labels, 2, leaves=False)
+    assert with_leaves.leaves and len(with_leaves.leaf_faces) > 0
+    assert not bark.leaves and len(bark.leaf_faces) == len(bark.leaf_card) == 0
+    dropped_bark = np.flatnonzero(~kept[np.asarray(lod0.bark.attributes["branch"])[lod0.bark.faces[:, 0]]])
+    assert np.array_equal(np.unique(bark.bark_faces), dropped_bark)
+    # Each card spans its bark only (plus the margin), so it is no larger than the card that carried the leaves.
+    only_bark = dataclasses.replace(lod0, leaves=species.MeshPart.empty())
+    alone = twig_cards(skeleton, only_bark, labels, 2)
+    assert np.allclose(bark.origin, alone.origin) and np.allclose(bark.extent, alone.extent)
+    assert bark.extent.prod(axis=1).sum() < with_leaves.extent.prod(axis=1).sum()
+
+
+def test_bark_cards_and_many_planes_come_on_top_of_the_atlas_budget_and_the_rest_ask_two_texels_a_pixel(sapling,
+                                                                                                       kept):
+    skeleton, lod0 = sapling
+    labels = twig_labels(skeleton, kept, None)
+    leafy, bark = twig_cards(skeleton, lod0, labels, 2), twig_cards(skeleton, lod0, labels, 2, leaves=False)
+    many = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, 0), 8)
+    assert leafy.budgeted and not bark.budgeted and not many.budgeted
+    assert leafy.asked_texel(0.01) == pytest.approx(0.01 / BUDGETED_TEXELS_PER_PIXEL)
+    assert bark.asked_texel(0.01) == many.asked_texel(0.01) == 0.01
+    alone = TwigAtlas.pack([leafy], [0.002], 20_000)
+    assert (alone.texel > 0.002).all()  # the budget binds
+    both = TwigAtlas.pack([bark, leafy], [0.002, 0.002], 20_000)
+    assert np.allclose(both.texel[:len(bark)], 0.002)  # bark cards keep their texel, whatever the budget
+    assert np.allclose(both.texel[len(bark):], alone.texel)  # and take nothing from the others
+
+
+def test_a_bark_card_level_draws_every_leaf_as_a_card_of_its_own_where_the_budget_holds_them(sapling):
+    skeleton, lod0 = sapling
+    lods = TreeLods(skeleton, lod0)
+    share = 0.125 * lod0.bark.n_faces / lod0.n_faces
+    level = lods.build(1, 0.4, 512, bark_share=share, twigs=True, twig_leaves=False)
+    target = int(np.floor(0.97 * 0.4 * lod0.n_faces))
+    assert not level.twigs.leaves and len(level.twigs.leaf_faces) == 0
+    assert 0 < level.n_triangles <= target
+    # Every leaf is a card (its own, not merged): the cards' leaves are LOD0's leaves.
+    assert level.n_clusters == skeleton.n_leaves
+    assert not level.mesh.leaves.attributes["clump"].any()
+    assert np.allclose(np.sort(level.skeleton.leaves.reshape(len(level.skeleton.leaves), -1), axis=0),
+                       np.sort(skeleton.leaves.reshape(skeleton.n_leaves, -1).astype(np.float32), axis=0))
+    # Cards carrying the leaves draw them on the twig cards instead, and only the kept branches' leaves as cards.
+    leafy = lods.build(1, 0.4, 512, bark_share=share, twigs=True)
+    assert leafy.twigs.leaves and len(leafy.twigs.leaf_faces) > 0 and leafy.n_clusters < skeleton.n_leaves
+    # Too little room for a card per leaf: the twig cards get at most half of what the bark leaves.
+    tight = lods.build(2, 0.12, 256, bark_share=share, twigs=True, twig_leaves=False)
+    room = int(np.floor(0.97 * 0.12 * lod0.n_faces)) - tight.mesh.bark.n_faces
+    assert tight.n_clusters < skeleton.n_leaves and 2 * 2 * len(tight.twigs) <= room + 1
