@@ -74,9 +74,6 @@ class TwigRule(NamedTuple):
 # tree_seed(7, 0) 24 -> 41). At the far level, bark cards won nowhere: its leaves would all be clumps.
 _NEAR_TWIG_RULES = (TwigRule(TWIG_CARD_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
 _FAR_TWIG_RULES = (TwigRule(FAR_TWIG_PLANES), TwigRule(FAR_TWIG_PLANES, planes_first=True))
-# A twig candidate that loses at its starting share while drawing less than this share of its budget is tried a
-# share up, and so on: the bark gets what the cards leave (lsystem_bush's LOD2 .778 -> .826).
-UNDERFILLED = 0.8
 # The crossed impostor's alpha as rendered, or grown by a texel: whichever matches LOD0 better from
 # IMPOSTOR_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse,
 # thin-branched plants whose twigs fall between the texels a pixel samples and fattens dense crowns, so it is chosen
@@ -214,8 +211,7 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         # level the median asset took about 1.3 s instead of 0.7).
         # Where the plain level's bark takes the whole budget, the cards start from the largest share that leaves
         # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125); bark cards start from the
-        # least share. Cards that lose there while leaving part of the budget unused start a share up, and so on
-        # (UNDERFILLED). Each twig rule climbs on its own; the best-scoring is the level's twig candidate. A later
+        # least share. Each twig rule climbs on its own; the best-scoring is the level's twig candidate. A later
         # rule is tried only where the first one's cards beat the plain level (on a dense Weber-Penn crown they do
         # not, and a large tree's candidate costs about a second: cherry's lods 2.6 -> 3.8 s when every rule ran;
         # bark cards tried there too gained .004 on LOD1's mean, on presets already within their floors).
@@ -236,11 +232,6 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
             if built(twig_share, default_gain, rule) is not None:
                 if plain_score < 0.0:
                     plain_score = plain_judgement.least(len(TWIG_CALIBRATION_AZIMUTHS))
-                while (score(twig_share, default_gain, rule, beat=plain_score) <= plain_score
-                       and built(twig_share, default_gain, rule).n_triangles < UNDERFILLED * budget * lod0.n_faces
-                       and twig_share + 1 < len(BARK_SHARE_SCALES)
-                       and built(twig_share + 1, default_gain, rule) is not None):
-                    twig_share += 1
                 if score(twig_share, default_gain, rule, beat=plain_score) > plain_score:
                     twig_share = climb_ladder(
                         lambda index, beat=-np.inf, rule=rule: score(index, default_gain, rule, beat), twig_share,
