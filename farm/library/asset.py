@@ -106,13 +106,22 @@ class LibraryAsset:
             "params": self.params, "height_m": float(self.skeleton.height),
             "crown_radius_m": float(self.skeleton.crown_radius),
             "levels": [{"name": lv.name, "triangles": lv.n_triangles, "share_of_lod0": lv.n_triangles / lod0_tris,
-                        "switch_px": lv.switch_px,
+                        "switch_px": lv.switch_px, **self._twig_facts(lv),
                         "iou_min": min(lv.iou) if lv.iou else 1.0,
                         "iou_mean": float(np.mean(lv.iou)) if lv.iou else 1.0,
                         "iou_per_azimuth": [round(v, 4) for v in lv.iou]} for lv in self.levels],
             "collision_capsules": [[round(float(v), 5) for v in row] for row in self.capsules],
             "wind_layout": WIND_LAYOUT,
         }
+
+
+    def _twig_facts(self, level) -> dict:
+        """What a level's twig cards are: how many, and whether they carry their branches' leaves (False: bark
+        cards, the leaves drawn as leaf cards); null without any."""
+        if level.twigs is None:
+            return {"twig_cards": 0, "twig_cards_carry_leaves": None}
+        cards = self.twig_atlas.layout.levels[level.twig_index]
+        return {"twig_cards": len(cards), "twig_cards_carry_leaves": bool(cards.leaves)}
 
 
 def leaf_instances(skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

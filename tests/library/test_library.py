@@ -334,13 +334,20 @@ def test_twig_cards_carry_a_material_per_season_in_glb_and_usd(library):
 
     from pxr import Usd, UsdShade
 
-    with_twigs = 0
+    with_twigs, kinds = 0, set()
     for asset_json in sorted((library / "assets").glob("*/asset.json")):
         folder = asset_json.parent
         data = (folder / f"{folder.name}.glb").read_bytes()
         length = struct.unpack_from("<I", data, 12)[0]
         doc = json.loads(data[20:20 + length])
         twig_meshes = [m for m in doc["meshes"] if m["name"].endswith("_twigs")]
+        # asset.json says which levels draw twig cards, how many, and whether they carry their leaves.
+        levels = {level["name"]: level for level in json.loads(asset_json.read_text())["levels"]}
+        assert {name for name, level in levels.items() if level["twig_cards"]} == {m["name"][:-6] for m in twig_meshes}
+        for mesh in twig_meshes:
+            level = levels[mesh["name"][:-6]]
+            assert doc["accessors"][mesh["primitives"][0]["indices"]]["count"] == 6 * level["twig_cards"]
+            kinds.add(level["twig_cards_carry_leaves"])
         if not twig_meshes:
             continue
         with_twigs += 1
@@ -360,3 +367,4 @@ def test_twig_cards_carry_a_material_per_season_in_glb_and_usd(library):
             assert bound.GetPrim().GetName() == f"twigs_{season}"
             assert (folder / f"textures/twig_atlas_{season}.png").is_file()
     assert with_twigs >= 1  # the sapling draws its dropped twigs as cards
+    assert kinds == {True, False}  # the sapling's LOD1 draws bark cards, its farther levels cards with leaves
