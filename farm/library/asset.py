@@ -231,8 +231,9 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         if spec.impostor == "octahedral":
             atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
         else:
-            atlas = fit_impostor(render_impostor(renderer, lod0_cover, tile=spec.impostor_tile), points, lod0_cover,
-                                 renderer, spec.switch_px[-1])
+            atlas = fit_impostor(lambda axis_share: render_impostor(renderer, lod0_cover, tile=spec.impostor_tile,
+                                                                    axis_share=axis_share),
+                                 points, lod0_cover, renderer, spec.switch_px[-1])
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)
         levels.append(LevelData("IMPOSTOR", billboard, None, np.zeros((billboard.bark.n_vertices, 4), np.float32),
