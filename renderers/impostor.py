@@ -292,9 +292,12 @@ def _plane_camera(centre: np.ndarray, half: float, reach: float, azimuth: float,
 
 
 def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The vertices the faces use, and the faces renumbered into them."""
-    used, inverse = np.unique(faces, return_inverse=True)
-    return np.asarray(vertices, np.float32)[used], inverse.reshape(faces.shape).astype(np.int32)
+    """The vertices the faces use (in their order), and the faces renumbered into them; a mask and a running
+    count, not a sort (18 groups per impostor: cherry's took 0.06 s by np.unique)."""
+    used = np.zeros(len(vertices), bool)
+    used[faces.ravel()] = True
+    rank = np.cumsum(used, dtype=np.int64) - 1
+    return np.asarray(vertices, np.float32)[used], rank[faces].astype(np.int32)
 
 
 def sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int, axis_radius: float,
