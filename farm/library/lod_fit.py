@@ -22,8 +22,10 @@ from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
 from species.studio.twig_cards import TWIG_CARD_PLANES, TwigAtlas
 from species.tree_mesh import MeshPart, TreeMesh
 
-__all__ = ["fit_lods", "fit_impostor", "CalibrationViews", "Judgement", "climb_ladder", "IMPOSTOR_GROWTHS", "IMPOSTOR_AXIS_SHARES", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel", "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS", "CALIBRATION_AZIMUTHS",
-           "TWIG_CALIBRATION_AZIMUTHS"]
+__all__ = ["fit_lods", "fit_impostor", "TwigRule", "CalibrationViews", "Judgement", "climb_ladder",
+           "IMPOSTOR_GROWTHS", "IMPOSTOR_AXIS_SHARES", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel",
+           "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS",
+           "CALIBRATION_AZIMUTHS", "TWIG_CALIBRATION_AZIMUTHS"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
 # card). A simplified branch draws more silhouette per triangle than a merged leaf card on a sparse crown and less
