@@ -114,7 +114,6 @@ class LibraryAsset:
             "wind_layout": WIND_LAYOUT,
         }
 
-
     def _twig_facts(self, level) -> dict:
         """What a level's twig cards are: how many, and whether they carry their branches' leaves (False: bark
         cards, the leaves drawn as leaf cards); null without any."""

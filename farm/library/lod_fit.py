@@ -183,10 +183,10 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                 scale = BARK_SHARE_SCALES[share]
                 try:
                     bark_share = None if share == full_share else min(scale * lod0_share, 1.0)
-                    rule = rules[twigs - 1] if twigs else TwigRule(TWIG_CARD_PLANES)
+                    twig_rule = rules[twigs - 1] if twigs else TwigRule(TWIG_CARD_PLANES)
                     lod = lods.build(level, budget, px, bark_share=bark_share, card_area_gain=CARD_AREA_GAINS[gain],
-                                     twigs=bool(twigs), twig_planes=rule.planes, planes_first=rule.planes_first,
-                                     twig_leaves=rule.leaves)
+                                     twigs=bool(twigs), twig_planes=twig_rule.planes,
+                                     planes_first=twig_rule.planes_first, twig_leaves=twig_rule.leaves)
                 except LodBudgetError:
                     if share == full_share and not twigs:
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
