@@ -114,16 +114,33 @@ def normals_from_depth(camera: Camera, depth: np.ndarray) -> np.ndarray:
         x, y = np.broadcast_to(u, z.shape), np.broadcast_to(v, z.shape)
     else:
         x, y = u * z, v * z
-    # Per-component gradients and cross product: no (H, W, 3) stacks until the normal itself.
-    xu, yu, zu = (np.gradient(c, axis=1) for c in (x, y, z))
-    xv, yv, zv = (np.gradient(c, axis=0) for c in (x, y, z))
-    n = np.stack([yu * zv - zu * yv, zu * xv - xu * zv, xu * yv - yu * xv], axis=-1)
-    n /= np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
-    towards = n[..., 2] if camera.is_orthographic else n[..., 0] * x + n[..., 1] * y + n[..., 2] * z
-    n[towards > 0] *= -1
-    out = np.clip((n + 1.0) * 127.5, 0, 255).astype(np.uint8)
-    out[z <= 0] = 0
+    # Per-component gradients, cross product, normalisation and flip: no (H, W, 3) float stacks (each of those
+    # steps on a stack, and numpy's reduction along its short last axis, cost more than the arithmetic).
+    xu, yu, zu = (_unit_gradient(c, 1) for c in (x, y, z))
+    xv, yv, zv = (_unit_gradient(c, 0) for c in (x, y, z))
+    nx, ny, nz = yu * zv - zu * yv, zu * xv - xu * zv, xu * yv - yu * xv
+    length = np.maximum(np.sqrt(nx * nx + ny * ny + nz * nz), 1e-12)
+    nx, ny, nz = nx / length, ny / length, nz / length
+    towards = nz if camera.is_orthographic else nx * x + ny * y + nz * z
+    away = towards > 0
+    background = z <= 0
+    out = np.empty(z.shape + (3,), np.uint8)
+    for k, component in enumerate((nx, ny, nz)):
+        texel = np.clip((np.where(away, -component, component) + 1.0) * 127.5, 0, 255).astype(np.uint8)
+        texel[background] = 0
+        out[..., k] = texel
     return out
+
+
+def _unit_gradient(values: np.ndarray, axis: int) -> np.ndarray:
+    """`np.gradient(values, axis=axis)` of a 2-D array (unit spacing, first-order edges; the same values: central
+    differences halved, one-sided ones at the ends), without its generic set-up."""
+    f = np.moveaxis(np.asarray(values), axis, 0)
+    out = np.empty(f.shape, np.result_type(f, np.float32))
+    out[1:-1] = (f[2:] - f[:-2]) / 2.0
+    out[0] = f[1] - f[0]
+    out[-1] = f[-1] - f[-2]
+    return np.moveaxis(out, 0, axis)
 
 
 def mask_albedo(mask: np.ndarray, bark_color, leaf_color) -> np.ndarray:
@@ -141,10 +158,12 @@ def tangent_space_normals(camera: Camera, depth: np.ndarray, covered: np.ndarray
     """(H, W, 3) uint8 normal-map texels of an image drawn as a texture seen head-on (x along the image's u,
     y up the image, z toward the viewer, [-1, 1] mapped to [0, 255]) from a depth map; flat (128, 128, 255) where
     not `covered` (H, W) bool."""
-    camera_normals = normals_from_depth(camera, depth).astype(np.float32) / 127.5 - 1.0
-    tangent = np.stack([camera_normals[..., 0], -camera_normals[..., 1], -camera_normals[..., 2]], axis=-1)
-    texels = np.where(covered[..., None], np.round((tangent + 1.0) * 127.5), (128, 128, 255))
-    return np.clip(texels, 0, 255).astype(np.uint8)
+    camera_normals = normals_from_depth(camera, depth)
+    texels = np.empty(camera_normals.shape, np.uint8)
+    for k, (sign, flat) in enumerate(((1.0, 128), (-1.0, 128), (-1.0, 255))):  # camera y down, z forward
+        tangent = sign * (camera_normals[..., k].astype(np.float32) / 127.5 - 1.0)
+        texels[..., k] = np.clip(np.where(covered, np.round((tangent + 1.0) * 127.5), flat), 0, 255)
+    return texels
 
 
 def silhouette_map(camera: Camera, front: np.ndarray, back: np.ndarray) -> np.ndarray:

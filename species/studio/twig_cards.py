@@ -17,6 +17,7 @@ from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh, quad_faces
 from ..geometry.sectors import plane_sectors
 from ..geometry.topology import depth_levels, node_depths
+from ..geometry.vectors import row_bounds
 from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
@@ -228,9 +229,9 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
         - card_mean[face_card][:, None, :]
     low, high = np.full((2, len(frame)), np.inf), np.full((2, len(frame)), -np.inf)
     for k in range(2):  # one axis at a time: 1-D ufunc.at is many times faster than 2-D
-        local = np.einsum("fci,fi->fc", rel, frame[face_card, k])
-        np.minimum.at(low[k], face_card, local.min(axis=1))
-        np.maximum.at(high[k], face_card, local.max(axis=1))
+        face_low, face_high = row_bounds(np.einsum("fci,fi->fc", rel, frame[face_card, k]))
+        np.minimum.at(low[k], face_card, face_low)
+        np.maximum.at(high[k], face_card, face_high)
     low, high = low.T, high.T
     pad = _CARD_MARGIN * np.maximum(high - low, 1e-6)
     low, high = low - pad, high + pad
