@@ -20,8 +20,8 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import Camera
 
-__all__ = ["triangle_coverage", "opaque_fraction", "shrunk_cards", "coverage_tree", "CoverageError",
-           "MAX_SAMPLES_PER_CHUNK"]
+__all__ = ["triangle_coverage", "triangle_pixels", "opaque_fraction", "shrunk_cards", "coverage_tree",
+           "CoverageError", "MAX_SAMPLES_PER_CHUNK"]
 
 # Candidate (triangle, pixel) pairs tested at once; bounds memory to a few hundred MB whatever the mesh.
 MAX_SAMPLES_PER_CHUNK = 2_000_000
@@ -48,12 +48,33 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     bottom row of `alpha`); alpha : (h, w) bool, True where the texture is opaque (nearest texel, no filtering).
     Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated perspective-correctly, as GL does.
     """
+    _check(np.asarray(vertices), np.asarray(faces), uvs, alpha)
+    if uvs is None:
+        pixels = triangle_pixels(camera, vertices, faces)
+    else:
+        alpha = np.asarray(alpha, bool)
+        pixels, texels = triangle_pixels(camera, vertices, faces, uvs, alpha.shape)
+        pixels = pixels[alpha.ravel()[texels]]
+    covered = np.zeros(camera.height * camera.width, bool)
+    covered[pixels] = True
+    return covered.reshape(camera.height, camera.width)
+
+
+def triangle_pixels(camera: Camera, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None,
+                    texture_shape: tuple[int, int] | None = None):
+    """The pixel centres inside the triangles, as (P,) int64 flat indices (row * W + column; a pixel inside two
+    triangles is listed twice); with `uvs` (V, 2) and `texture_shape` (h, w), also (P,) int64 the flat index
+    (row * w + column) of the texel each samples (`triangle_coverage`'s rule). What `triangle_coverage` cuts by
+    an alpha mask; worked out once, it serves every texture of the same shape on the same triangles."""
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
-    _check(vertices, faces, uvs, alpha)
-    covered = np.zeros(camera.height * camera.width, bool)
+    textured = uvs is not None
+    if textured and (texture_shape is None or len(texture_shape) != 2):
+        raise CoverageError(f"texture shape {texture_shape!r} is invalid: allowed (h, w) with uvs")
+    _check(vertices, faces, uvs, np.zeros(texture_shape, bool) if textured else None)
+    found_pixels, found_texels = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     if len(faces) == 0:
-        return covered.reshape(camera.height, camera.width)
+        return (found_pixels[0], found_texels[0]) if textured else found_pixels[0]
     pixels, depth = camera.project(vertices)
     if np.any(depth[faces] <= 0):
         raise CoverageError(f"camera {camera.name!r} sees triangles behind it; coverage needs the mesh in front")
@@ -69,9 +90,8 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     span = hi - lo + 1
     alive = np.all(span > 0, axis=1) & (np.abs(det) > 1e-12)
     index = np.flatnonzero(alive)
-    if uvs is not None:
+    if textured:
         face_uv = np.asarray(uvs, np.float64)[faces]  # (F, 3, 2)
-        texels = np.asarray(alpha, bool)
     counts = span[index, 0] * span[index, 1]
     ends = np.cumsum(counts)
     start = 0
@@ -93,19 +113,24 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
         b2 = (dy * edge1[face, 0] - dx * edge1[face, 1]) * inv
         inside = (b1 >= -1e-9) & (b2 >= -1e-9) & (b1 + b2 <= 1.0 + 1e-9)
         face, b1, b2 = face[inside], b1[inside], b2[inside]
-        flat = (py[inside] * camera.width + px[inside]).astype(np.int64)
-        if uvs is not None:
+        found_pixels.append((py[inside] * camera.width + px[inside]).astype(np.int64))
+        if textured:
             # Screen barycentrics weighted by 1 / depth (a plane seen at a slant from a near camera drifts by
-            # several texels under affine interpolation).
-            w = np.stack([1.0 - b1 - b2, b1, b2], axis=1) * inverse_depth[face]
-            w /= w.sum(axis=1, keepdims=True)
-            uv = np.einsum("pk,pkc->pc", w, face_uv[face])
-            h, w = texels.shape
-            tcol = np.clip(np.floor(uv[:, 0] * w), 0, w - 1).astype(np.int64)
-            trow = np.clip(np.floor((1.0 - uv[:, 1]) * h), 0, h - 1).astype(np.int64)
-            flat = flat[texels[trow, tcol]]
-        covered[flat] = True
-    return covered.reshape(camera.height, camera.width)
+            # several texels under affine interpolation); per corner, not as (P, 3) stacks (the same sums).
+            weights = [(1.0 - b1 - b2) * inverse_depth[face, 0], b1 * inverse_depth[face, 1],
+                       b2 * inverse_depth[face, 2]]
+            total = weights[0] + weights[1] + weights[2]
+            weights = [w / total for w in weights]
+            corner_uv = face_uv[face]
+            u, v = (weights[0] * corner_uv[:, 0, c] + weights[1] * corner_uv[:, 1, c]
+                    + weights[2] * corner_uv[:, 2, c] for c in range(2))
+            h, w = texture_shape
+            tcol = np.clip(np.floor(u * w), 0, w - 1).astype(np.int64)
+            trow = np.clip(np.floor((1.0 - v) * h), 0, h - 1).astype(np.int64)
+            found_texels.append(trow * w + tcol)
+    if textured:
+        return np.concatenate(found_pixels), np.concatenate(found_texels)
+    return np.concatenate(found_pixels)
 
 
 def opaque_fraction(alpha: np.ndarray) -> float:

@@ -19,7 +19,7 @@ from species.errors import TreefarmError
 from species.geometry import plane_sectors
 from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
-from .alpha_coverage import triangle_coverage
+from .alpha_coverage import triangle_pixels
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
 from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
                    single_sample_renderer_class, tangent_space_normals)
@@ -93,9 +93,26 @@ class ImpostorAtlas:
     def coverage(self, camera: Camera) -> np.ndarray:
         """(H, W) bool, the silhouette the billboard (`mesh()`) shows through `camera`: its triangles cut by the
         atlas alpha (>= 128, the files' 0.5 cutoff), rasterised per pixel centre (`alpha_coverage`)."""
+        return self.coverage_of(self.billboard_pixels(camera), camera)
+
+    def billboard_pixels(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """The billboard's pixel centres through `camera` and the atlas texel each samples (`triangle_pixels`):
+        the same for every atlas of the same planes and atlas size (`same_billboard`), whatever their alpha."""
         billboard = self.mesh()
-        return triangle_coverage(camera, billboard.vertices, billboard.faces, billboard.uvs,
-                                 self.albedo[..., 3] >= 128)
+        return triangle_pixels(camera, billboard.vertices, billboard.faces, billboard.uvs, self.albedo.shape[:2])
+
+    def coverage_of(self, pixels: tuple[np.ndarray, np.ndarray], camera: Camera) -> np.ndarray:
+        """`coverage(camera)` from `billboard_pixels(camera)` of this atlas or of one with the same billboard."""
+        pixel, texel = pixels
+        covered = np.zeros(camera.height * camera.width, bool)
+        covered[pixel[(self.albedo[..., 3] >= 128).ravel()[texel]]] = True
+        return covered.reshape(camera.height, camera.width)
+
+    def same_billboard(self, other: "ImpostorAtlas") -> bool:
+        """Whether `other` has this atlas's planes (centre, half side, azimuths) and atlas size: the same mesh
+        and UVs, so the same `billboard_pixels`."""
+        return (self.albedo.shape == other.albedo.shape and self.tile == other.tile and self.half == other.half
+                and np.array_equal(self.centre, other.centre) and np.array_equal(self.azimuths, other.azimuths))
 
     def grown(self, texels: int) -> "ImpostorAtlas":
         """This atlas with each tile's opaque texels grown by `texels` 4-neighbour steps, within the tile: a new

@@ -328,13 +328,15 @@ def fit_impostor(render, points, lod0_cover: TreeMesh, renderer, switch_px: int)
     its alpha grown by each of IMPOSTOR_GROWTHS (ties: the first)."""
     cameras = [switch_camera(points, azimuth, int(switch_px)) for azimuth in IMPOSTOR_CALIBRATION_AZIMUTHS]
     references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
-    best, best_score = None, -np.inf
+    best, best_score, first, pixels = None, -np.inf, None, None
     for axis_share in IMPOSTOR_AXIS_SHARES:
         atlas = render(axis_share)
+        if first is None or not atlas.same_billboard(first):  # the candidates differ in alpha alone
+            first, pixels = atlas, [atlas.billboard_pixels(camera) for camera in cameras]
         for texels in IMPOSTOR_GROWTHS:
             candidate = atlas.grown(texels) if texels else atlas
-            ious = [silhouette_iou(reference, closed_silhouette(candidate.coverage(camera)))
-                    for reference, camera in zip(references, cameras)]
+            ious = [silhouette_iou(reference, closed_silhouette(candidate.coverage_of(hits, camera)))
+                    for reference, hits, camera in zip(references, pixels, cameras)]
             found = min(ious) + float(np.mean(ious))
             if found > best_score:
                 best, best_score = candidate, found
