@@ -74,15 +74,17 @@ class PartDepths:
 
 
 def _nearest(depths: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest of several depth maps (0 = empty): (depth (H, W) float32, index (H, W) int64 of the winner, -1)."""
-    stack = np.stack(depths)
-    keyed = np.where(stack > 0, stack, np.inf)
-    winner = keyed.argmin(axis=0)
-    depth = np.take_along_axis(keyed, winner[None], axis=0)[0]
-    empty = ~np.isfinite(depth)
-    winner[empty] = -1
-    depth[empty] = 0.0
-    return depth.astype(np.float32), winner
+    """Nearest of several depth maps (0 = empty): (depth (H, W) float32, index (H, W) int64 of the winner, -1).
+    On a tie the first map wins. A running minimum map by map: `argmin` over their (K, H, W) stack gives the same
+    winners at several times the cost."""
+    nearest = np.where(depths[0] > 0, depths[0], np.inf)
+    winner = np.zeros(nearest.shape, np.int64)
+    for index, depth in enumerate(depths[1:], 1):
+        keyed = np.where(depth > 0, depth, np.inf)
+        winner = np.where(keyed < nearest, index, winner)
+        nearest = np.minimum(nearest, keyed)
+    empty = np.isinf(nearest)
+    return np.where(empty, 0.0, nearest).astype(np.float32), np.where(empty, -1, winner)
 
 
 def combine_parts(parts: PartDepths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
