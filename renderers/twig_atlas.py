@@ -110,4 +110,6 @@ def render_twig_atlas(renderer, layout: TwigAtlas, lod0_cover: TreeMesh) -> Twig
     # They are worked out from every second texel's depth, through the camera of that coarser grid.
     half = Camera(-(-width // 2), -(-height // 2), np.diag([0.5, 0.5, 1.0]), np.eye(4), "orthographic", near, far,
                   width / 2, height / 2, name="twig_atlas_normals")
-    return TwigAtlasImage(layout, mask, tangent_space_normals(half, depth[::2, ::2], mask[::2, ::2] > 0))
+    normal = tangent_space_normals(half, depth[::2, ::2], mask[::2, ::2] > 0)
+    normal.flags.writeable = False  # made once, written into each file (a PNG cache may know it by identity)
+    return TwigAtlasImage(layout, mask, normal)

@@ -94,9 +94,12 @@ class LibraryAsset:
         if self.twig_atlas is None:
             return {}
         leaf = self.lod0.leaf_color
-        return {season: self.twig_atlas.albedo(self.lod0.bark_color,
-                                               None if season == "bare" else season_leaf_colour(season, leaf))
-                for season in SEASONS}
+        albedos = {season: self.twig_atlas.albedo(self.lod0.bark_color,
+                                                  None if season == "bare" else season_leaf_colour(season, leaf))
+                   for season in SEASONS}
+        for image in albedos.values():
+            image.flags.writeable = False  # each file's writer encodes them: `PngCache` knows them by identity
+        return albedos
 
     def metadata(self) -> dict:
         """JSON-able facts about the asset (catalog row without file entries)."""

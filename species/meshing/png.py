@@ -33,14 +33,16 @@ def png_bytes(image: np.ndarray, compress_level: int = 9, palette: bool = False)
         # One integer per texel, channels big-endian, so its order is the rows' lexicographic order (same
         # palette as a row-wise unique, which took about 0.9 s on a 1024 x 580 atlas against 0.01 s for this).
         channels = image.shape[2]
-        keys = np.zeros(image.shape[:2], np.uint32)
-        for c in range(channels):
-            keys |= image[..., c].astype(np.uint32) << np.uint32(8 * (channels - 1 - c))
-        unique_keys = np.sort(np.unique(keys, sorted=False))  # hashed, then the few colours sorted
+        if channels == 4:  # the texel's four bytes read as one big-endian integer: the same keys in one pass
+            keys = np.ascontiguousarray(image).view(">u4")[..., 0].astype(np.uint32)
+        else:
+            keys = np.zeros(image.shape[:2], np.uint32)
+            for c in range(channels):
+                keys |= image[..., c].astype(np.uint32) << np.uint32(8 * (channels - 1 - c))
+        unique_keys, index = _palette_index(keys.ravel())
         if len(unique_keys) <= 256:
-            index = np.searchsorted(unique_keys, keys)
             colours = (unique_keys[:, None] >> (8 * np.arange(channels - 1, -1, -1, dtype=np.uint32))) & 0xFF
-            indexed = Image.fromarray(index.reshape(image.shape[:2]).astype(np.uint8), mode="P")
+            indexed = Image.fromarray(index.reshape(image.shape[:2]), mode="P")
             indexed.putpalette(colours[:, :3].astype(np.uint8).tobytes())
             extra = {"transparency": colours[:, 3].astype(np.uint8).tobytes()} if image.shape[2] == 4 else {}
             indexed.save(buffer, format="PNG", compress_level=compress_level, **extra)
@@ -48,3 +50,29 @@ def png_bytes(image: np.ndarray, compress_level: int = 9, palette: bool = False)
     Image.fromarray(image, mode="RGBA" if image.shape[2] == 4 else "RGB").save(
         buffer, format="PNG", compress_level=compress_level)
     return buffer.getvalue()
+
+
+# Up to this many colours, `_palette_index` finds them by comparisons (a pass over the keys each), not by hashing
+# and a binary search per texel: about 3 against 13 ms for a 1024 x 800 atlas of three colours.
+_FEW_COLOURS = 8
+
+
+def _palette_index(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """The distinct values of `keys` (N,) uint32, sorted, and each key's rank among them as (N,) uint8; the rank is
+    None when there are more than 256 values (no palette holds them)."""
+    distinct, pending = [], None
+    while len(keys) and len(distinct) <= _FEW_COLOURS:
+        first = 0 if pending is None else int(np.argmax(pending))
+        if pending is not None and not pending[first]:
+            values = np.sort(np.array(distinct, np.uint32))
+            index = np.zeros(len(keys), np.uint8)
+            for rank, value in enumerate(values[1:], 1):
+                index[keys == value] = rank
+            return values, index
+        distinct.append(keys[first])
+        differs = keys != keys[first]
+        pending = differs if pending is None else pending & differs
+    values = np.sort(np.unique(keys, sorted=False))  # hashed, then the colours sorted
+    if len(values) > 256:
+        return values, None
+    return values, np.searchsorted(values, keys).astype(np.uint8)

@@ -48,3 +48,19 @@ def test_an_image_the_encoder_cannot_write_is_rejected_and_not_cached():
     with pytest.raises(ParameterError, match="image"):
         cache.encode(np.zeros((4, 4, 3), np.float32))
     assert len(cache) == 0
+
+
+def test_a_read_only_image_is_known_by_identity_but_a_read_only_view_is_hashed_each_time():
+    cache = PngCache()
+    owned = _image(3, 4)
+    owned.flags.writeable = False
+    first = cache.encode(owned, palette=True)
+    assert cache.encode(owned, palette=True) is first and cache.encode(owned) == png_bytes(owned, PNG_COMPRESS_LEVEL)
+    # A read-only view's pixels can still change through its base: its bytes must follow them.
+    base = _image(4, 4)
+    view = base.view()
+    view.flags.writeable = False
+    before = cache.encode(view)
+    base[0, 0] = 255 - base[0, 0]
+    after = cache.encode(view)
+    assert after != before and after == png_bytes(base, PNG_COMPRESS_LEVEL)
