@@ -132,14 +132,32 @@ def _bpy_version() -> str:
 
 def platform() -> str:
     """What besides the versions decides rasterised bytes: the CPU's x86-64 level as numpy detects it (or the
-    machine name elsewhere) and the OpenGL renderer, e.g. "x86-64-v3, llvmpipe (LLVM 15.0.6, 256 bits)"."""
+    machine name elsewhere), its vendor, and the OpenGL renderer, e.g. "x86-64-v4 GenuineIntel, llvmpipe (LLVM
+    15.0.6, 256 bits)". The vendor because Blender's FBX writer gives other bytes on an Intel machine than on the
+    machine of the same level that recorded "x86-64-v4, llvmpipe (LLVM 15.0.6, 256 bits)" (every FBX of the
+    one-asset library, 2026-12-04; every other output the same); entries recorded before carry no vendor."""
     import platform as host
 
     from numpy._core._multiarray_umath import __cpu_features__ as features
 
     levels = [level for level in ("X86_V4", "X86_V3", "X86_V2") if features.get(level)]
     cpu = f"x86-64-v{levels[0][-1]}" if levels else host.machine()
-    return f"{cpu}, {_gl_string('RENDERER')}"
+    return f"{cpu} {_cpu_vendor()}, {_gl_string('RENDERER')}"
+
+
+def _cpu_vendor() -> str:
+    """The CPU vendor string (/proc/cpuinfo's vendor_id, e.g. GenuineIntel, AuthenticAMD), else the processor's
+    name as Python reports it, else "unknown"."""
+    import platform as host
+
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as info:
+            for line in info:
+                if line.startswith("vendor_id"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return host.processor() or "unknown"
 
 
 def versions() -> dict[str, str]:
