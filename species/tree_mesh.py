@@ -174,6 +174,7 @@ class TreeMesh:
         """
         return self.export("glb", transform=transform, extras=extras)
 
-    def to_obj(self) -> dict[str, bytes]:
-        """OBJ text, its MTL and the texture PNGs, by file name (`<name>.obj`, `<name>.mtl`, ...)."""
-        return self.export("obj")
+    def to_obj(self, compress_level: int = 9) -> dict[str, bytes]:
+        """OBJ text, its MTL and the texture PNGs (at zlib level `compress_level`), by file name (`<name>.obj`,
+        `<name>.mtl`, ...)."""
+        return self.export("obj", compress_level=compress_level)

@@ -101,7 +101,8 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
             put("usd", f"{asset.asset_id}.usdc", asset_to_usdc(asset))
     if "obj" in spec.formats:
         with timer.stage("obj"):
-            for name, data in asset.lod0.to_obj().items():  # side files keyed by their own name: stable keys
+            # Side files keyed by their own name (stable keys); textures at the library's fast zlib level.
+            for name, data in asset.lod0.to_obj(pngs.compress_level).items():
                 put("obj" if name.endswith(".obj") else f"obj_{name}", f"obj/{name}", data)
     if "collision" in spec.formats:
         put("collision", f"{asset.asset_id}_collision.obj", _obj_text(capsule_mesh(asset.capsules),

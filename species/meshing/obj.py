@@ -39,7 +39,7 @@ def _part_text(name: str, part: MeshPart, first_index: int) -> bytes:
         raise ObjError(f"{name} cannot be written as OBJ: {error}") from error
 
 
-def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
+def tree_mesh_to_obj(tree: TreeMesh, compress_level: int = 9) -> dict[str, bytes]:
     """OBJ, MTL and textures of `tree`, by file name; write them side by side in one folder.
 
     OBJ is conventionally Y up, so positions and normals are turned from our Z-up world with
@@ -47,6 +47,8 @@ def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
     and "leaves" (left out when empty), each with `usemtl` of its material. The MTL gives bark
     `map_Kd <name>_bark.png` and leaves `map_Kd`/`map_d <name>_leaf.png` (the leaf PNG's alpha is the
     cut-out). Texture names carry the tree's name so many trees can share a folder. Same tree, same bytes.
+    `compress_level`: the textures' zlib level (9, the smallest files, takes about 50 ms for the two; the asset
+    library writes them at its own fast level).
     """
     if not isinstance(tree, TreeMesh):
         raise ObjError(f"tree_mesh_to_obj needs a TreeMesh; got {type(tree).__name__}")
@@ -73,6 +75,6 @@ def tree_mesh_to_obj(tree: TreeMesh) -> dict[str, bytes]:
     return {
         f"{name}.obj": b"".join(obj),
         f"{name}.mtl": mtl.encode("ascii"),
-        bark_file: bark_png(tree.bark_color),
-        leaf_file: leaf_png(tree.leaf_color),
+        bark_file: bark_png(tree.bark_color, compress_level),
+        leaf_file: leaf_png(tree.leaf_color, compress_level),
     }

@@ -108,20 +108,21 @@ def leaf_texture(color, size: int = 128) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
-def _bark_png(color: tuple[float, float, float]) -> bytes:
-    return png_bytes(bark_texture(color, np.random.default_rng(BARK_TEXTURE_SEED)))
+def _bark_png(color: tuple[float, float, float], compress_level: int) -> bytes:
+    return png_bytes(bark_texture(color, np.random.default_rng(BARK_TEXTURE_SEED)), compress_level)
 
 
 @lru_cache(maxsize=64)
-def _leaf_png(color: tuple[float, float, float]) -> bytes:
-    return png_bytes(leaf_texture(color))
+def _leaf_png(color: tuple[float, float, float], compress_level: int) -> bytes:
+    return png_bytes(leaf_texture(color), compress_level)
 
 
-def bark_png(color) -> bytes:
-    """PNG bytes of `bark_texture(color)` with the fixed texture seed (cached per colour)."""
-    return _bark_png(tuple(float(c) for c in _check_colour(color)))
+def bark_png(color, compress_level: int = 9) -> bytes:
+    """PNG bytes of `bark_texture(color)` with the fixed texture seed at zlib level `compress_level` (cached per
+    colour and level)."""
+    return _bark_png(tuple(float(c) for c in _check_colour(color)), compress_level)
 
 
-def leaf_png(color) -> bytes:
-    """PNG bytes of `leaf_texture(color)` (cached per colour)."""
-    return _leaf_png(tuple(float(c) for c in _check_colour(color)))
+def leaf_png(color, compress_level: int = 9) -> bytes:
+    """PNG bytes of `leaf_texture(color)` at zlib level `compress_level` (cached per colour and level)."""
+    return _leaf_png(tuple(float(c) for c in _check_colour(color)), compress_level)

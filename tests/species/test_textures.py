@@ -59,6 +59,15 @@ def test_pngs_decode_to_the_arrays_and_are_identical_each_call():
     assert bark_png(BARK) == bark_png(list(BARK)) and leaf_png(LEAF)[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_texture_pngs_at_a_fast_level_hold_the_same_pixels():
+    for made, image in ((leaf_png, leaf_texture(LEAF)), (bark_png, bark_texture(BARK, np.random.default_rng(
+            BARK_TEXTURE_SEED)))):
+        colour = LEAF if made is leaf_png else BARK
+        fast, small = made(colour, 2), made(colour)
+        assert fast == png_bytes(image, 2) and small == png_bytes(image, 9) and len(fast) >= len(small)
+        np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(fast))), image)
+
+
 def test_out_of_range_colour_is_rejected():
     with pytest.raises(ParameterError, match="color"):
         leaf_texture((1.5, 0, 0))
