@@ -149,11 +149,11 @@ def mask_albedo(mask: np.ndarray, bark_color, leaf_color) -> np.ndarray:
     """(H, W, 4) uint8 sRGB + alpha of a part mask (`combine_parts`: 1 bark, 2 leaves): bark texels in
     `bark_color`, leaf texels in `leaf_color` (linear RGB in [0, 1]) with alpha 255, the rest transparent; leaf
     texels too when `leaf_color` is None."""
-    image = np.zeros(mask.shape + (4,), np.uint8)
+    palette = np.zeros((256, 4), np.uint8)  # by mask value: a lookup, not a masked write per part
     for part, colour in ((1, bark_color), (2, leaf_color)):
         if colour is not None:
-            image[mask == part] = (*np.round(linear_to_srgb(np.asarray(colour)) * 255).astype(np.uint8), 255)
-    return image
+            palette[part] = (*np.round(linear_to_srgb(np.asarray(colour)) * 255).astype(np.uint8), 255)
+    return palette[np.asarray(mask, np.uint8)]
 
 
 def tangent_space_normals(camera: Camera, depth: np.ndarray, covered: np.ndarray) -> np.ndarray:
