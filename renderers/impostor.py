@@ -24,7 +24,8 @@ from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_directio
 from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
                    single_sample_renderer_class, tangent_space_normals)
 
-__all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "impostor_coverage",
+__all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "render_impostors",
+           "impostor_coverage",
            "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
            "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS", "AXIS_SHARE",
            "SECTOR_OVERLAP", "sector_groups", "atlas_tile", "pixel_rays", "plane_coordinates"]
@@ -357,6 +358,13 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
     crown about once, not the union of every plane's whole view (which fills in a sparse crown). The slices are
     uploaded once, two depth-only passes (bark, leaves) per plane. `renderer` is the process's
     CoverageRenderer."""
+    return render_impostors(renderer, tree, tile, planes, (axis_share,), sector_overlap)[0]
+
+
+def render_impostors(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128, planes: int = IMPOSTOR_PLANES,
+                     axis_shares=(AXIS_SHARE,), sector_overlap: float = SECTOR_OVERLAP) -> list[ImpostorAtlas]:
+    """`render_impostor` for each of `axis_shares`, the faces uploaded once: in bands between the shares' axis
+    radii, each band both whole (drawn on every plane by the shares whose axis holds it) and by sector."""
     if not 8 <= tile <= 2048:
         raise ImpostorError(f"impostor tile {tile} px is invalid: allowed 8..2048")
     if not 1 <= planes <= 8:
@@ -365,18 +373,56 @@ def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128,
     azimuths = np.arange(planes) * (180.0 / planes)
     columns = min(planes, _ATLAS_COLUMNS)
     rows = -(-planes // columns)
-    albedo = np.zeros((rows * tile, columns * tile, 4), np.uint8)
-    normal = np.zeros((rows * tile, columns * tile, 3), np.uint8)
-    normal[...] = (128, 128, 255)
-    renderer.load_groups(sector_groups(tree, centre, planes, axis_share * half, sector_overlap))
-    for plane, azimuth in enumerate(azimuths):
-        camera = _plane_camera(centre, half, reach, float(azimuth), tile)
-        parts = PartDepths({"bark": renderer.group_depth(camera, ("bark_axis", f"bark_{plane}")),
-                            LEAVES: renderer.group_depth(camera, ("leaves_axis", f"leaves_{plane}"))})
-        row, col = (plane // columns) * tile, (plane % columns) * tile
-        albedo[row:row + tile, col:col + tile], normal[row:row + tile, col:col + tile] = atlas_tile(
-            camera, parts, tree)
-    return ImpostorAtlas(albedo, normal, centre, half, azimuths.astype(np.float64), tile)
+    radii = sorted({float(share) * half for share in axis_shares})
+    renderer.load_groups(_banded_groups(tree, centre, planes, radii, sector_overlap))
+    atlases = []
+    for share in axis_shares:
+        inner = radii.index(float(share) * half) + 1  # the bands within this share's axis radius
+        albedo = np.zeros((rows * tile, columns * tile, 4), np.uint8)
+        normal = np.zeros((rows * tile, columns * tile, 3), np.uint8)
+        normal[...] = (128, 128, 255)
+        for plane, azimuth in enumerate(azimuths):
+            camera = _plane_camera(centre, half, reach, float(azimuth), tile)
+            parts = PartDepths({kind_name: renderer.group_depth(
+                camera, [f"{kind}_band{band}" for band in range(inner)]
+                + [f"{kind}_band{band}_{plane}" for band in range(inner, len(radii) + 1)])
+                for kind, kind_name in (("bark", "bark"), ("leaves", LEAVES))})
+            row, col = (plane // columns) * tile, (plane % columns) * tile
+            albedo[row:row + tile, col:col + tile], normal[row:row + tile, col:col + tile] = atlas_tile(
+                camera, parts, tree)
+        atlases.append(ImpostorAtlas(albedo, normal, centre, half, azimuths.astype(np.float64), tile))
+    return atlases
+
+
+def _banded_groups(tree: TreeMesh, centre: np.ndarray, planes: int, radii: list[float],
+                   overlap: float) -> dict[str, tuple[np.ndarray, np.ndarray, bool]]:
+    """`sector_groups` for several axis radii at once (ascending): "bark_band{b}"/"leaves_band{b}" the faces
+    whose distance from the axis lies in band b (within radii[0]; between radii[b - 1] and radii[b]; beyond the
+    last), and "..._band{b}_{p}" those of them that plane p draws by sector (with the overlap). Drawn with the
+    whole bands within a radius and the sector groups of the bands beyond it, a plane shows exactly the faces
+    `sector_groups` gives it for that radius."""
+    right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
+    line0 = np.degrees(np.arctan2(right[1], right[0]))
+    groups = {}
+    for kind, part in (("bark", tree.bark), ("leaves", tree.leaves)):
+        if part.n_faces == 0:
+            continue
+        centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
+        angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
+        sector, neighbour, shared = plane_sectors(angle - line0, planes, overlap)
+        distance = np.hypot(centroid[:, 0], centroid[:, 1])
+        band = np.searchsorted(np.asarray(radii), distance, side="left")  # distance <= radii[b] -> band <= b
+        for b in range(len(radii) + 1):
+            within = band == b
+            if b < len(radii):
+                groups[f"{kind}_band{b}"] = (*_compact(part.vertices, part.faces[within]), kind == "leaves")
+            if b == 0:
+                continue
+            for index in range(planes):
+                chosen = within & ((sector == index) | (shared & (neighbour == index)))
+                groups[f"{kind}_band{b}_{index}"] = (*_compact(part.vertices, part.faces[chosen]),
+                                                     kind == "leaves")
+    return groups
 
 
 def atlas_tile(camera: Camera, parts: PartDepths, tree: TreeMesh) -> tuple[np.ndarray, np.ndarray]:

@@ -13,7 +13,7 @@ import numpy as np
 import species
 from renderers.alpha_coverage import coverage_tree, opaque_fraction
 from renderers.framing import framing_points
-from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostor, silhouette_iou, switch_camera
+from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostors, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import render_octahedral_impostor
 from species.studio.collision import collision_capsules
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
@@ -233,8 +233,8 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         if spec.impostor == "octahedral":
             atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
         else:
-            atlas = fit_impostor(lambda axis_share: render_impostor(renderer, lod0_cover, tile=spec.impostor_tile,
-                                                                    axis_share=axis_share),
+            atlas = fit_impostor(lambda shares: render_impostors(renderer, lod0_cover, tile=spec.impostor_tile,
+                                                                 axis_shares=shares),
                                  points, lod0_cover, renderer, spec.switch_px[-1])
         billboard = species.TreeMesh(bark=atlas.mesh(), leaves=species.MeshPart.empty(), name=f"{ident}_IMPOSTOR")
         empty4, empty3 = np.zeros((0, 4), np.float32), np.zeros((0, 3), np.float32)

@@ -323,14 +323,14 @@ def climb_ladder(score, start: int, count: int) -> int:
 
 def fit_impostor(render, points, lod0_cover: TreeMesh, renderer, switch_px: int):
     """The crossed impostor that matches LOD0 (`lod0_cover` drawn, framed by LOD0's `framing_points`) best from
-    IMPOSTOR_CALIBRATION_AZIMUTHS at `switch_px`: the least plus the mean IoU over them, among `render(axis_share)`
-    (the atlas sliced with that share of the planes' half side on every plane) for each of IMPOSTOR_AXIS_SHARES,
-    its alpha grown by each of IMPOSTOR_GROWTHS (ties: the first)."""
+    IMPOSTOR_CALIBRATION_AZIMUTHS at `switch_px`: the least plus the mean IoU over them, among the atlases
+    `render(IMPOSTOR_AXIS_SHARES)` returns (one per share: sliced with that share of the planes' half side on every
+    plane; `renderers.impostor.render_impostors` uploads the slices once for all), each with its alpha grown by
+    each of IMPOSTOR_GROWTHS (ties: the first)."""
     cameras = [switch_camera(points, azimuth, int(switch_px)) for azimuth in IMPOSTOR_CALIBRATION_AZIMUTHS]
     references = [closed_silhouette(renderer.coverage(lod0_cover, camera)) for camera in cameras]
     best, best_score, first, pixels = None, -np.inf, None, None
-    for axis_share in IMPOSTOR_AXIS_SHARES:
-        atlas = render(axis_share)
+    for atlas in render(IMPOSTOR_AXIS_SHARES):
         if first is None or not atlas.same_billboard(first):  # the candidates differ in alpha alone
             first, pixels = atlas, [atlas.billboard_pixels(camera) for camera in cameras]
         for texels in IMPOSTOR_GROWTHS:

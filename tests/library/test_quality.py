@@ -333,8 +333,9 @@ def test_the_impostor_keeps_the_axis_share_and_alpha_growth_that_match_lod0_best
     scores = {(share, t): calibration_score(rendered[share].grown(t)) for share in IMPOSTOR_AXIS_SHARES
               for t in IMPOSTOR_GROWTHS}
     asked = []
-    chosen = fit_impostor(lambda share: asked.append(share) or rendered[share], points, cover, renderer, 64)
-    assert asked == list(IMPOSTOR_AXIS_SHARES)  # each slicing rendered once
+    chosen = fit_impostor(lambda shares: asked.append(tuple(shares)) or [rendered[share] for share in shares],
+                          points, cover, renderer, 64)
+    assert asked == [tuple(IMPOSTOR_AXIS_SHARES)]  # every slicing rendered in one call
     assert calibration_score(chosen) == max(scores.values())
     assert max(scores, key=scores.get)[1] == 1  # grown by a texel here
     assert asset.impostor.albedo.tobytes() == chosen.albedo.tobytes()  # what the build keeps

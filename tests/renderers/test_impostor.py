@@ -110,3 +110,22 @@ def test_alpha_growth_out_of_range_is_refused():
     for texels in (-1, 9, 1.5, True):
         with pytest.raises(ImpostorError, match="alpha growth"):
             atlas.grown(texels)
+
+
+def test_impostors_of_several_axis_shares_from_one_upload_are_each_shares_own():
+    from renderers.impostor import CoverageRenderer, render_impostor, render_impostors
+    from tree_factory import make_tree
+
+    mesh, _ = make_tree(np.random.default_rng(5))
+    renderer = CoverageRenderer(64)
+    try:
+        shares = (0.2, 0.05, 0.35)
+        together = render_impostors(renderer, mesh, tile=48, axis_shares=shares)
+        for share, atlas in zip(shares, together):
+            alone = render_impostor(renderer, mesh, tile=48, axis_share=share)
+            assert atlas.albedo.tobytes() == alone.albedo.tobytes()
+            assert atlas.normal.tobytes() == alone.normal.tobytes()
+        # The shares slice differently: the atlases are not all the same.
+        assert len({atlas.albedo.tobytes() for atlas in together}) > 1
+    finally:
+        renderer.close()
