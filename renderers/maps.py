@@ -153,7 +153,11 @@ def mask_albedo(mask: np.ndarray, bark_color, leaf_color) -> np.ndarray:
     for part, colour in ((1, bark_color), (2, leaf_color)):
         if colour is not None:
             palette[part] = (*np.round(linear_to_srgb(np.asarray(colour)) * 255).astype(np.uint8), 255)
-    return palette[np.asarray(mask, np.uint8)]
+    mask = np.asarray(mask, np.uint8)
+    image = np.empty(mask.shape + (4,), np.uint8)
+    # Each texel's four bytes gathered as one 32-bit word: several times faster than gathering rows of four.
+    np.take(palette.view(np.uint32)[:, 0], mask, out=image.view(np.uint32)[..., 0])
+    return image
 
 
 def tangent_space_normals(camera: Camera, depth: np.ndarray, covered: np.ndarray) -> np.ndarray:
