@@ -4,7 +4,8 @@ previews, Blender outputs if available), GLB size with/without instancing, IoU p
 Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_library.py [SPECIES ...] [--no-scaling]
 Reference: Sapling alone takes 1.85 s median to grow one mesh (no LODs); target < 1 s per asset without Blender.
 IoU rule (renderers/alpha_coverage.py): every leaf and cluster card drawn as its two triangles shrunk about its
-centre to the opaque share of its alpha tile, in unculled depth-only passes; the impostor cut by its atlas alpha.
+centre to the opaque share of its alpha tile, in depth-only passes that cull only the bark's back faces (as its
+single-sided material does; leaves and twig cards are double-sided); the impostor cut by its atlas alpha.
 Measured on 2026-11-24, one core (taskset -c 0, OMP_NUM_THREADS=1), impostor + quality seconds before -> after
 that rule: maple 1.25+3.21 -> 0.13+0.49, pine 18.9+28.7 -> 0.13+1.26, cherry 11.0+16.7 -> 0.24+1.53,
 balsam_fir 6.42+9.26 -> 0.09+0.56, douglas_fir 5.72+6.36 -> 0.09+0.51.

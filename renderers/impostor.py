@@ -174,17 +174,25 @@ class CoverageRenderer(DepthRenderer):
     """The farm's depth renderer for coverage: the whole tree in a single depth-only draw, and named groups of
     faces uploaded once and drawn in any combination (the impostor's azimuth sectors).
 
-    Its depth-only passes draw without back-face culling, so leaf cards go in once, not once per winding
-    (pyrender culls in depth-only passes; for leafy trees that halves the triangles drawn). The nearest surface
-    still wins per pixel; only `back_depth`, which relies on culling, is not available here.
+    A tree's coverage (`coverage`) is drawn as its files' materials draw it: the bark single-sided (back faces
+    culled, as an engine culls the bark material, which is not double-sided), the leaves double-sided without
+    culling, so leaf cards go in once, not once per winding (pyrender culls every depth-only draw; for leafy trees
+    that halves the triangles drawn). Culling the bark's far walls halves its cost (sassafras's LOD0 at 512 px:
+    11.3 -> 5.5 ms). Whatever is not closed bark (twig cards, faces pressed onto them) goes in `leaves`. Named
+    groups (`load_groups`: slices of the tree, faces pressed into an atlas) are drawn without culling. The
+    nearest surface still wins per pixel; only `back_depth`, which relies on culling, is not available here.
     """
 
     def __init__(self, size: int = 256):
         super().__init__(size)
         self._renderer._renderer = _unculled_renderer_class()(size, size)
+        self._culled_bark = True
 
     def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool):
-        return super()._mesh(vertices, faces, False)  # no culling: one winding is seen from both sides
+        mesh = super()._mesh(vertices, faces, False)  # one winding, seen from both sides unless culled
+        for primitive in mesh.primitives:
+            primitive.culled = self._culled_bark and not double_sided
+        return mesh
 
     def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
         raise ImpostorError("back_depth needs back-face culling: use renderers.maps.DepthRenderer for it")
@@ -204,8 +212,12 @@ class CoverageRenderer(DepthRenderer):
         int, double_sided); empty groups are left out."""
         for node in self._mesh_nodes.values():
             self._scene.remove_node(node)
-        self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided))
-                            for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
+        self._culled_bark = False  # slices and pressed faces are not closed: drawn from both sides
+        try:
+            self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided))
+                                for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
+        finally:
+            self._culled_bark = True
         self._tree = None  # the next `load` uploads its tree again
 
     def group_depth(self, camera: Camera, names) -> np.ndarray:
@@ -221,7 +233,8 @@ def _unculled_renderer_class():
     """The single-sample pyrender Renderer of `renderers.maps` whose depth-only draws keep both windings.
 
     pyrender 0.1.45 (pinned) enables GL_CULL_FACE for every depth-only primitive; this draw binds the same
-    buffers and model matrix, turns culling off and draws the indexed triangles. Other passes are unchanged.
+    buffers and model matrix, culls back faces only of the primitives marked `culled` (a tree's bark) and draws
+    the indexed triangles. Other passes are unchanged.
     """
     import ctypes
 
@@ -248,7 +261,11 @@ def _unculled_renderer_class():
                 return super()._bind_and_draw_primitive(primitive, pose, program, flags)
             program.set_uniform("M", pose)
             primitive._bind()
-            GL.glDisable(GL.GL_CULL_FACE)
+            if getattr(primitive, "culled", False):
+                GL.glEnable(GL.GL_CULL_FACE)
+                GL.glCullFace(GL.GL_BACK)
+            else:
+                GL.glDisable(GL.GL_CULL_FACE)
             GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
             GL.glDrawElements(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT, ctypes.c_void_p(0))
             primitive._unbind()

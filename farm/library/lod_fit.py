@@ -271,10 +271,10 @@ def drawn_cover(lod_mesh: TreeMesh, leaf_fraction: float, card_fraction: float, 
     return cover if twig_runs is None else _with_faces(cover, twig_runs)
 
 
-def _with_faces(cover: TreeMesh, bark: MeshPart, leaves: MeshPart | None = None) -> TreeMesh:
-    """`cover` with more faces drawn as bark and, when given, as leaves (coverage passes draw both alike)."""
-    return dataclasses.replace(cover, bark=MeshPart.concatenate([cover.bark, bark]),
-                               leaves=cover.leaves if leaves is None else MeshPart.concatenate([cover.leaves, leaves]))
+def _with_faces(cover: TreeMesh, *parts: MeshPart) -> TreeMesh:
+    """`cover` with more faces, drawn double-sided as its leaves are (twig cards and the faces pressed onto them
+    are not closed: a coverage pass culls only the bark's back faces, as the files' bark material does)."""
+    return dataclasses.replace(cover, leaves=MeshPart.concatenate([cover.leaves, *parts]))
 
 
 def settle_twigs(fitted: list[FittedLevel], skeleton, lod0_cover: TreeMesh, renderer, leaf_fraction: float,

@@ -129,3 +129,27 @@ def test_impostors_of_several_axis_shares_from_one_upload_are_each_shares_own():
         assert len({atlas.albedo.tobytes() for atlas in together}) > 1
     finally:
         renderer.close()
+
+
+def test_coverage_culls_the_bark_s_back_faces_as_its_material_does_but_never_the_leaves_or_groups():
+    from renderers.impostor import CoverageRenderer, switch_camera
+
+    triangle = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
+    points = np.concatenate([triangle, triangle + [0.0, 0.5, 0.0], triangle - [0.0, 0.5, 0.0]])
+    renderer = CoverageRenderer(64)
+    try:
+        camera = switch_camera(points, 0.0, 64)
+        covered = {}
+        for winding in ([[0, 1, 2]], [[0, 2, 1]]):
+            part = MeshPart(triangle, np.array(winding), np.zeros((3, 3)), np.zeros((3, 2)))
+            as_bark = renderer.coverage(TreeMesh(bark=part, leaves=MeshPart.empty(), name="b"), camera)
+            as_leaf = renderer.coverage(TreeMesh(bark=MeshPart.empty(), leaves=part, name="l"), camera)
+            renderer.load_groups({"slice": (triangle, np.array(winding), False)})
+            as_group = renderer.group_depth(camera, ["slice"]) > 0
+            covered[str(winding)] = (int(as_bark.sum()), int(as_leaf.sum()), int(as_group.sum()))
+        (front_bark, front_leaf, front_group), (back_bark, back_leaf, back_group) = sorted(covered.values(),
+                                                                                        reverse=True)
+        assert front_bark == front_leaf == back_leaf == front_group == back_group > 100
+        assert back_bark == 0  # seen from behind, a single-sided bark face is culled
+    finally:
+        renderer.close()
