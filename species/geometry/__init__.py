@@ -12,12 +12,12 @@ from .radii import pipe_model_radii
 from .sectors import plane_sectors
 from .tangents import DEGENERATE_UV_SINE, vertex_tangents
 from .topology import depth_levels, node_depths
-from .vectors import MIN_LENGTH, column_bounds, row_bounds, unit_vectors, unit_vectors_and_lengths
+from .vectors import MIN_LENGTH, column_bounds, dot3, row_bounds, unit_vectors, unit_vectors_and_lengths
 
 __all__ = [
     "rot_x", "rot_y", "rot_z", "rot_axis", "premul", "track_frames", "tilt_frames", "zxz", "declination", "apply",
     "euler_xyz", "from_euler_xyz", "FrameError", "polyline_tangents", "parallel_transport_frames",
     "rotation_minimizing_frames", "simplification_keys", "pipe_model_radii", "node_depths",
     "depth_levels", "plane_sectors", "unit_vectors", "unit_vectors_and_lengths", "column_bounds", "row_bounds",
-    "MIN_LENGTH", "vertex_tangents", "DEGENERATE_UV_SINE", "unit_quaternions",
+    "dot3", "MIN_LENGTH", "vertex_tangents", "DEGENERATE_UV_SINE", "unit_quaternions",
 ]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["unit_vectors", "unit_vectors_and_lengths", "row_norms", "cross_rows", "column_bounds", "row_bounds",
-           "MIN_LENGTH"]
+           "dot3", "MIN_LENGTH"]
 
 # Shorter than this (metres, or a dimensionless cross product) a vector has no usable direction.
 MIN_LENGTH = 1e-12
@@ -65,3 +65,12 @@ def row_bounds(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     for column in columns[1:]:
         low, high = np.minimum(low, column), np.maximum(high, column)
     return low, high
+
+
+def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products along the last axis (length 3) of `a` and `b`, broadcast against each other: what
+    `np.einsum("...k,...k->...", a, b)` gives, bit for bit (it sums a contraction of 3 contiguous values as
+    (a0 b0 + a2 b2) + a1 b1; checked on the farm's arrays), about 4x faster for the (F, 3, 3) corner arrays of
+    twig cards, whose einsum paths numpy does not optimise."""
+    a, b = np.asarray(a), np.asarray(b)
+    return (a[..., 0] * b[..., 0] + a[..., 2] * b[..., 2]) + a[..., 1] * b[..., 1]

@@ -17,7 +17,7 @@ from ..skeleton import Skeleton
 from ..tree_mesh import MeshPart, TreeMesh, quad_faces
 from ..geometry.sectors import plane_sectors
 from ..geometry.topology import depth_levels, node_depths
-from ..geometry.vectors import row_bounds
+from ..geometry.vectors import dot3, row_bounds
 from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
@@ -154,7 +154,7 @@ class TwigCards:
                                   (lod0.leaves, self.leaf_faces, self.leaf_card)):
             corners = part.face_corners[faces]  # (F, 3, 3): per face, so each card's values are gathered once
             normal = self.axes[card, 2]
-            offset = np.einsum("fci,fi->fc", corners - self.origin[card][:, None, :], normal)
+            offset = dot3(corners - self.origin[card][:, None, :], normal[:, None, :])
             flat = (corners - offset[..., None] * normal[:, None, :]).astype(np.float32).reshape(-1, 3)
             parts.append(MeshPart(flat, np.arange(len(flat), dtype=np.int32).reshape(-1, 3),
                                   np.repeat(normal.astype(np.float32), 3, axis=0), np.zeros((len(flat), 2), np.float32)))
@@ -209,7 +209,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
     faces, cards = [], []
     for part, face, label in zip((lod0.bark, lod0.leaves), (bark_faces, leaf_faces), face_label):
         rel = part.face_centroids[face] - mean[label]
-        across, out = np.einsum("fi,fi->f", rel, v[label]), np.einsum("fi,fi->f", rel, normal[label])
+        across, out = dot3(rel, v[label]), dot3(rel, normal[label])
         sector, neighbour, shared = plane_sectors(np.degrees(np.arctan2(out, across)), planes, TWIG_SECTOR_OVERLAP)
         radius = np.hypot(across, out)
         reach = np.zeros(n)
@@ -229,7 +229,7 @@ def twig_cards(skeleton: Skeleton, lod0: TreeMesh, labels: np.ndarray, planes: i
         - card_mean[face_card][:, None, :]
     low, high = np.full((2, len(frame)), np.inf), np.full((2, len(frame)), -np.inf)
     for k in range(2):  # one axis at a time: 1-D ufunc.at is many times faster than 2-D
-        face_low, face_high = row_bounds(np.einsum("fci,fi->fc", rel, frame[face_card, k]))
+        face_low, face_high = row_bounds(dot3(rel, frame[face_card, k][:, None, :]))
         np.minimum.at(low[k], face_card, face_low)
         np.maximum.at(high[k], face_card, face_high)
     low, high = low.T, high.T
@@ -327,7 +327,7 @@ class TwigAtlas:
         (P,) int (atlas numbering): columns run along u, rows down the tile against v (image rows), depth along
         the normal away from TWIG_DEPTH_OFFSET."""
         origin, axes, extent = self._cards
-        local = np.einsum("pj,pij->pi", np.asarray(points, np.float64) - origin[card], axes[card])
+        local = dot3((np.asarray(points, np.float64) - origin[card])[:, None, :], axes[card])
         local /= self.texel[card, None]
         column = self.offset[card, 0] + TWIG_PADDING_TEXELS + local[:, 0]
         row = self.offset[card, 1] + TWIG_PADDING_TEXELS + extent[card, 1] / self.texel[card] - local[:, 1]
