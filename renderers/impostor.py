@@ -247,14 +247,7 @@ def _unculled_renderer_class():
         def _read_main_framebuffer(self, scene, flags):
             if not self.read_coverage:
                 return super()._read_main_framebuffer(scene, flags)
-            width, height = self._main_fb_dims
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
-            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
-            GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_DEPTH_BUFFER_BIT, GL.GL_NEAREST)
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb)
-            window = np.frombuffer(GL.glReadPixels(0, 0, width, height, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT),
-                                   np.float32).reshape(height, width)
-            return window[::-1] < 1.0  # cleared to 1.0: anything drawn is nearer
+            return self.window_depth() < 1.0  # cleared to 1.0: anything drawn is nearer
 
         def _bind_and_draw_primitive(self, primitive, pose, program, flags):
             if not flags & RenderFlags.DEPTH_ONLY or primitive.indices is None or primitive.poses is not None:
@@ -344,25 +337,10 @@ def sector_groups(tree: TreeMesh, centre: np.ndarray, planes: int, axis_radius: 
     two plane groups. A trunk that leaves the axis goes by sector like the rest: on every plane, each plane drew
     it at another place and a view between them saw it that many times over (bonsai's S-shaped trunk: least IoU
     at 64 px .809 -> .835; no other preset changed)."""
-    # Plane p's line in the ground plane is at angle line0 + p * 180 / planes (it turns with its azimuth).
-    right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
-    line0 = np.degrees(np.arctan2(right[1], right[0]))
-    groups = {}
-    for kind, part in (("bark", tree.bark), ("leaves", tree.leaves)):
-        if part.n_faces == 0:
-            continue
-        centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
-        angle = np.degrees(np.arctan2(centroid[:, 1], centroid[:, 0]))
-        sector, neighbour, shared = plane_sectors(angle - line0, planes, overlap)
-        axis = np.hypot(centroid[:, 0], centroid[:, 1]) <= axis_radius
-        sector[axis] = -1
-        for index in range(-1, planes):
-            name = f"{kind}_{'axis' if index < 0 else index}"
-            chosen = sector == index
-            if index >= 0:
-                chosen |= (sector >= 0) & shared & (neighbour == index)
-            groups[name] = (*_compact(part.vertices, part.faces[chosen]), kind == "leaves")
-    return groups
+    names = {"band0": "axis", **{f"band1_{plane}": str(plane) for plane in range(planes)}}
+    return {f"{kind}_{names[band]}": group for key, group in _banded_groups(tree, centre, planes, [axis_radius],
+                                                                             overlap).items()
+            for kind, band in [key.split("_", 1)]}
 
 
 def render_impostor(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128, planes: int = IMPOSTOR_PLANES,
@@ -418,6 +396,7 @@ def _banded_groups(tree: TreeMesh, centre: np.ndarray, planes: int, radii: list[
     last), and "..._band{b}_{p}" those of them that plane p draws by sector (with the overlap). Drawn with the
     whole bands within a radius and the sector groups of the bands beyond it, a plane shows exactly the faces
     `sector_groups` gives it for that radius."""
+    # Plane p's line in the ground plane is at angle line0 + p * 180 / planes (it turns with its azimuth).
     right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
     line0 = np.degrees(np.arctan2(right[1], right[0]))
     groups = {}

@@ -400,17 +400,22 @@ def single_sample_renderer_class():
             # pyrender's read-back of a depth-only pass, its values bit for bit (float32, the camera's planes),
             # without blitting the colour buffer nobody reads and with `where` for its masked writes (the twig
             # atlas's 2048 x 530 passes: about 3x faster).
+            window = self.window_depth()
+            ndc = 2.0 * window - 1.0
+            near, far = scene.main_camera_node.camera.znear, scene.main_camera_node.camera.zfar
+            linear = (2.0 * near * far) / (far + near - ndc * (far - near))
+            return np.where(window == 1.0, np.float32(0.0), linear)
+
+        def window_depth(self) -> np.ndarray:
+            """(H, W) float32 window depth of the last pass, image rows top first (1.0 where nothing was drawn):
+            the depth buffer copied out of the render target and read back."""
             width, height = self._main_fb_dims
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb_ms)
             GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._main_fb)
             GL.glBlitFramebuffer(0, 0, width, height, 0, 0, width, height, GL.GL_DEPTH_BUFFER_BIT, GL.GL_NEAREST)
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._main_fb)
-            window = np.frombuffer(GL.glReadPixels(0, 0, width, height, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT),
-                                   np.float32).reshape(height, width)[::-1]
-            ndc = 2.0 * window - 1.0
-            near, far = scene.main_camera_node.camera.znear, scene.main_camera_node.camera.zfar
-            linear = (2.0 * near * far) / (far + near - ndc * (far - near))
-            return np.where(window == 1.0, np.float32(0.0), linear)
+            return np.frombuffer(GL.glReadPixels(0, 0, width, height, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT),
+                                 np.float32).reshape(height, width)[::-1]
 
         def _configure_main_framebuffer(self):
             super()._configure_main_framebuffer()
