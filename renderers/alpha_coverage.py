@@ -20,7 +20,7 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 from .camera import Camera
 
-__all__ = ["triangle_coverage", "triangle_pixels", "opaque_fraction", "shrunk_cards", "coverage_tree",
+__all__ = ["triangle_coverage", "triangle_pixels", "pixel_mask", "opaque_fraction", "shrunk_cards", "coverage_tree",
            "CoverageError", "MAX_SAMPLES_PER_CHUNK"]
 
 # Candidate (triangle, pixel) pairs tested at once; bounds memory to a few hundred MB whatever the mesh.
@@ -31,13 +31,21 @@ class CoverageError(TreefarmError):
     """Coverage asked of triangles behind the camera, or with UVs/alpha of the wrong shape, or an empty tile."""
 
 
-def _check(vertices, faces, uvs, alpha) -> None:
+def _check(vertices, faces, uvs, texture_shape) -> None:
+    """Faces (F, 3); uvs (V, 2) and the alpha texture's shape (h, w) both given (alpha-tested) or neither."""
     if faces.ndim != 2 or faces.shape[1] != 3:
         raise CoverageError(f"faces of shape {faces.shape} are invalid: allowed (F, 3)")
-    if (uvs is None) != (alpha is None):
+    if (uvs is None) != (texture_shape is None):
         raise CoverageError("uvs and alpha go together: pass both (alpha-tested) or neither (opaque)")
-    if uvs is not None and (uvs.shape != (len(vertices), 2) or alpha.ndim != 2):
-        raise CoverageError(f"uvs {uvs.shape} / alpha {alpha.shape} are invalid: allowed (V, 2) and (h, w)")
+    if uvs is not None and (uvs.shape != (len(vertices), 2) or len(texture_shape) != 2):
+        raise CoverageError(f"uvs {uvs.shape} / alpha {tuple(texture_shape)} are invalid: allowed (V, 2) and (h, w)")
+
+
+def pixel_mask(camera: Camera, pixels: np.ndarray) -> np.ndarray:
+    """(H, W) bool of `camera`'s image, True at the flat pixel indices `pixels` (row * W + column)."""
+    covered = np.zeros(camera.height * camera.width, bool)
+    covered[pixels] = True
+    return covered.reshape(camera.height, camera.width)
 
 
 def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None,
@@ -48,16 +56,12 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     bottom row of `alpha`); alpha : (h, w) bool, True where the texture is opaque (nearest texel, no filtering).
     Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated perspective-correctly, as GL does.
     """
-    _check(np.asarray(vertices), np.asarray(faces), uvs, alpha)
-    if uvs is None:
-        pixels = triangle_pixels(camera, vertices, faces)
-    else:
-        alpha = np.asarray(alpha, bool)
-        pixels, texels = triangle_pixels(camera, vertices, faces, uvs, alpha.shape)
-        pixels = pixels[alpha.ravel()[texels]]
-    covered = np.zeros(camera.height * camera.width, bool)
-    covered[pixels] = True
-    return covered.reshape(camera.height, camera.width)
+    if uvs is None or alpha is None:
+        _check(np.asarray(vertices), np.asarray(faces), uvs, None if alpha is None else np.shape(alpha))
+        return pixel_mask(camera, triangle_pixels(camera, vertices, faces))
+    alpha = np.asarray(alpha, bool)
+    pixels, texels = triangle_pixels(camera, vertices, faces, uvs, alpha.shape)
+    return pixel_mask(camera, pixels[alpha.ravel()[texels]])
 
 
 def triangle_pixels(camera: Camera, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None,
@@ -69,9 +73,7 @@ def triangle_pixels(camera: Camera, vertices: np.ndarray, faces: np.ndarray, uvs
     vertices = np.asarray(vertices, np.float64)
     faces = np.asarray(faces, np.int64)
     textured = uvs is not None
-    if textured and (texture_shape is None or len(texture_shape) != 2):
-        raise CoverageError(f"texture shape {texture_shape!r} is invalid: allowed (h, w) with uvs")
-    _check(vertices, faces, uvs, np.zeros(texture_shape, bool) if textured else None)
+    _check(vertices, faces, uvs, texture_shape)
     found_pixels, found_texels = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     if len(faces) == 0:
         return (found_pixels[0], found_texels[0]) if textured else found_pixels[0]

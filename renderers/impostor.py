@@ -19,7 +19,7 @@ from species.errors import TreefarmError
 from species.geometry import plane_sectors
 from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
-from .alpha_coverage import triangle_pixels
+from .alpha_coverage import pixel_mask, triangle_pixels
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
 from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
                    single_sample_renderer_class, tangent_space_normals)
@@ -105,9 +105,7 @@ class ImpostorAtlas:
     def coverage_of(self, pixels: tuple[np.ndarray, np.ndarray], camera: Camera) -> np.ndarray:
         """`coverage(camera)` from `billboard_pixels(camera)` of this atlas or of one with the same billboard."""
         pixel, texel = pixels
-        covered = np.zeros(camera.height * camera.width, bool)
-        covered[pixel[(self.albedo[..., 3] >= 128).ravel()[texel]]] = True
-        return covered.reshape(camera.height, camera.width)
+        return pixel_mask(camera, pixel[(self.albedo[..., 3] >= 128).ravel()[texel]])
 
     def same_billboard(self, other: "ImpostorAtlas") -> bool:
         """Whether `other` has this atlas's planes (centre, half side, azimuths) and atlas size: the same mesh
@@ -186,12 +184,13 @@ class CoverageRenderer(DepthRenderer):
     def __init__(self, size: int = 256):
         super().__init__(size)
         self._renderer._renderer = _unculled_renderer_class()(size, size)
-        self._culled_bark = True
 
-    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool):
-        mesh = super()._mesh(vertices, faces, False)  # one winding, seen from both sides unless culled
+    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool, culled: bool | None = None):
+        """One winding of the faces, seen from both sides unless `culled` (default: single-sided bark, a part
+        that is not `double_sided`)."""
+        mesh = super()._mesh(vertices, faces, False)
         for primitive in mesh.primitives:
-            primitive.culled = self._culled_bark and not double_sided
+            primitive.culled = not double_sided if culled is None else culled
         return mesh
 
     def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
@@ -212,12 +211,9 @@ class CoverageRenderer(DepthRenderer):
         int, double_sided); empty groups are left out."""
         for node in self._mesh_nodes.values():
             self._scene.remove_node(node)
-        self._culled_bark = False  # slices and pressed faces are not closed: drawn from both sides
-        try:
-            self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided))
-                                for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
-        finally:
-            self._culled_bark = True
+        # Slices and pressed faces are not closed: drawn from both sides.
+        self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided, culled=False))
+                            for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
         self._tree = None  # the next `load` uploads its tree again
 
     def group_depth(self, camera: Camera, names) -> np.ndarray:
