@@ -25,7 +25,7 @@ from species.tree_mesh import MeshPart, TreeMesh
 __all__ = ["fit_lods", "fit_impostor", "TwigRule", "CalibrationViews", "Judgement", "climb_ladder",
            "IMPOSTOR_GROWTHS", "IMPOSTOR_AXIS_SHARES", "IMPOSTOR_CALIBRATION_AZIMUTHS", "FittedLevel",
            "settle_twigs", "level_cover", "drawn_cover", "BARK_SHARE_SCALES", "CARD_AREA_GAINS",
-           "CALIBRATION_AZIMUTHS", "TWIG_CALIBRATION_AZIMUTHS"]
+           "CALIBRATION_AZIMUTHS", "TWIG_CALIBRATION_AZIMUTHS", "MIDDLE_TWIG_PLANES"]
 
 # Candidate bark shares of a level's budget, as multiples of LOD0's bark share (at most the whole budget but one
 # card). A simplified branch draws more silhouette per triangle than a merged leaf card on a sparse crown and less
@@ -68,13 +68,21 @@ class TwigRule(NamedTuple):
     leaves: bool = True
 
 
-# Twig rules a level is fitted with, for nearer levels, then for the farthest. Bark cards (every dropped branch
-# a crossed pair of its own bark, its leaves left as leaf cards, one per leaf where the budget holds them) suit
-# the near levels of shrubs and saplings, whose tubes would take the budget and whose leaves lose their shape
-# pressed onto cards: 45 presets, LOD1 mean least IoU .889 -> .920, presets within floor - 0.02 31 -> 44
-# (sc_multistem_shrub .823 -> .928, sc_young_sapling .772 -> .889, sc_dome_shrub .819 -> .932; on
+# The levels between the nearest and the farthest (LOD2 by default) may draw up to this many planes per cluster
+# where the room holds them (crossed upright from twig_cards.UPRIGHT_PLANES), their tiles in the atlas budget
+# (twig_cards.BUDGETED_MAX_PLANES): at 256 px a crossed pair shows a cluster's twigs pressed from between its
+# planes (45 presets: LOD2 mean least IoU .837 -> .840, within floor - 0.02 25 -> 26, palm .881 -> .912,
+# lsystem_bush .778 -> .863, sc_shadow_oak .851 -> .875, maple .910 -> .924; sc_self_pruning_forest_tree
+# .780 -> .768; tree_seed(7, 0): .830 -> .834, 26 -> 27; docs/library.md).
+MIDDLE_TWIG_PLANES = 4
+# Twig rules a level is fitted with, for the nearest level, the middle ones and the farthest. Bark cards (every
+# dropped branch a crossed pair of its own bark, its leaves left as leaf cards, one per leaf where the budget
+# holds them) suit the near levels of shrubs and saplings, whose tubes would take the budget and whose leaves
+# lose their shape pressed onto cards: 45 presets, LOD1 mean least IoU .889 -> .920, presets within floor - 0.02
+# 31 -> 44 (sc_multistem_shrub .823 -> .928, sc_young_sapling .772 -> .889, sc_dome_shrub .819 -> .932; on
 # tree_seed(7, 0) 24 -> 41). At the far level, bark cards won nowhere: its leaves would all be clumps.
 _NEAR_TWIG_RULES = (TwigRule(TWIG_CARD_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
+_MIDDLE_TWIG_RULES = (TwigRule(MIDDLE_TWIG_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
 _FAR_TWIG_RULES = (TwigRule(FAR_TWIG_PLANES), TwigRule(FAR_TWIG_PLANES, planes_first=True))
 # The crossed impostor's alpha as rendered, or grown by a texel: whichever matches LOD0 better from
 # IMPOSTOR_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse,
@@ -174,7 +182,7 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         px = int(px)
         views = CalibrationViews(renderer, lod0_cover, points, px)
         tried: dict[tuple[int, int, int], tuple[object, Judgement | None]] = {}
-        rules = _FAR_TWIG_RULES if level == len(budgets) else _NEAR_TWIG_RULES
+        rules = _FAR_TWIG_RULES if level == len(budgets) else _NEAR_TWIG_RULES if level == 1 else _MIDDLE_TWIG_RULES
 
         def built(share: int, gain: int, twigs: int = 0):
             """The candidate level (None where it cannot be built); twigs: 0 plain, k > 0 twig cards by

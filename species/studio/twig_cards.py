@@ -22,7 +22,8 @@ from .leaf_clusters import cluster_axes
 
 __all__ = ["TwigCards", "TwigAtlas", "TwigCardError", "twig_labels", "twig_cards", "TWIG_PADDING_TEXELS",
            "TWIG_DEPTH_OFFSET", "TWIG_CARD_PLANES", "TWIG_AXIS_SHARE", "TWIG_SECTOR_OVERLAP",
-           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES", "LEVEL_SPRAY_NORMAL_Z", "BUDGETED_TEXELS_PER_PIXEL"]
+           "SHARED_TEXEL_RATIO", "UPRIGHT_PLANES", "LEVEL_SPRAY_NORMAL_Z", "BUDGETED_TEXELS_PER_PIXEL",
+           "BUDGETED_MAX_PLANES"]
 
 # Empty texels around each card's tile, so a sampled mip or a bilinear tap never reads its neighbour.
 TWIG_PADDING_TEXELS = 2
@@ -61,6 +62,11 @@ TWIG_SECTOR_OVERLAP = 0.15
 # level's thin twigs fall between its pixel centres (45 presets, sharing every copy: LOD2 mean least IoU .824 ->
 # .829, presets within 19 -> 23; sc_shadow_conifer's LOD3 sharing LOD1's tiles .648 -> .625).
 SHARED_TEXEL_RATIO = 2.0
+# Cards of at most this many planes per cluster that carry their leaves (the nearer levels': LOD2 may take up to
+# 4, `farm.library.lod_fit.MIDDLE_TWIG_PLANES`) share the atlas budget at BUDGETED_TEXELS_PER_PIXEL; the far
+# level's up to 8 come on top at one texel a pixel. LOD2's 3-4 plane cards on top at one texel a pixel lost
+# sassafras's LOD2 .774 -> .745 (held by the budget: .785) for LOD3 means within .001 (45 presets).
+BUDGETED_MAX_PLANES = 4
 # Texels per screen pixel (at the level's switch size) asked of the cards the atlas budget holds: sampled twice,
 # into texels and then into pixels, a twig thinner than a pixel breaks up; at two texels a pixel less of it does
 # (45 presets: LOD2 mean least IoU .833 -> .838, presets within its floor 23 -> 25, sassafras .738 -> .774). The
@@ -129,10 +135,10 @@ class TwigCards:
 
     @property
     def budgeted(self) -> bool:
-        """Whether the atlas budget holds these cards' tiles: crossed pairs carrying their leaves. Bark cards (a
-        near level's every dropped branch, thin strips) and a far level's many planes come on top of it, so they
-        do not coarsen the others."""
-        return self.leaves and self.planes <= TWIG_CARD_PLANES
+        """Whether the atlas budget holds these cards' tiles: cards carrying their leaves, at most
+        BUDGETED_MAX_PLANES per cluster. Bark cards (a near level's every dropped branch, thin strips) and a far
+        level's many planes come on top of it, so they do not coarsen the others."""
+        return self.leaves and self.planes <= BUDGETED_MAX_PLANES
 
     def asked_texel(self, metres_per_px: float) -> float:
         """Metres per texel these cards ask at a switch size of `metres_per_px` metres per screen pixel."""
@@ -282,7 +288,7 @@ class TwigAtlas:
         tallest tiles first, into a power-of-two width about the square root of their area (at least the widest
         tile). A card that is the same as one of a nearer level (`_tile_sources`) gets no tile of its own: it
         samples that card's, at its finer texel, and takes nothing of the budget. A level whose cards are not
-        `TwigCards.budgeted` (bark cards; more than TWIG_CARD_PLANES planes per cluster, the far level's) keeps
+        `TwigCards.budgeted` (bark cards; more than BUDGETED_MAX_PLANES planes per cluster, the far level's) keeps
         its texel size and its tiles come on top of `max_texels`: they do not coarsen the other levels' cards."""
         levels = tuple(levels)
         texel = np.concatenate([np.full(len(cards), float(t)) for cards, t in zip(levels, texels)])

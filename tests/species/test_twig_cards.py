@@ -7,9 +7,9 @@ import pytest
 
 import species
 from species.studio.lod import TreeLods
-from species.studio.twig_cards import (BUDGETED_TEXELS_PER_PIXEL, LEVEL_SPRAY_NORMAL_Z, TWIG_CARD_PLANES,
-                                       TWIG_PADDING_TEXELS, UPRIGHT_PLANES, TwigAtlas, TwigCardError, twig_cards,
-                                       twig_labels)
+from species.studio.twig_cards import (BUDGETED_MAX_PLANES, BUDGETED_TEXELS_PER_PIXEL, LEVEL_SPRAY_NORMAL_Z,
+                                       TWIG_CARD_PLANES, TWIG_PADDING_TEXELS, UPRIGHT_PLANES, TwigAtlas, TwigCardError,
+                                       twig_cards, twig_labels)
 
 
 @pytest.fixture(scope="module")
@@ -333,7 +333,9 @@ def test_bark_cards_and_many_planes_come_on_top_of_the_atlas_budget_and_the_rest
     labels = twig_labels(skeleton, kept, None)
     leafy, bark = twig_cards(skeleton, lod0, labels, 2), twig_cards(skeleton, lod0, labels, 2, leaves=False)
     many = twig_cards(skeleton, lod0, twig_labels(skeleton, kept, 0), 8)
-    assert leafy.budgeted and not bark.budgeted and not many.budgeted
+    middle = twig_cards(skeleton, lod0, labels, BUDGETED_MAX_PLANES)  # a middle level's upright clusters
+    assert leafy.budgeted and middle.budgeted and not bark.budgeted and not many.budgeted
+    assert middle.planes == BUDGETED_MAX_PLANES < many.planes
     assert leafy.asked_texel(0.01) == pytest.approx(0.01 / BUDGETED_TEXELS_PER_PIXEL)
     assert bark.asked_texel(0.01) == many.asked_texel(0.01) == 0.01
     alone = TwigAtlas.pack([leafy], [0.002], 20_000)
