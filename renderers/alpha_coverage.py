@@ -56,12 +56,11 @@ def triangle_coverage(camera: Camera, vertices: np.ndarray, faces: np.ndarray, u
     bottom row of `alpha`); alpha : (h, w) bool, True where the texture is opaque (nearest texel, no filtering).
     Pixel centres are at integer (u, v) as in `Camera`. UVs are interpolated perspective-correctly, as GL does.
     """
-    if uvs is None or alpha is None:
-        _check(np.asarray(vertices), np.asarray(faces), uvs, None if alpha is None else np.shape(alpha))
-        return pixel_mask(camera, triangle_pixels(camera, vertices, faces))
-    alpha = np.asarray(alpha, bool)
-    pixels, texels = triangle_pixels(camera, vertices, faces, uvs, alpha.shape)
-    return pixel_mask(camera, pixels[alpha.ravel()[texels]])
+    found = triangle_pixels(camera, vertices, faces, uvs, None if alpha is None else np.shape(alpha))
+    if alpha is None:
+        return pixel_mask(camera, found)
+    pixels, texels = found
+    return pixel_mask(camera, pixels[np.asarray(alpha, bool).ravel()[texels]])
 
 
 def triangle_pixels(camera: Camera, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None,

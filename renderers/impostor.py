@@ -374,10 +374,10 @@ def render_impostors(renderer: CoverageRenderer, tree: TreeMesh, tile: int = 128
         normal[...] = (128, 128, 255)
         for plane, azimuth in enumerate(azimuths):
             camera = _plane_camera(centre, half, reach, float(azimuth), tile)
-            parts = PartDepths({kind_name: renderer.group_depth(
+            parts = PartDepths({kind: renderer.group_depth(
                 camera, [f"{kind}_band{band}" for band in range(inner)]
                 + [f"{kind}_band{band}_{plane}" for band in range(inner, len(radii) + 1)])
-                for kind, kind_name in (("bark", "bark"), ("leaves", LEAVES))})
+                for kind in ("bark", LEAVES)})
             row, col = (plane // columns) * tile, (plane % columns) * tile
             albedo[row:row + tile, col:col + tile], normal[row:row + tile, col:col + tile] = atlas_tile(
                 camera, parts, tree)
@@ -396,7 +396,7 @@ def _banded_groups(tree: TreeMesh, centre: np.ndarray, planes: int, radii: list[
     right = np.cross(-view_direction(0.0, 0.0), [0.0, 0.0, 1.0])
     line0 = np.degrees(np.arctan2(right[1], right[0]))
     groups = {}
-    for kind, part in (("bark", tree.bark), ("leaves", tree.leaves)):
+    for kind, part in (("bark", tree.bark), (LEAVES, tree.leaves)):
         if part.n_faces == 0:
             continue
         centroid = part.vertices[part.faces].mean(axis=1).astype(np.float64) - centre
@@ -407,13 +407,13 @@ def _banded_groups(tree: TreeMesh, centre: np.ndarray, planes: int, radii: list[
         for b in range(len(radii) + 1):
             within = band == b
             if b < len(radii):
-                groups[f"{kind}_band{b}"] = (*_compact(part.vertices, part.faces[within]), kind == "leaves")
+                groups[f"{kind}_band{b}"] = (*_compact(part.vertices, part.faces[within]), kind == LEAVES)
             if b == 0:
                 continue
             for index in range(planes):
                 chosen = within & ((sector == index) | (shared & (neighbour == index)))
                 groups[f"{kind}_band{b}_{index}"] = (*_compact(part.vertices, part.faces[chosen]),
-                                                     kind == "leaves")
+                                                     kind == LEAVES)
     return groups
 
 
