@@ -200,8 +200,16 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                         raise  # LOD0's own proportion is the reference: its failure is the budget's
                     tried[share, gain, twigs] = (None, None)
                     return None
-                cover = lambda lod=lod: level_cover(lod, lod0_cover, leaf_fraction, card_fraction)  # noqa: E731
-                tried[share, gain, twigs] = (lod, Judgement(views, cover))
+                # Two rules may come to the same cards at a share (TreeLods keeps them by what they are: the far
+                # level's rules, where its clusters are few): the same level, judged once.
+                same = [entry for (s, g, t), entry in tried.items()
+                        if t and t != twigs and s == share and g == gain and entry[0] is not None
+                        and entry[0].twigs is lod.twigs]
+                if same:
+                    tried[share, gain, twigs] = same[0]
+                else:
+                    cover = lambda lod=lod: level_cover(lod, lod0_cover, leaf_fraction, card_fraction)  # noqa: E731
+                    tried[share, gain, twigs] = (lod, Judgement(views, cover))
             return tried[share, gain, twigs][0]
 
         def score(share: int, gain: int, twigs: int = 0, beat: float = -np.inf) -> float:
