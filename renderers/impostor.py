@@ -8,6 +8,7 @@ triangles), and (H, W) bool coverage masks and IoU figures at a given screen siz
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 from dataclasses import dataclass
@@ -21,7 +22,7 @@ from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .alpha_coverage import pixel_mask, triangle_pixels
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import (LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
+from .maps import (DUMMY_PLANES, LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
                    single_sample_renderer_class, tangent_space_normals)
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "render_impostors",
@@ -186,7 +187,8 @@ class CoverageRenderer(DepthRenderer):
     def __init__(self, size: int = 256):
         super().__init__(size)
         self._renderer._renderer = _unculled_renderer_class()(size, size)
-        self._cover_tree, self._cover_primitives = None, []
+        self._cover_tree, self._cover_primitives = None, []  # `coverage`'s tree and its uploaded primitives
+        self._groups: dict[str, object] = {}  # `load_groups`' uploaded primitives by name
 
     def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool, culled: bool | None = None):
         """One winding of the faces, seen from both sides unless `culled` (default: single-sided bark, a part
@@ -201,49 +203,67 @@ class CoverageRenderer(DepthRenderer):
 
     def coverage(self, tree: TreeMesh, camera: Camera) -> np.ndarray:
         """(H, W) bool, pixels whose centre a triangle of `tree` covers (leaf cards as opaque quads)."""
-        platform = self._renderer._platform
-        platform.make_current()
-        try:
+        with self._current():
             if tree is not self._cover_tree:
-                self._upload_cover(tree)
-            return self._renderer._renderer.coverage_pass(self._cover_primitives, camera)
-        finally:
-            platform.make_uncurrent()
-
-    def _upload_cover(self, tree: TreeMesh) -> None:
-        """Put `tree` in GL buffers for `coverage` (the context current): its bark as one culled primitive, its
-        leaves as one drawn from both sides; the previous tree's buffers freed."""
-        for primitive in self._cover_primitives:
-            primitive._remove_from_context()
-        self._cover_primitives = []
-        for part, culled in ((tree.bark, True), (tree.leaves, False)):
-            if part.n_faces:
-                primitive = self._pyrender.Primitive(positions=part.vertices, indices=part.faces)
-                primitive._add_to_context()
-                primitive.culled = culled
-                self._cover_primitives.append(primitive)
-        self._cover_tree = tree
-
-    def close(self) -> None:
-        self._cover_tree, self._cover_primitives = None, []  # their GL objects go with the context
-        super().close()
+                self._free(self._cover_primitives)
+                self._cover_primitives = [self._upload(part.vertices, part.faces, culled)
+                                          for part, culled in ((tree.bark, True), (tree.leaves, False))
+                                          if part.n_faces]
+                self._cover_tree = tree
+            return self._renderer._renderer.coverage_pass(self._cover_primitives, *self._view_projection(camera))
 
     def load_groups(self, groups: dict[str, tuple[np.ndarray, np.ndarray, bool]]) -> None:
-        """Replace the scene's meshes by named face groups: name -> (vertices (V, 3) float metres, faces (F, 3)
-        int, double_sided); empty groups are left out."""
-        for node in self._mesh_nodes.values():
-            self._scene.remove_node(node)
-        # Slices and pressed faces are not closed: drawn from both sides.
-        self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided, culled=False))
-                            for name, (vertices, faces, double_sided) in groups.items() if len(faces)}
-        self._tree = None  # the next `load` uploads its tree again
+        """Upload named face groups for `group_depth`, replacing those loaded before: name -> (vertices (V, 3)
+        float metres, faces (F, 3) int, double_sided); empty groups are left out."""
+        with self._current():
+            self._free(self._groups.values())
+            # Slices and pressed faces are not closed: drawn from both sides.
+            self._groups = {name: self._upload(vertices, faces, False)
+                            for name, (vertices, faces, _) in groups.items() if len(faces)}
 
     def group_depth(self, camera: Camera, names) -> np.ndarray:
         """(H, W) float32 metres, the nearest surface of the named groups (those loaded), 0 where none."""
-        visible = set(names) & set(self.part_names)
-        if not visible:
+        primitives = [self._groups[name] for name in sorted(set(names) & set(self._groups))]
+        if not primitives:
             return np.zeros((camera.height, camera.width), np.float32)
-        return self._pass(camera, visible)
+        with self._current():
+            linear = self._renderer._renderer.depth_pass(primitives, *self._view_projection(camera))
+        return self._metric_depth(linear, camera)
+
+    def close(self) -> None:
+        self._cover_tree, self._cover_primitives, self._groups = None, [], {}  # freed with the context
+        super().close()
+
+    @contextlib.contextmanager
+    def _current(self):
+        """This renderer's GL context made current for the block (as pyrender's own passes do)."""
+        platform = self._renderer._platform
+        platform.make_current()
+        try:
+            yield
+        finally:
+            platform.make_uncurrent()
+
+    def _upload(self, vertices: np.ndarray, faces: np.ndarray, culled: bool):
+        """A primitive in GL buffers (the context current), drawn by the direct passes; `culled`: back faces
+        culled (a tree's bark) or drawn too."""
+        primitive = self._pyrender.Primitive(positions=vertices, indices=faces)
+        primitive._add_to_context()
+        primitive.culled = culled
+        return primitive
+
+    @staticmethod
+    def _free(primitives) -> None:
+        for primitive in primitives:
+            primitive._remove_from_context()
+
+    def _view_projection(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
+        """The view and projection matrices pyrender's own pass would give the shaders for `camera` (its scene
+        camera posed as `_draw` poses it), so a direct pass draws the same pixels as a scene pass."""
+        self._set_camera(camera, False)
+        gl = self._renderer._renderer
+        gl.viewport_width, gl.viewport_height = camera.width, camera.height
+        return gl._get_camera_matrices(self._scene)
 
 
 @functools.cache
@@ -266,31 +286,45 @@ def _unculled_renderer_class():
             super().__init__(*args, **kwargs)
             self._cover_targets: dict[tuple[int, int], int] = {}  # (width, height) -> framebuffer
 
-        def coverage_pass(self, primitives, camera: Camera) -> np.ndarray:
-            """(H, W) bool, the pixels the primitives (uploaded, each marked `culled` or not) cover through
-            `camera`: pyrender's depth-only program (the same vertex transform, so the same pixels) without its
+        def coverage_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
+            """(H, W) bool (the viewport's size), the pixels the primitives (uploaded, each marked `culled` or
+            not) cover: pyrender's depth-only program (the same vertex transform, so the same pixels) without its
             scene walk, into a one-byte colour target with no depth buffer (a mask needs no nearest surface:
             llvmpipe draws maple's LOD0 at 512 px in 8.0 ms so, 9.4 ms with depth)."""
-            width, height = camera.width, camera.height
+            width, height = self.viewport_width, self.viewport_height
             GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._cover_target(width, height))
             GL.glViewport(0, 0, width, height)
             GL.glDisable(GL.GL_DEPTH_TEST)
             GL.glClearColor(0.0, 0.0, 0.0, 0.0)
             GL.glClear(GL.GL_COLOR_BUFFER_BIT)
-            if primitives:
-                flags = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
-                program = self._get_primitive_program(primitives[0], flags, ProgramFlags.USE_MATERIAL)
-                program._bind()
-                program.set_uniform("V", np.linalg.inv(camera.opengl_pose()))
-                program.set_uniform("P", camera.opengl_projection())
-                for primitive in primitives:
-                    self._bind_and_draw_primitive(primitive, _IDENTITY, program, flags)
-                program._unbind()
+            self._draw_primitives(primitives, view, projection)
             GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)  # rows of one byte a pixel, unpadded
             red = GL.glReadPixels(0, 0, width, height, GL.GL_RED, GL.GL_UNSIGNED_BYTE)
             GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 4)  # GL's default, which pyrender's own read-backs assume
             GL.glEnable(GL.GL_DEPTH_TEST)
             return np.frombuffer(red, np.uint8).reshape(height, width)[::-1] > 0  # GL rows run up
+
+        def depth_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
+            """(H, W) float32, what pyrender's depth-only pass of the primitives returns (its framebuffer, state
+            and read-back; linear depth between the dummy planes of `renderers.maps`), without its scene walk."""
+            flags = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES | RenderFlags.OFFSCREEN
+            self._configure_forward_pass_viewport(flags)
+            GL.glClearColor(1.0, 1.0, 1.0, 1.0)
+            GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+            self._draw_primitives(primitives, view, projection)
+            return self.linear_depth(self.window_depth(), *DUMMY_PLANES)
+
+        def _draw_primitives(self, primitives, view: np.ndarray, projection: np.ndarray) -> None:
+            if not primitives:
+                return
+            flags = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
+            program = self._get_primitive_program(primitives[0], flags, ProgramFlags.USE_MATERIAL)
+            program._bind()
+            program.set_uniform("V", view)
+            program.set_uniform("P", projection)
+            for primitive in primitives:
+                self._bind_and_draw_primitive(primitive, _IDENTITY, program, flags)
+            program._unbind()
 
         def _cover_target(self, width: int, height: int):
             """The framebuffer of one R8 colour renderbuffer of this size (made on first use, then kept: a

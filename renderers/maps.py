@@ -29,9 +29,13 @@ from .camera import Camera
 __all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "tangent_space_normals",
            "mask_albedo", "silhouette_map",
            "envelope_silhouette_map", "closed_mask", "use_headless_gl", "single_sample_renderer_class", "LEAVES",
+           "DUMMY_PLANES",
            "ENVELOPE_CLOSING_256", "ENVELOPE_SIGMA_256"]
 
 LEAVES = "leaves"
+# The near and far planes pyrender is told (our projection matrices carry the real ones): its read-back
+# linearises window depth with them, and `DepthRenderer` turns that back into window depth.
+DUMMY_PLANES = (1.0, 2.0)
 # The crown envelope (`envelope_silhouette_map`), in pixels at 256 px, scaled with the image: gaps between leaves
 # up to ~8 px are closed (the outline a person draws round a sparse crown), and the depth surfaces are the
 # visible surfaces averaged over a Gaussian of sigma 8 px. At 4 px the target still holds the per-leaf depth that
@@ -343,10 +347,14 @@ class DepthRenderer:
 
     def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
         """(H, W) float32 metres of the nearest (farthest if reverse_depth) surface of the visible parts."""
-        linear = self._draw(camera, visible, reverse_depth)
+        return self._metric_depth(self._draw(camera, visible, reverse_depth), camera, reverse_depth)
+
+    @staticmethod
+    def _metric_depth(linear: np.ndarray, camera: Camera, reverse_depth: bool = False) -> np.ndarray:
+        """(H, W) float32 metres from pyrender's read-back of a pass through `camera` (0 where empty)."""
         if reverse_depth:
             linear = linear[:, ::-1]
-        # pyrender linearised the window depth with the dummy planes near 1, far 2: undo, then use ours.
+        # pyrender linearised the window depth with the dummy planes (DUMMY_PLANES): undo, then use ours.
         hit = linear > 0
         window = np.where(hit, 2.0 - 2.0 / np.where(hit, linear, 1.0), 1.0)
         depth = camera.depth_from_window(window, reverse_depth)
@@ -400,9 +408,13 @@ def single_sample_renderer_class():
             # pyrender's read-back of a depth-only pass, its values bit for bit (float32, the camera's planes),
             # without blitting the colour buffer nobody reads and with `where` for its masked writes (the twig
             # atlas's 2048 x 530 passes: about 3x faster).
-            window = self.window_depth()
+            camera = scene.main_camera_node.camera
+            return self.linear_depth(self.window_depth(), camera.znear, camera.zfar)
+
+        @staticmethod
+        def linear_depth(window: np.ndarray, near: float, far: float) -> np.ndarray:
+            """(H, W) float32, pyrender's linear depth of a window depth read-back, 0 where nothing was drawn."""
             ndc = 2.0 * window - 1.0
-            near, far = scene.main_camera_node.camera.znear, scene.main_camera_node.camera.zfar
             linear = (2.0 * near * far) / (far + near - ndc * (far - near))
             return np.where(window == 1.0, np.float32(0.0), linear)
 
@@ -437,8 +449,8 @@ def _matrix_camera_class():
         """A pyrender camera whose projection is a given 4x4 matrix (ours, built from K and the planes)."""
 
         def __init__(self, projection: np.ndarray):
-            # Dummy planes 1 and 2: pyrender linearises read-back depth with them; DepthRenderer undoes it.
-            super().__init__(znear=1.0, zfar=2.0)
+            # Dummy planes: pyrender linearises read-back depth with them; DepthRenderer undoes it.
+            super().__init__(znear=DUMMY_PLANES[0], zfar=DUMMY_PLANES[1])
             self._projection = projection
 
         def get_projection_matrix(self, width=None, height=None):
