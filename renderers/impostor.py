@@ -23,7 +23,7 @@ from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 from .alpha_coverage import pixel_mask, triangle_pixels
 from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
 from .maps import (DUMMY_PLANES, LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
-                   single_sample_renderer_class, tangent_space_normals)
+                   single_sample_renderer_class, tangent_space_normals, tree_parts)
 
 __all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "render_impostors",
            "impostor_coverage",
@@ -170,33 +170,49 @@ class ImpostorAtlas:
 
 
 class CoverageRenderer(DepthRenderer):
-    """The farm's depth renderer for coverage: the whole tree in a single depth-only draw, and named groups of
-    faces uploaded once and drawn in any combination (the impostor's azimuth sectors).
+    """The farm's depth renderer for coverage: a tree's silhouette in one draw, its parts' depths, and named
+    groups of faces uploaded once and drawn in any combination (the impostor's azimuth sectors).
 
-    A tree's coverage (`coverage`) is drawn as its files' materials draw it: the bark single-sided (back faces
-    culled, as an engine culls the bark material, which is not double-sided), the leaves double-sided without
-    culling, so leaf cards go in once, not once per winding (pyrender culls every depth-only draw; for leafy trees
-    that halves the triangles drawn). Culling the bark's far walls halves its cost (sassafras's LOD0 at 512 px:
-    11.3 -> 5.5 ms). It is drawn from two primitives (bark, leaves) kept apart from the scene, with pyrender's
-    program but not its scene walk, into a one-byte target without depth: the same pixels for a fifth less
-    (144 passes of six presets at 64-512 px: 1.20 -> 0.95 s). Whatever is not closed bark (twig cards, faces pressed onto them) goes in `leaves`. Named
-    groups (`load_groups`: slices of the tree, faces pressed into an atlas) are drawn without culling. The
-    nearest surface still wins per pixel; only `back_depth`, which relies on culling, is not available here.
+    A tree is drawn as its files' materials draw it: the bark single-sided (back faces culled, as an engine culls
+    the bark material, which is not double-sided), the leaves double-sided without culling, so leaf cards go in
+    once, not once per winding (pyrender culls every depth-only draw; for leafy trees that halves the triangles
+    drawn). Culling the bark's far walls halves its cost (sassafras's LOD0 at 512 px: 11.3 -> 5.5 ms). Whatever
+    is not closed bark (twig cards, faces pressed onto them) goes in `leaves`. Named groups (`load_groups`:
+    slices of the tree, faces pressed into an atlas) are drawn without culling. The nearest surface wins per
+    pixel; only `back_depth`, which relies on culling, is not available here.
+
+    Every pass draws primitives uploaded apart from pyrender's scene, with its program, framebuffer and
+    read-back but not its scene walk (`_direct_pass_renderer_class`): the same pixels and depths, and `coverage`
+    draws into a one-byte target without depth (144 passes of six presets at 64-512 px: 1.20 -> 0.95 s).
     """
 
     def __init__(self, size: int = 256):
         super().__init__(size)
-        self._renderer._renderer = _unculled_renderer_class()(size, size)
+        self._renderer._renderer = _direct_pass_renderer_class()(size, size)
         self._cover_tree, self._cover_primitives = None, []  # `coverage`'s tree and its uploaded primitives
         self._groups: dict[str, object] = {}  # `load_groups`' uploaded primitives by name
+        self._parts: dict[str, object] = {}  # `load`'s, by part name (`maps.tree_parts`)
 
-    def _mesh(self, vertices: np.ndarray, faces: np.ndarray, double_sided: bool, culled: bool | None = None):
-        """One winding of the faces, seen from both sides unless `culled` (default: single-sided bark, a part
-        that is not `double_sided`)."""
-        mesh = super()._mesh(vertices, faces, False)
-        for primitive in mesh.primitives:
-            primitive.culled = not double_sided if culled is None else culled
-        return mesh
+    @property
+    def part_names(self) -> list[str]:
+        return list(self._parts)
+
+    def load(self, tree: TreeMesh) -> None:
+        """Upload a tree's parts (`maps.tree_parts`: bark per branch order, culled; leaves drawn from both sides)
+        for `part_depths`."""
+        if tree is self._tree:
+            return
+        with self._current():
+            self._free(self._parts.values())
+            self._parts = {name: self._upload(vertices, faces, not double_sided)
+                           for name, (vertices, faces, double_sided) in tree_parts(tree).items()}
+        self._tree = tree
+
+    def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
+        """(H, W) float32 metres of the nearest surface of the visible loaded parts (a direct depth pass)."""
+        if reverse_depth:
+            raise ImpostorError("a farthest-surface pass needs back-face culling: use renderers.maps.DepthRenderer")
+        return self._depth_of([self._parts[name] for name in sorted(visible & set(self._parts))], camera)
 
     def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
         raise ImpostorError("back_depth needs back-face culling: use renderers.maps.DepthRenderer for it")
@@ -226,12 +242,15 @@ class CoverageRenderer(DepthRenderer):
         primitives = [self._groups[name] for name in sorted(set(names) & set(self._groups))]
         if not primitives:
             return np.zeros((camera.height, camera.width), np.float32)
+        return self._depth_of(primitives, camera)
+
+    def _depth_of(self, primitives, camera: Camera) -> np.ndarray:
         with self._current():
             linear = self._renderer._renderer.depth_pass(primitives, *self._view_projection(camera))
         return self._metric_depth(linear, camera)
 
     def close(self) -> None:
-        self._cover_tree, self._cover_primitives, self._groups = None, [], {}  # freed with the context
+        self._cover_tree, self._cover_primitives, self._groups, self._parts = None, [], {}, {}  # freed with it
         super().close()
 
     @contextlib.contextmanager
@@ -267,30 +286,30 @@ class CoverageRenderer(DepthRenderer):
 
 
 @functools.cache
-def _unculled_renderer_class():
-    """The single-sample pyrender Renderer of `renderers.maps` whose depth-only draws keep both windings.
+def _direct_pass_renderer_class():
+    """The single-sample pyrender Renderer of `renderers.maps` with passes that draw uploaded primitives directly.
 
-    pyrender 0.1.45 (pinned) enables GL_CULL_FACE for every depth-only primitive; this draw binds the same
-    buffers and model matrix, culls back faces only of the primitives marked `culled` (a tree's bark) and draws
-    the indexed triangles. Other passes are unchanged. `coverage_pass` draws uploaded primitives as a mask.
+    pyrender 0.1.45 (pinned) walks its scene on every pass and culls every depth-only primitive. These passes use
+    its depth-only program, framebuffer and read-back, draw a list of primitives (each marked `culled`: a tree's
+    bark, back faces culled; otherwise both windings, in one draw), and skip the walk.
     """
     import ctypes
 
     from OpenGL import GL
     from pyrender.constants import ProgramFlags, RenderFlags
 
+    _DEPTH_ONLY = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
     _IDENTITY = np.eye(4)  # the model matrix: trees are uploaded in world coordinates
 
-    class UnculledDepthRenderer(single_sample_renderer_class()):
+    class DirectPassRenderer(single_sample_renderer_class()):
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             self._cover_targets: dict[tuple[int, int], int] = {}  # (width, height) -> framebuffer
 
         def coverage_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
-            """(H, W) bool (the viewport's size), the pixels the primitives (uploaded, each marked `culled` or
-            not) cover: pyrender's depth-only program (the same vertex transform, so the same pixels) without its
-            scene walk, into a one-byte colour target with no depth buffer (a mask needs no nearest surface:
-            llvmpipe draws maple's LOD0 at 512 px in 8.0 ms so, 9.4 ms with depth)."""
+            """(H, W) bool (the viewport's size), the pixels the primitives cover: into a one-byte colour target
+            with no depth buffer (a mask needs no nearest surface: llvmpipe draws maple's LOD0 at 512 px in
+            8.0 ms so, 9.4 ms with depth), the same vertex transform, so the same pixels."""
             width, height = self.viewport_width, self.viewport_height
             GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._cover_target(width, height))
             GL.glViewport(0, 0, width, height)
@@ -306,9 +325,8 @@ def _unculled_renderer_class():
 
         def depth_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
             """(H, W) float32, what pyrender's depth-only pass of the primitives returns (its framebuffer, state
-            and read-back; linear depth between the dummy planes of `renderers.maps`), without its scene walk."""
-            flags = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES | RenderFlags.OFFSCREEN
-            self._configure_forward_pass_viewport(flags)
+            and read-back: linear depth between `maps.DUMMY_PLANES`, 0 where nothing was drawn)."""
+            self._configure_forward_pass_viewport(_DEPTH_ONLY | RenderFlags.OFFSCREEN)
             GL.glClearColor(1.0, 1.0, 1.0, 1.0)
             GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
             self._draw_primitives(primitives, view, projection)
@@ -317,13 +335,21 @@ def _unculled_renderer_class():
         def _draw_primitives(self, primitives, view: np.ndarray, projection: np.ndarray) -> None:
             if not primitives:
                 return
-            flags = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
-            program = self._get_primitive_program(primitives[0], flags, ProgramFlags.USE_MATERIAL)
+            program = self._get_primitive_program(primitives[0], _DEPTH_ONLY, ProgramFlags.USE_MATERIAL)
             program._bind()
             program.set_uniform("V", view)
             program.set_uniform("P", projection)
+            program.set_uniform("M", _IDENTITY)
+            GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
             for primitive in primitives:
-                self._bind_and_draw_primitive(primitive, _IDENTITY, program, flags)
+                primitive._bind()
+                if primitive.culled:
+                    GL.glEnable(GL.GL_CULL_FACE)
+                    GL.glCullFace(GL.GL_BACK)
+                else:
+                    GL.glDisable(GL.GL_CULL_FACE)
+                GL.glDrawElements(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT, ctypes.c_void_p(0))
+                primitive._unbind()
             program._unbind()
 
         def _cover_target(self, width: int, height: int):
@@ -341,21 +367,7 @@ def _unculled_renderer_class():
                 targets[width, height] = framebuffer
             return targets[width, height]
 
-        def _bind_and_draw_primitive(self, primitive, pose, program, flags):
-            if not flags & RenderFlags.DEPTH_ONLY or primitive.indices is None or primitive.poses is not None:
-                return super()._bind_and_draw_primitive(primitive, pose, program, flags)
-            program.set_uniform("M", pose)
-            primitive._bind()
-            if getattr(primitive, "culled", False):
-                GL.glEnable(GL.GL_CULL_FACE)
-                GL.glCullFace(GL.GL_BACK)
-            else:
-                GL.glDisable(GL.GL_CULL_FACE)
-            GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
-            GL.glDrawElements(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT, ctypes.c_void_p(0))
-            primitive._unbind()
-
-    return UnculledDepthRenderer
+    return DirectPassRenderer
 
 
 def switch_camera(points: np.ndarray, azimuth_deg: float, screen_px: int) -> Camera:

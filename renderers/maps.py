@@ -29,7 +29,7 @@ from .camera import Camera
 __all__ = ["DepthRenderer", "PartDepths", "combine_parts", "normals_from_depth", "tangent_space_normals",
            "mask_albedo", "silhouette_map",
            "envelope_silhouette_map", "closed_mask", "use_headless_gl", "single_sample_renderer_class", "LEAVES",
-           "DUMMY_PLANES",
+           "DUMMY_PLANES", "tree_parts",
            "ENVELOPE_CLOSING_256", "ENVELOPE_SIGMA_256"]
 
 LEAVES = "leaves"
@@ -243,6 +243,21 @@ def envelope_silhouette_map(camera: Camera, front: np.ndarray, back: np.ndarray)
     return np.stack([np.where(crown, front_env, 1.0), gap, crown.astype(np.float64)], axis=-1).astype(np.float32)
 
 
+def tree_parts(tree: TreeMesh) -> dict[str, tuple[np.ndarray, np.ndarray, bool]]:
+    """The parts a renderer draws a tree in: name -> (vertices, faces, double_sided), the bark one part per
+    branch order (its `order` attribute; order 0 without one), then the leaves; empty parts left out."""
+    parts = {}
+    bark = tree.bark
+    if bark.n_faces:
+        order = bark.attributes.get("order")
+        face_order = np.zeros(bark.n_faces, np.uint8) if order is None else np.asarray(order)[bark.faces[:, 0]]
+        for value in np.unique(face_order):
+            parts[_bark_part(int(value))] = (bark.vertices, bark.faces[face_order == value], False)
+    if tree.leaves.n_faces:
+        parts[LEAVES] = (tree.leaves.vertices, tree.leaves.faces, True)
+    return parts
+
+
 class DepthRenderer:
     """One pyrender OffscreenRenderer, reused across trees and views; draws depth-only passes of a tree's parts.
 
@@ -307,18 +322,8 @@ class DepthRenderer:
             return
         for node in self._mesh_nodes.values():
             self._scene.remove_node(node)
-        self._mesh_nodes = {}
-        bark = tree.bark
-        if bark.n_faces:
-            order = bark.attributes.get("order")
-            face_order = (np.zeros(bark.n_faces, np.uint8) if order is None
-                          else np.asarray(order)[bark.faces[:, 0]])
-            for value in np.unique(face_order):
-                faces = bark.faces[face_order == value]
-                self._mesh_nodes[_bark_part(int(value))] = self._scene.add(self._mesh(bark.vertices, faces, False))
-        if tree.leaves.n_faces:
-            self._mesh_nodes[LEAVES] = self._scene.add(
-                self._mesh(tree.leaves.vertices, tree.leaves.faces, True))
+        self._mesh_nodes = {name: self._scene.add(self._mesh(vertices, faces, double_sided))
+                            for name, (vertices, faces, double_sided) in tree_parts(tree).items()}
         self._tree = tree
 
     def _set_camera(self, camera: Camera, reverse_depth: bool) -> None:

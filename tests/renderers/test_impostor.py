@@ -153,3 +153,42 @@ def test_coverage_culls_the_bark_s_back_faces_as_its_material_does_but_never_the
         assert back_bark == 0  # seen from behind, a single-sided bark face is culled
     finally:
         renderer.close()
+
+
+def test_direct_passes_draw_the_depths_and_pixels_of_pyrenders_scene_pass():
+    """CoverageRenderer draws its uploads without pyrender's scene walk: each bark part's depth must be bit for
+    bit what a DepthRenderer's scene pass gives (both cull it), the leaves' the same pixels (drawn once
+    unculled here, there as two culled windings, whose interpolated depths differ in the last bits), and its
+    coverage the pixels that depth covers, from views at any azimuth, elevation and size."""
+    import pytest
+
+    from renderers.camera import perspective_camera
+    from renderers.impostor import CoverageRenderer, ImpostorError, switch_camera
+    from renderers.maps import DepthRenderer, combine_parts
+    from tree_factory import make_tree
+
+    mesh, _ = make_tree(np.random.default_rng(3))
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    direct, scene = CoverageRenderer(64), DepthRenderer(64)
+    try:
+        cameras = [switch_camera(points, 33.75, 128), switch_camera(points, 200.0, 512),
+                   perspective_camera(points, 71.0, 25.0, 96)]
+        for camera in cameras:
+            for renderer in (direct, scene):
+                renderer.load(mesh)
+            ours, theirs = direct.part_depths(camera, True), scene.part_depths(camera, True)
+            assert sorted(ours.depths) == sorted(theirs.depths) and len(ours.depths) > 2
+            for name, depth in theirs.depths.items():
+                if name.startswith("bark"):
+                    assert depth.tobytes() == ours.depths[name].tobytes(), name
+                else:
+                    assert np.array_equal(depth > 0, ours.depths[name] > 0)
+                    np.testing.assert_allclose(ours.depths[name], depth, rtol=0, atol=1e-3)
+            depth, _, _ = combine_parts(theirs)
+            assert 50 < (depth > 0).sum() < depth.size
+            assert np.array_equal(direct.coverage(mesh, camera), depth > 0)
+        with pytest.raises(ImpostorError, match="back-face culling"):
+            direct.back_depth(cameras[0], np.zeros((cameras[0].height, cameras[0].width), np.float32))
+    finally:
+        direct.close()
+        scene.close()
