@@ -359,11 +359,11 @@ class DepthRenderer:
         """(H, W) float32 metres from pyrender's read-back of a pass through `camera` (0 where empty)."""
         if reverse_depth:
             linear = linear[:, ::-1]
-        # pyrender linearised the window depth with the dummy planes (DUMMY_PLANES): undo, then use ours.
+        # pyrender linearised the window depth with the dummy planes (DUMMY_PLANES): undo, then use ours. Only
+        # where something was drawn (a twig atlas's 2048 x 577 passes are mostly empty).
         hit = linear > 0
-        window = np.where(hit, 2.0 - 2.0 / np.where(hit, linear, 1.0), 1.0)
-        depth = camera.depth_from_window(window, reverse_depth)
-        depth[~hit] = 0.0
+        depth = np.zeros(linear.shape, np.float32)
+        depth[hit] = camera.depth_from_window(2.0 - 2.0 / linear[hit], reverse_depth)
         return depth
 
     def part_depths(self, camera: Camera, split_orders: bool) -> PartDepths:
