@@ -294,17 +294,20 @@ def _direct_pass_renderer_class():
     bark, back faces culled; otherwise both windings, in one draw), and skip the walk.
     """
     import ctypes
+    from collections import OrderedDict
 
     from OpenGL import GL
     from pyrender.constants import ProgramFlags, RenderFlags
 
     _DEPTH_ONLY = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
+    _COVER_TARGETS = 8
     _IDENTITY = np.eye(4)  # the model matrix: trees are uploaded in world coordinates
 
     class DirectPassRenderer(single_sample_renderer_class()):
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
-            self._cover_targets: dict[tuple[int, int], int] = {}  # (width, height) -> framebuffer
+            # (width, height) -> (framebuffer, renderbuffer), least recently used first
+            self._cover_targets: OrderedDict[tuple[int, int], tuple[int, int]] = OrderedDict()
 
         def coverage_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
             """(H, W) bool (the viewport's size), the pixels the primitives cover: into a one-byte colour target
@@ -353,10 +356,16 @@ def _direct_pass_renderer_class():
             program._unbind()
 
         def _cover_target(self, width: int, height: int):
-            """The framebuffer of one R8 colour renderbuffer of this size (made on first use, then kept: a
-            library asset's passes come in four sizes)."""
+            """The framebuffer of one R8 colour renderbuffer of this size, made on first use and kept among the
+            _COVER_TARGETS most recently used (a library asset's passes come in four sizes)."""
             targets = self._cover_targets
-            if (width, height) not in targets:
+            if (width, height) in targets:
+                targets.move_to_end((width, height))
+            else:
+                if len(targets) >= _COVER_TARGETS:
+                    framebuffer, renderbuffer = targets.popitem(last=False)[1]
+                    GL.glDeleteFramebuffers(1, [framebuffer])
+                    GL.glDeleteRenderbuffers(1, [renderbuffer])
                 renderbuffer = GL.glGenRenderbuffers(1)
                 GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, renderbuffer)
                 GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_R8, width, height)
@@ -364,8 +373,8 @@ def _direct_pass_renderer_class():
                 GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, framebuffer)
                 GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0, GL.GL_RENDERBUFFER,
                                              renderbuffer)
-                targets[width, height] = framebuffer
-            return targets[width, height]
+                targets[width, height] = (framebuffer, renderbuffer)
+            return targets[width, height][0]
 
     return DirectPassRenderer
 

@@ -192,3 +192,24 @@ def test_direct_passes_draw_the_depths_and_pixels_of_pyrenders_scene_pass():
     finally:
         direct.close()
         scene.close()
+
+
+def test_coverage_of_many_sizes_keeps_a_few_targets_and_the_same_pixels():
+    """A silhouette drawn at many sizes in turn (each into a one-byte target of its own) comes out the same as
+    when its size is drawn first, and the renderer keeps only a few of those targets."""
+    from renderers.impostor import CoverageRenderer, switch_camera
+    from tree_factory import make_tree
+
+    mesh, _ = make_tree(np.random.default_rng(4))
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    cameras = [switch_camera(points, 30.0, size) for size in range(40, 200, 12)]
+    renderer = CoverageRenderer(64)
+    try:
+        first = [renderer.coverage(mesh, camera) for camera in cameras]
+        again = [renderer.coverage(mesh, camera) for camera in reversed(cameras)][::-1]
+        for camera, a, b in zip(cameras, first, again):
+            assert a.shape == (camera.height, camera.width) and a.any()
+            assert np.array_equal(a, b)
+        assert len(renderer._renderer._renderer._cover_targets) <= 8 < len(cameras)
+    finally:
+        renderer.close()
