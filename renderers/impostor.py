@@ -209,9 +209,8 @@ class CoverageRenderer(DepthRenderer):
         self._tree = tree
 
     def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
-        """(H, W) float32 metres of the nearest surface of the visible loaded parts (a direct depth pass)."""
-        if reverse_depth:
-            raise ImpostorError("a farthest-surface pass needs back-face culling: use renderers.maps.DepthRenderer")
+        """(H, W) float32 metres of the nearest surface of the visible loaded parts (a direct depth pass; the
+        farthest-surface pass is `back_depth`'s alone, refused below)."""
         return self._depth_of([self._parts[name] for name in sorted(visible & set(self._parts))], camera)
 
     def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
