@@ -2,6 +2,7 @@
 previews, Blender outputs if available), GLB size with/without instancing, IoU per level, and 1 vs 2 workers.
 
 Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_library.py [SPECIES ...] [--no-scaling]
+[--no-twig-cards] (the last: the spec's `twig_cards: false`, levels of tubes and leaf cards only)
 Reference: Sapling alone takes 1.85 s median to grow one mesh (no LODs); target < 1 s per asset without Blender.
 IoU rule (renderers/alpha_coverage.py): every leaf and cluster card drawn as its two triangles shrunk about its
 centre to the opaque share of its alpha tile, in depth-only passes that cull only the bark's back faces (as its
@@ -41,7 +42,7 @@ Seeds are tree_seed(0, position in the list): compare figures only between runs 
 """
 from __future__ import annotations
 
-import contextlib
+import dataclasses
 import os
 import shutil
 import sys
@@ -53,7 +54,7 @@ import numpy as np
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
-def main(names: list[str], scaling: bool = True) -> None:
+def main(names: list[str], scaling: bool = True, twig_cards: bool = True) -> None:
     from farm.library.asset import build_asset
     from farm.library.gltf_asset import glb_size
     from farm.library.job import run_library, write_asset_files
@@ -65,7 +66,8 @@ def main(names: list[str], scaling: bool = True) -> None:
     from species.meshing.png import png_bytes
 
     spec = parse_library_spec({"species": {n: 1 for n in names}, "formats": ["glb", "usd", "obj", "collision"],
-                               "texture_size": 256, "impostor_tile": 128})
+                               "texture_size": 256, "impostor_tile": 128, "twig_cards": twig_cards})
+    plain = dataclasses.replace(spec, twig_cards=False)
     renderer = CoverageRenderer(64)
     stages, figures, floors = [], [], {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -109,9 +111,11 @@ def main(names: list[str], scaling: bool = True) -> None:
     for name, record in figures:
         s = record["sizes"]
         print(f"  {name:20s} {s['glb']:>10d} / {s['glb_without_instancing']:>10d}  ({s['glb'] / s['glb_without_instancing']:.2f}x)")
-    print("\nGLB bytes with twig cards / the same asset without them, and the twig atlas's images (four albedos, the "
-          "normal map) as a share of the GLB without them (issue 26: the twig atlas may grow the GLB by at most 25 %)")
-    for i, name in enumerate(names):
+    if twig_cards:
+        print("\nGLB bytes with twig cards / the same asset without them (`twig_cards: false`), and the twig atlas's "
+              "images (four albedos, the normal map) as a share of the GLB without them (issue 26: the twig atlas "
+              "may grow the GLB by at most 25 %)")
+    for i, name in enumerate(names if twig_cards else []):
         asset = build_asset(name, tree_seed(0, i), spec, renderer, StageTimer())
         if asset.twig_atlas is None:
             print(f"  {name:20s} no twig cards")
@@ -119,8 +123,7 @@ def main(names: list[str], scaling: bool = True) -> None:
         with_twigs = glb_size(asset)
         atlas_bytes = sum(len(png_bytes(image, palette=True)) for image in asset.twig_albedos.values()) \
             + len(png_bytes(asset.twig_atlas.normal))
-        with plain_levels_only():
-            without = glb_size(build_asset(name, tree_seed(0, i), spec, renderer, StageTimer()))
+        without = glb_size(build_asset(name, tree_seed(0, i), plain, renderer, StageTimer()))
         print(f"  {name:20s} {with_twigs:>10d} / {without:>10d}  ({100 * (with_twigs / without - 1):+.1f} %; atlas "
               f"{atlas_bytes:>8d} B = {100 * atlas_bytes / without:.1f} %)")
     print("\nReference: Sapling grows one mesh in 1.85 s median (no LODs); target: full asset < 1 s per tree on one core")
@@ -148,23 +151,12 @@ def main(names: list[str], scaling: bool = True) -> None:
     print(f"speed-up with 2 workers: {elapsed[1] / elapsed[2]:.2f}x (2 cores)")
 
 
-@contextlib.contextmanager
-def plain_levels_only():
-    """Within it, `build_asset` keeps every level's plain candidate (no twig cards), for the size comparison."""
-    import farm.library.asset as asset_module
-
-    real = asset_module.settle_twigs
-    asset_module.settle_twigs = lambda fitted, *args: ([f.plain for f in fitted], None, [-1] * len(fitted))
-    try:
-        yield
-    finally:
-        asset_module.settle_twigs = real
-
-
 _WARM_UP = "bonsai"
 _SCALING_SPECIES = ("palm", "sc_young_sapling", "sassafras", "lsystem_monopodial")
 
 if __name__ == "__main__":
-    arguments = [a for a in sys.argv[1:] if a != "--no-scaling"]
+    flags = ("--no-scaling", "--no-twig-cards")
+    arguments = [a for a in sys.argv[1:] if a not in flags]
     main(arguments or ["maple", "pine", "cherry", "palm", "sc_young_sapling", "lsystem_monopodial", "sassafras",
-                       "douglas_fir", "balsam_fir"], scaling="--no-scaling" not in sys.argv[1:])
+                       "douglas_fir", "balsam_fir"], scaling="--no-scaling" not in sys.argv[1:],
+         twig_cards="--no-twig-cards" not in sys.argv[1:])

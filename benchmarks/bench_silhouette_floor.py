@@ -14,8 +14,9 @@ to the side and LOD0 against LOD0 turned by 1 deg.
 Figures: least IoU over renderers.impostor.QUALITY_AZIMUTHS, both silhouettes closed as the library measures
 them, each level at its default switch size; assets built as `farm library` builds them (default spec).
 
-Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_silhouette_floor.py [SPECIES ...]  (default: every
-preset, seed tree_seed(0, 0); about 3 s per preset on one core)
+Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_silhouette_floor.py [SPECIES ...] [--no-twig-cards]
+(default: every preset, seed tree_seed(0, 0); about 3 s per preset on one core; --no-twig-cards: the spec's
+`twig_cards: false`, levels of tubes and leaf cards only)
 Reference: issue 11's target, IoU >= 0.9 at every switch (LOD1 512 px, LOD2 256, LOD3 128, impostor 64).
 """
 from __future__ import annotations
@@ -34,7 +35,7 @@ TURNS_DEG = (1.0, 4.0)
 COLUMNS = ("library", f"LOD0 {SHIFT_PX:g} px aside", *(f"LOD0 turned {t:g} deg" for t in TURNS_DEG))
 
 
-def main(names: list[str]) -> None:
+def main(names: list[str], twig_cards: bool = True) -> None:
     from tqdm import tqdm
 
     from farm.library.asset import build_asset, leaf_fractions
@@ -49,7 +50,7 @@ def main(names: list[str]) -> None:
     rows, seconds = {}, {}
     level_names = switch_sizes = None
     for name in tqdm(names, desc="presets", unit="tree"):
-        spec = parse_library_spec({"species": {name: 1}})
+        spec = parse_library_spec({"species": {name: 1}, "twig_cards": twig_cards})
         timer = StageTimer()
         asset = build_asset(name, tree_seed(0, 0), spec, renderer, timer)
         seconds[name] = timer.seconds
@@ -97,4 +98,5 @@ def print_stage_seconds(seconds: dict[str, dict[str, float]]) -> None:
 if __name__ == "__main__":
     import species
 
-    main(sys.argv[1:] or [preset.name for preset in species.list_presets()])
+    arguments = [a for a in sys.argv[1:] if a != "--no-twig-cards"]
+    main(arguments or [preset.name for preset in species.list_presets()], twig_cards="--no-twig-cards" not in sys.argv[1:])

@@ -212,7 +212,7 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         lod0_cover = coverage_tree(lod0, lod0_fraction)  # LOD0's leaf cards cut to their texture's opaque share
         points = framing_points(lod0)  # every camera on LOD0 below is framed by these
         fitted = fit_lods(skeleton, lod0, lod0_cover, spec.lod_budgets, spec.switch_px, renderer, lod0_fraction,
-                          card_fraction, points)
+                          card_fraction, points, twig_cards=spec.twig_cards)
     with timer.stage("twigs"):
         lods, twig_atlas, twig_slots = settle_twigs(fitted, skeleton, lod0_cover, renderer, lod0_fraction,
                                                     card_fraction)

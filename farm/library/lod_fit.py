@@ -159,7 +159,7 @@ class FittedLevel:
 
 
 def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_fraction: float,
-             card_fraction: float, points=None) -> list[FittedLevel]:
+             card_fraction: float, points=None, twig_cards: bool = True) -> list[FittedLevel]:
     """One FittedLevel per (budget, switch size), fitted against LOD0 at the level's switch size from
     CALIBRATION_AZIMUTHS (score: the least IoU over them). First the bark share climbs BARK_SHARE_SCALES x LOD0's
     share from the previous level's choice (LOD1: _FIRST_SCALE) to the better neighbour while one is better; then,
@@ -170,7 +170,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
     (the farthest up to about twenty), not one per pair, and a candidate that cannot beat the one it is compared
     with is not drawn from its remaining views (`Judgement`). Budgets LOD0's own proportion cannot meet raise
     LodBudgetError as `build_lod` does; other shares that cannot be met are skipped. `points`: LOD0's
-    `framing_points`, when the caller has them."""
+    `framing_points`, when the caller has them. `twig_cards=False`: the plain climbs only (every level's
+    `twigs` None)."""
     lods = TreeLods(skeleton, lod0)
     lod0_share = lod0.bark.n_faces / max(lod0.n_faces, 1)
     points = framing_points(lod0) if points is None else points
@@ -183,6 +184,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         views = CalibrationViews(renderer, lod0_cover, points, px)
         tried: dict[tuple[int, int, int], tuple[object, Judgement | None]] = {}
         rules = _FAR_TWIG_RULES if level == len(budgets) else _NEAR_TWIG_RULES if level == 1 else _MIDDLE_TWIG_RULES
+        if not twig_cards:
+            rules = ()
 
         def built(share: int, gain: int, twigs: int = 0):
             """The candidate level (None where it cannot be built); twigs: 0 plain, k > 0 twig cards by

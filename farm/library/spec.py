@@ -29,10 +29,10 @@ DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
 IMPOSTOR_KINDS = ("crossed", "octahedral")
 DEFAULT_IMPOSTOR_TILE = 128  # px; an octahedral atlas takes the largest tile up to this that fits MAX_ATLAS_PX
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
-             "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources"}
+             "twig_cards", "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources"}
 # Spec fields the job record leaves out while they hold these values: they came after library.json was first
 # written, and leaving them out keeps the default library's records and spec digest as they were.
-_OMITTED_WHEN = {"impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
+_OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
 # The library's trees table holds the skeletons (and carries resume); the meshes are the assets' own files, so
 # no views and no GLB column.
 LIBRARY_TABLES = DatasetTables(view_outputs=(), store_glb=False)
@@ -73,6 +73,9 @@ class LibrarySpec(PipelineSpec):
                     take over; strictly decreasing, one more than lod_budgets.
     formats       : files written per asset (glb, usd, obj, fbx, collision) and per species (blend).
     texture_size  : bark texture height in pixels (leaf atlas tiles are half of it).
+    twig_cards    : whether the LOD fit may draw dropped branches as twig (and bark) cluster cards; False keeps
+                    every level to tubes and leaf cards: about half the asset's time, at some silhouette fidelity
+                    on twiggy crowns (docs/library.md).
     impostor      : "crossed" (8 crossed planes, 16 triangles; the default) or "octahedral" (one quad and a
                     hemi-octahedral atlas of views, `renderers.octahedral_impostor`).
     impostor_frames : octahedral frames per side of the atlas grid (FRAMES_RANGE); crossed: the default, unused.
@@ -88,6 +91,7 @@ class LibrarySpec(PipelineSpec):
     switch_px: tuple[int, ...] = DEFAULT_SWITCH_PX
     formats: tuple[str, ...] = FORMATS
     texture_size: int = 256
+    twig_cards: bool = True
     impostor: str = "crossed"
     impostor_frames: int = OCTAHEDRAL_FRAMES
     impostor_tile: int = DEFAULT_IMPOSTOR_TILE
@@ -184,6 +188,9 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     texture_size = check_int("texture_size", raw.get("texture_size", 256), 32, 4096)
     if texture_size % 4:
         raise LibrarySpecError("texture_size", texture_size, "a multiple of 4 in [32, 4096]")
+    twig_cards = raw.get("twig_cards", True)
+    if not isinstance(twig_cards, bool):
+        raise LibrarySpecError("twig_cards", twig_cards, "true or false")
     impostor = raw.get("impostor", "crossed")
     if impostor not in IMPOSTOR_KINDS:
         raise LibrarySpecError("impostor", impostor, f"one of: {', '.join(IMPOSTOR_KINDS)}")
@@ -200,7 +207,8 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
     resources = check_resources(raw.get("resources", {}))
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
-                       formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, impostor=impostor,
+                       formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, twig_cards=twig_cards,
+                       impostor=impostor,
                        impostor_frames=frames, impostor_tile=tile,
                        shard_size=shard_size, resources=resources)
 

@@ -17,6 +17,7 @@ from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_card
 from renderers.camera import orthographic_camera, perspective_camera
 from renderers.framing import framing_points
 from renderers.impostor import switch_camera
+from species.meshing.gltf import read_glb_json
 from species.meshing.tubes_and_cards import leaf_part
 from species.studio.pbr_textures import leaf_atlas
 from species.skeleton import Skeleton
@@ -129,6 +130,33 @@ def test_impostor_planes_cross_on_the_trunk(sapling):
 def sapling(renderer):
     spec = parse_library_spec({"species": {"sc_young_sapling": 1}, "texture_size": 64, "impostor_tile": 32})
     return build_asset("sc_young_sapling", tree_seed(3, 0), spec, renderer, StageTimer())
+
+
+def test_without_twig_cards_every_level_is_the_fits_plain_candidate_within_its_budget(sapling, renderer):
+    import farm.library.asset as asset_module
+
+    assert sapling.twig_atlas is not None  # this tree draws twig cards by default: the option changes something
+    fitted = []
+    real_fit = asset_module.fit_lods
+    asset_module.fit_lods = lambda *args, **kwargs: fitted.append(real_fit(*args, **kwargs)) or fitted[-1]
+    try:
+        for twig_cards in (True, False):
+            spec = parse_library_spec({"species": {"sc_young_sapling": 1}, "texture_size": 64, "impostor_tile": 32,
+                                       "twig_cards": twig_cards})
+            plain = build_asset("sc_young_sapling", tree_seed(3, 0), spec, renderer, StageTimer())
+    finally:
+        asset_module.fit_lods = real_fit
+    assert plain.twig_atlas is None and all(level.twigs is None for level in plain.levels)
+    assert all(level.twigs is None for level in fitted[1])
+    for level, with_cards, without, budget in zip(plain.levels[1:], fitted[0], fitted[1], spec.lod_budgets):
+        # The same plain climb as with twig cards on: the option drops the twig candidates, nothing else.
+        assert np.array_equal(with_cards.plain.mesh.bark.faces, without.plain.mesh.bark.faces)
+        assert np.array_equal(with_cards.plain.skeleton.leaves, without.plain.skeleton.leaves)
+        assert level.mesh is without.plain.mesh and level.n_triangles <= budget * plain.lod0.n_faces
+        assert len(level.iou) == 8
+    assert np.array_equal(plain.lod0.bark.vertices, sapling.lod0.bark.vertices)
+    names = {material["name"] for material in read_glb_json(asset_to_glb(plain))["materials"]}
+    assert not any(name.startswith("twigs_") for name in names) and "bark" in names
 
 
 def test_cameras_framed_on_hull_points_equal_those_framed_on_every_vertex(sapling):

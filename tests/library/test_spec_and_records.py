@@ -77,6 +77,23 @@ def test_the_default_crossed_impostor_leaves_the_job_record_as_it_was():
     assert "impostor" not in record and "impostor_frames" not in record and record["impostor_tile"] == 128
 
 
+def test_twig_cards_are_on_by_default_left_out_of_the_record_and_round_trip_when_off():
+    spec = parse_library_spec(SPEC)
+    assert spec.twig_cards is True and "twig_cards" not in spec.to_dict()
+    assert parse_library_spec({**SPEC, "twig_cards": True}) == spec
+    plain = parse_library_spec({**SPEC, "twig_cards": False})
+    record = json.loads(json.dumps(plain.to_dict()))
+    assert record["twig_cards"] is False and library_spec_from_record(record) == plain
+    assert plain.digest() != spec.digest()
+
+
+@pytest.mark.parametrize("value", ["no", 0, 1, None, [False]])
+def test_twig_cards_other_than_true_or_false_are_refused_naming_the_value(value):
+    with pytest.raises(LibrarySpecError) as info:
+        parse_library_spec({**SPEC, "twig_cards": value})
+    assert info.value.field == "twig_cards" and "true or false" in str(info.value) and repr(value) in str(info.value)
+
+
 def test_an_octahedral_spec_takes_the_largest_tile_that_fits_the_atlas_and_round_trips():
     spec = parse_library_spec({**SPEC, "impostor": "octahedral"})
     assert (spec.impostor, spec.impostor_frames, spec.impostor_tile) == ("octahedral", 12, 85)
