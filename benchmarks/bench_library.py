@@ -115,17 +115,17 @@ def main(names: list[str], scaling: bool = True, twig_cards: bool = True) -> Non
         print("\nGLB bytes with twig cards / the same asset without them (`twig_cards: false`), and the twig atlas's "
               "images (four albedos, the normal map) as a share of the GLB without them (issue 26: the twig atlas "
               "may grow the GLB by at most 25 %)")
-    for i, name in enumerate(names if twig_cards else []):
-        asset = build_asset(name, tree_seed(0, i), spec, renderer, StageTimer())
-        if asset.twig_atlas is None:
-            print(f"  {name:20s} no twig cards")
-            continue
-        with_twigs = glb_size(asset)
-        atlas_bytes = sum(len(png_bytes(image, palette=True)) for image in asset.twig_albedos.values()) \
-            + len(png_bytes(asset.twig_atlas.normal))
-        without = glb_size(build_asset(name, tree_seed(0, i), plain, renderer, StageTimer()))
-        print(f"  {name:20s} {with_twigs:>10d} / {without:>10d}  ({100 * (with_twigs / without - 1):+.1f} %; atlas "
-              f"{atlas_bytes:>8d} B = {100 * atlas_bytes / without:.1f} %)")
+        for i, name in enumerate(names):
+            asset = build_asset(name, tree_seed(0, i), spec, renderer, StageTimer())
+            if asset.twig_atlas is None:
+                print(f"  {name:20s} no twig cards")
+                continue
+            with_twigs = glb_size(asset)
+            atlas_bytes = sum(len(png_bytes(image, palette=True)) for image in asset.twig_albedos.values()) \
+                + len(png_bytes(asset.twig_atlas.normal))
+            without = glb_size(build_asset(name, tree_seed(0, i), plain, renderer, StageTimer()))
+            print(f"  {name:20s} {with_twigs:>10d} / {without:>10d}  ({100 * (with_twigs / without - 1):+.1f} %; atlas "
+                  f"{atlas_bytes:>8d} B = {100 * atlas_bytes / without:.1f} %)")
     print("\nReference: Sapling grows one mesh in 1.85 s median (no LODs); target: full asset < 1 s per tree on one core")
     if not scaling:
         return
