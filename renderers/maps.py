@@ -361,9 +361,11 @@ class DepthRenderer:
             linear = linear[:, ::-1]
         # pyrender linearised the window depth with the dummy planes (DUMMY_PLANES): undo, then use ours. Only
         # where something was drawn (a twig atlas's 2048 x 577 passes are mostly empty).
+        near, far = DUMMY_PLANES
         hit = linear > 0
         depth = np.zeros(linear.shape, np.float32)
-        depth[hit] = camera.depth_from_window(2.0 - 2.0 / linear[hit], reverse_depth)
+        window = far / (far - near) - (far * near / (far - near)) / linear[hit]  # 2 - 2 / linear for (1, 2)
+        depth[hit] = camera.depth_from_window(window, reverse_depth)
         return depth
 
     def part_depths(self, camera: Camera, split_orders: bool) -> PartDepths:
