@@ -44,7 +44,7 @@ def plain_loop(spec, out: Path) -> float:
     import cv2
 
     from farm.pipeline import plan_shards, run_shard
-    from farm.storage import Location
+    from farm.dataset.storage import Location
     from farm.tree_chain import SpeciesChain
 
     cv2.setNumThreads(1)

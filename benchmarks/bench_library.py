@@ -60,7 +60,7 @@ def main(names: list[str], scaling: bool = True, twig_cards: bool = True) -> Non
     from farm.library.job import run_library, write_asset_files
     from farm.library.quality import FLOOR_MARGIN, asset_floors
     from farm.library.spec import parse_library_spec
-    from farm.storage import Location
+    from farm.dataset.storage import Location
     from farm.tree_chain import StageTimer, tree_seed
     from renderers.impostor import CoverageRenderer
     from species.meshing.png import png_bytes

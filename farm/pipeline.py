@@ -21,10 +21,10 @@ from species.errors import TreefarmError
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
 from .jobs import PipelineSpec, species_of_trees
-from .manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
+from .dataset.manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
 from .ray_reaper import start_reaper
-from .storage import Location, TransientWriteError
+from .dataset.storage import Location, TransientWriteError
 from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 

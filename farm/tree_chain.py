@@ -16,7 +16,7 @@ import numpy as np
 
 
 from .dataset import FLOAT_OUTPUTS, trees_schema
-from .image_codec import encode_map
+from .dataset.image_codec import encode_map
 
 __all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
            "tree_row", "view_rows", "failed_tree_row", "to_json"]

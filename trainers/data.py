@@ -36,8 +36,8 @@ import numpy as np
 import torch
 
 from farm.dataset import part_files, reading_part
-from farm.storage import Location
-from farm.torch_dataset import ViewsDataset
+from farm.dataset.storage import Location
+from farm.dataset.torch_dataset import ViewsDataset
 
 from .pix2pix import targets_from_views
 from .preprocess import apply_crop, prepare

@@ -352,7 +352,7 @@ def masked_depth_error(prediction, target, mask, channels: Sequence[int] | None 
 class Pix2PixTask:
     """One of seed 000's two cGAN tasks, as data: which dataset outputs it reads and how its channels are used.
 
-    input_output, target_output : views-table output names (`farm.torch_dataset.ViewsDataset` items).
+    input_output, target_output : views-table output names (`farm.dataset.torch_dataset.ViewsDataset` items).
     channel_names : target channels in order. depth_channels : those `masked_depth_error` scores.
     dense_channels : those supervised on every pixel (others on the foreground only).
     mask_channel : the target channel that is the foreground mask (>= 0.5), or None: foreground where the
@@ -412,7 +412,7 @@ def _as_chw(name: str, image, channels: int) -> torch.Tensor:
         image = image[None]
     if image.ndim != 3 or image.shape[0] != channels:
         raise Pix2PixError(f"output {name!r} has shape {tuple(image.shape)}: allowed ({channels}, H, W) as "
-                           f"farm.torch_dataset.ViewsDataset decodes it")
+                           f"farm.dataset.torch_dataset.ViewsDataset decodes it")
     return image
 
 

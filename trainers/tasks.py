@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from farm.dataset import DatasetError, read_manifest
-from farm.storage import Location
+from farm.dataset.storage import Location
 from species.errors import TreefarmError
 
 __all__ = ["Task", "TASKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task", "print_data_spec"]

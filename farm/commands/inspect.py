@@ -61,7 +61,7 @@ def contact_rows(path: str, n_rows: int) -> list:
     import pyarrow.compute as pc
 
     from farm.dataset import FLOAT_OUTPUTS, open as open_table, read_manifest
-    from farm.image_codec import METRIC_MAPS, decode_map
+    from farm.dataset.image_codec import METRIC_MAPS, decode_map
 
     outputs = read_manifest(path)["job"]["render"]["outputs"]
     trees = open_table(path, "trees").to_table(columns=["tree_id", "species", "error"])
@@ -88,7 +88,7 @@ def contact_rows(path: str, n_rows: int) -> list:
 def run(args: argparse.Namespace) -> int:
     from renderers import write_contact_sheet
 
-    from farm.storage import Location
+    from farm.dataset.storage import Location
 
     check_flag_int("--rows", args.rows, 1)
     print(summary_table(args.dir))

@@ -58,7 +58,7 @@ def _load(args):
 def _print_floors(folder: str, progress: bool) -> None:
     from farm.library.catalog import refresh_catalog_tables
     from farm.library.quality import FLOOR_MARGIN, library_floors, store_floors
-    from farm.storage import Location
+    from farm.dataset.storage import Location
     from farm.table import format_table
 
     floors = library_floors(folder, progress=progress)

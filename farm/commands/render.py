@@ -66,7 +66,7 @@ def encode_image(name: str, image: np.ndarray, camera) -> tuple[np.ndarray, dict
 
 def _write_png(path: Path, image: np.ndarray) -> None:
     """One view's output as a PNG file, by the dataset's map codec (8- or 16-bit, RGB or grey)."""
-    from farm.image_codec import encode_pixels
+    from farm.dataset.image_codec import encode_pixels
 
     with user_path(path, "write"):
         path.write_bytes(encode_pixels(image))
@@ -120,7 +120,7 @@ def _photo_sheet_rows(photos) -> list:
     """Contact sheet rows of a Blender photos job: one row per camera, its photo, depth and part mask."""
     from renderers import viewable
 
-    from farm.image_codec import decode_map
+    from farm.dataset.image_codec import decode_map
 
     rows = []
     for camera, photo, depth, mask, scale in zip(photos.cameras, photos.images, photos.depths, photos.masks,

@@ -23,8 +23,8 @@ def _print_stages(stage_seconds: dict, n_trees: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from farm.dataset import DatasetError, read_manifest
-    from farm.manifest import SHARDS_FOLDER, JOB_RECORD, read_shard_record
-    from farm.storage import Location
+    from farm.dataset.manifest import SHARDS_FOLDER, JOB_RECORD, read_shard_record
+    from farm.dataset.storage import Location
 
     location = Location.resolve(args.dir)
     if location.exists("manifest.json"):

@@ -70,8 +70,8 @@ def _task_arguments(parser: argparse.ArgumentParser) -> None:
 
 def dataset_folders(paths: list[str]) -> list[str]:
     """Each path that is a dataset (has manifest.json or a job record), else its subfolders that are, sorted."""
-    from farm.manifest import JOB_RECORD
-    from farm.storage import Location
+    from farm.dataset.manifest import JOB_RECORD
+    from farm.dataset.storage import Location
 
     out = []
     for path in paths:
@@ -123,7 +123,7 @@ def run_train(args: argparse.Namespace) -> int:
         sys.stdout.write(print_data_spec(args.task))
         return 0
     folders = _need_data(args)
-    from farm.manifest import code_version
+    from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
     from trainers.models import register_result
     from trainers.registry import open_registry
@@ -162,7 +162,7 @@ def _print_result(task: str, result, version, registry) -> None:
 
 def run_retrain(args: argparse.Namespace) -> int:
     folders = _need_data(args)
-    from farm.manifest import code_version
+    from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
     from trainers.models import retrain
     from trainers.networks import TrainSettings

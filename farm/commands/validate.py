@@ -18,8 +18,8 @@ def register(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from farm.dataset import read_manifest
-    from farm.manifest import validate_dataset
-    from farm.storage import Location
+    from farm.dataset.manifest import validate_dataset
+    from farm.dataset.storage import Location
 
     location = Location.resolve(args.dir)
     if not location.exists("manifest.json"):  # not a dataset at all (status 2), rather than a damaged one (1)

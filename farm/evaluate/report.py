@@ -104,7 +104,7 @@ def _cell(stats: dict | None) -> str:
 
 
 def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, table: dict) -> str:
-    from farm.manifest import code_version
+    from farm.dataset.manifest import code_version
     from farm.table import format_table
     from reconstruct.scoring import METRICS
 

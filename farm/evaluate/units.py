@@ -51,7 +51,7 @@ def load_tree(unit: Unit) -> HeldOutTree:
 
     import species
     from farm.dataset import FLOAT_OUTPUTS, part_files, read_manifest, reading_part
-    from farm.image_codec import METRIC_MAPS, decode_map
+    from farm.dataset.image_codec import METRIC_MAPS, decode_map
     from renderers import Camera
 
     location, files = part_files(unit.dataset, "trees")

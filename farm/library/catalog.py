@@ -12,9 +12,9 @@ from renderers.blender import blender_available
 from renderers.contact_sheet import contact_sheet
 from species.meshing.gltf import GlbError, read_glb_chunks
 
-from ..image_codec import decode_map, encode_pixels
-from ..manifest import Problem
-from ..storage import Location, sha256_hex
+from ..dataset.image_codec import decode_map, encode_pixels
+from ..dataset.manifest import Problem
+from ..dataset.storage import Location, sha256_hex
 from ..tree_chain import to_json
 from .blender_catalog import DEFAULT_CATALOG, write_blender_library
 from .previews import gallery_html

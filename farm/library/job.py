@@ -19,9 +19,9 @@ from species.meshing.gltf import z_up_to_y_up
 from species.studio.collision import capsule_mesh
 
 from ..jobs import preset_names
-from ..manifest import JOB_RECORD
+from ..dataset.manifest import JOB_RECORD
 from ..pipeline import run_job
-from ..storage import Location, sha256_hex
+from ..dataset.storage import Location, sha256_hex
 from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
 from .asset import LibraryAsset, build_asset
 from .catalog import write_catalog

@@ -88,7 +88,7 @@ def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
     """Every catalogued asset of a library folder rebuilt with the library's spec and measured (`asset_floors`)."""
     from tqdm import tqdm
 
-    from farm.storage import Location
+    from farm.dataset.storage import Location
     from farm.tree_chain import StageTimer
     from renderers.impostor import CoverageRenderer
 

@@ -10,7 +10,7 @@ import json
 
 from species.errors import TreefarmError
 
-from ..storage import Location
+from ..dataset.storage import Location
 from ..tree_chain import to_json, tree_seed
 from .asset import asset_id
 from .spec import LibrarySpec, library_spec_from_record, species_of_trees

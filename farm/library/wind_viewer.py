@@ -10,7 +10,7 @@ from pathlib import Path
 
 from species.errors import TreefarmError
 
-from ..storage import Location
+from ..dataset.storage import Location
 
 __all__ = ["WIND_PAGE", "VIEWER_THREE", "THREE_FILES", "three_version", "three_source", "wind_page_html",
            "write_wind_viewer", "wind_link"]

@@ -5,7 +5,7 @@ written whole under a temporary name and renamed, sorted by tree id then reviewe
 """
 from __future__ import annotations
 
-from farm.storage import Location
+from farm.dataset.storage import Location
 
 from .store import ReviewStore
 

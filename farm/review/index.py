@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from farm.dataset import FLOAT_OUTPUTS, read_manifest, reading_part
-from farm.storage import Location
+from farm.dataset.storage import Location
 from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
@@ -186,7 +186,7 @@ class DatasetIndex:
 
 def viewable_png(output: str, png: bytes, scale: float | None, offset: float | None) -> bytes:
     """A stored map as an 8-bit PNG: depth near = bright on black; [0, 1] maps with 1 = far inverted; labels spread."""
-    from farm.image_codec import METRIC_MAPS, decode_map, encode_map
+    from farm.dataset.image_codec import METRIC_MAPS, decode_map, encode_map
 
     if png is None:
         raise NotFound(f"output {output!r} is empty for this view")

@@ -161,7 +161,7 @@ def tree_flags(table) -> QaFlags:
 
 def sketch_ink(png: bytes) -> float:
     """Fraction of dark pixels (< 128) of a sketch PNG (black lines on white)."""
-    from farm.image_codec import decode_map
+    from farm.dataset.image_codec import decode_map
 
     image = decode_map(png)
     return float(np.count_nonzero(image < 128)) / max(image.size, 1)

@@ -23,7 +23,7 @@ NO_VERDICT, ANY_FLAG, NO_FLAG = "none", "any", "none"
 
 def default_db_path(dataset: str) -> Path:
     """`reviews.sqlite` in the dataset folder (a local folder: SQLite needs a local file)."""
-    from farm.storage import Location
+    from farm.dataset.storage import Location
 
     location = Location.resolve(dataset)
     if not location.is_local:

@@ -2,7 +2,7 @@
 
 In: an (H, W, 3) or (H, W, 4) uint8 image and a zlib level. Out: PNG bytes with no metadata and no timestamp,
 the same bytes for the same pixels and level. (Rendered maps of the dataset, 16-bit included, have their own
-codec, `farm.image_codec`; the Blender worker writes its own PNGs inside Blender's Python.)
+codec, `farm.dataset.image_codec`; the Blender worker writes its own PNGs inside Blender's Python.)
 """
 from __future__ import annotations
 

@@ -133,7 +133,7 @@ def test_contact_sheet_labels_are_whole():
 
 def test_the_torch_dataset_names_a_damaged_part_file(tmp_path, finished_dataset):
     from farm.dataset import DatasetError
-    from farm.torch_dataset import ViewsDataset
+    from farm.dataset.torch_dataset import ViewsDataset
 
     data = tmp_path / "data"
     shutil.copytree(finished_dataset, data)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from farm.image_codec import ImageCodecError, decode_map, encode_map, encode_pixels
+from farm.dataset.image_codec import ImageCodecError, decode_map, encode_map, encode_pixels
 
 
 def test_uint8_rgb_map_round_trips_exactly_in_rgb_order():

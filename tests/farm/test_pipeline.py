@@ -10,9 +10,9 @@ import pyarrow.parquet as pq
 import pytest
 
 import farm.dataset as dataset
-from farm.manifest import validate_dataset
+from farm.dataset.manifest import validate_dataset
 from farm.pipeline import JobError, plan_shards, run_job, run_shard
-from farm.storage import Location
+from farm.dataset.storage import Location
 from farm.tree_chain import tree_seed
 from farm_standins import SlowChain, StandinChain, standin_spec
 

@@ -53,7 +53,7 @@ def test_ray_data_reads_every_view(standin_dataset, ray_session):
 def test_torch_dataset_decodes_images_lazily_to_channel_first_tensors(standin_dataset):
     import torch
 
-    from farm.torch_dataset import ViewsDataset
+    from farm.dataset.torch_dataset import ViewsDataset
 
     _, path = standin_dataset
     views = ViewsDataset(path, with_params=True)
@@ -70,7 +70,7 @@ def test_torch_dataset_decodes_images_lazily_to_channel_first_tensors(standin_da
 def test_hugging_face_datasets_reads_the_views_with_8_bit_maps_as_images(standin_dataset, tmp_path):
     from PIL import Image
 
-    from farm.image_codec import decode_map
+    from farm.dataset.image_codec import decode_map
 
     _, path = standin_dataset
     views = dataset.to_huggingface(path, "views", cache_dir=str(tmp_path / "hf"))

@@ -16,7 +16,7 @@ import pytest
 from ray import cloudpickle
 
 from farm.pipeline import JobError, plan_shards, run_job, run_shard
-from farm.storage import Location, TransientWriteError
+from farm.dataset.storage import Location, TransientWriteError
 from farm_standins import StandinChain, standin_spec
 from species.errors import PathError
 
@@ -116,7 +116,7 @@ def test_a_part_path_that_is_a_folder_fails_the_job_at_once_naming_it_and_keeps_
 
 def finished_without_ray(folder: Path) -> Path:
     """A finished stand-in dataset written in this process (its shards run one after another, no Ray)."""
-    from farm.manifest import build_manifest, write_job_record, write_manifest
+    from farm.dataset.manifest import build_manifest, write_job_record, write_manifest
 
     spec, location = standin_spec(), Location.resolve(str(folder))
     write_job_record(location, spec)
@@ -130,7 +130,7 @@ def test_validate_starts_no_native_thread_that_could_outlive_the_interpreter(tmp
     It must leave the process with the threads it had before it ran."""
     folder = finished_without_ray(tmp_path / "data")
     script = textwrap.dedent(f"""
-        import os, pyarrow.parquet, farm.manifest
+        import os, pyarrow.parquet, farm.dataset.manifest
         from farm.cli import main
         before = len(os.listdir("/proc/self/task"))
         status = main(["validate", {str(folder)!r}])

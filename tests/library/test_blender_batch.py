@@ -11,7 +11,7 @@ from farm.library.catalog import validate_library, write_catalog
 from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
 from farm.pipeline import plan_shards, run_shard
-from farm.storage import Location
+from farm.dataset.storage import Location
 from renderers.blender import BlenderError
 from species.meshing.gltf import read_glb_chunks
 

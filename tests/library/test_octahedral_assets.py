@@ -13,7 +13,7 @@ import pytest
 from farm.library.job import add_asset
 from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
-from farm.storage import Location
+from farm.dataset.storage import Location
 from gltf_validator import assert_valid_glb
 from renderers.blender import blender_available
 from species.meshing.gltf import read_glb_chunks

@@ -11,7 +11,7 @@ from farm.library.records import (LIBRARY_RECORD, LibraryError, library_asset_id
                                   write_added_record, write_library_record)
 from farm.library.spec import (FORMATS, LIBRARY_TABLES, LibrarySpecError, library_spec_from_record,
                                parse_library_spec)
-from farm.storage import Location
+from farm.dataset.storage import Location
 from farm.tree_chain import tree_seed
 
 SPEC = {"name": "records", "seed": 3, "species": {"maple": 2, "palm": 1}, "shard_size": 2}

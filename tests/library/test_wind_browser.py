@@ -28,7 +28,7 @@ from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
 from farm.library.wind_viewer import (THREE_FILES, VIEWER_THREE, WIND_PAGE, WindViewerError, three_source,
                                       three_version, wind_page_html, write_wind_viewer)
-from farm.storage import Location
+from farm.dataset.storage import Location
 from required_tools import missing_tool
 
 PROJECT = Path(__file__).resolve().parents[2]

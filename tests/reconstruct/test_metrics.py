@@ -16,7 +16,7 @@ import farm.dataset as dataset
 import species
 from farm.jobs import parse_spec
 from farm.pipeline import plan_shards, run_shard
-from farm.storage import Location
+from farm.dataset.storage import Location
 from farm.tree_chain import SpeciesChain
 from reconstruct.metrics import (RADIUS_MULTIPLES, MetricError, foreground_depth_error, height_crown_errors,
                                  node_distances, parameter_scores, silhouette_iou, skeleton_precision_recall,

@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import farm.dataset as dataset
-from farm.image_codec import decode_map
+from farm.dataset.image_codec import decode_map
 from farm.review.server import TOKEN_HEADER
 
 from conftest import running_server

@@ -12,7 +12,7 @@ import farm.dataset as dataset
 from farm.review import qa
 from farm.review.index import DatasetIndex
 from farm.review.service import ReviewService, TreeQuery
-from farm.storage import sha256_hex
+from farm.dataset.storage import sha256_hex
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +82,7 @@ def test_a_mesh_with_millions_of_triangles_is_huge(real_trees):
 
 
 def test_a_blank_sketch_is_faint_and_a_drawn_one_is_not(review_dataset):
-    from farm.image_codec import encode_map
+    from farm.dataset.image_codec import encode_map
 
     blank = encode_map("sketch_tsn", np.full((64, 64), 255, np.uint8))[0]
     drawn = np.full((64, 64), 255, np.uint8)

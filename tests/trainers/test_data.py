@@ -201,7 +201,7 @@ def test_rejected_trees_are_left_out_and_counted(datasets, tmp_path):
 
 # ------------------------------------------------------------------------------------------ records
 def test_plain_record_is_the_preprocessed_view(datasets):
-    from farm.torch_dataset import ViewsDataset
+    from farm.dataset.torch_dataset import ViewsDataset
 
     data = open_data("sketchnet", [str(datasets["sketchnet"])])
     dataset = TaskDataset(data, Split.by_hash(data.keys, (1.0, 0.0, 0.0)), "train")

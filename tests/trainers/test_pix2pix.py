@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from farm.image_codec import decode_map, encode_map
+from farm.dataset.image_codec import decode_map, encode_map
 from trainers.pix2pix import (PIX2PIX_TASKS, GlobalDiscriminator, PatchDiscriminator, Pix2PixError, UNetGenerator,
                               discriminator_loss, generator_loss, get_task, make_discriminator, make_optimizer,
                               masked_depth_error, masked_l1, pix2pix_step, targets_from_views)

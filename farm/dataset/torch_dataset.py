@@ -9,7 +9,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .dataset import FLOAT_OUTPUTS, DatasetError, part_files, read_manifest, reading_part
+from .readers import part_files, read_manifest
+from .schema import FLOAT_OUTPUTS, DatasetError, reading_part
 from .image_codec import METRIC_MAPS, decode_map
 
 __all__ = ["ViewsDataset"]
@@ -19,7 +20,7 @@ def _torch():
     try:
         import torch
     except ImportError:
-        raise ImportError("farm.torch_dataset needs torch: pip install torch") from None
+        raise ImportError("farm.dataset.torch_dataset needs torch: pip install torch") from None
     return torch
 
 

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .dataset import SCHEMA_VERSION, TABLES, DatasetError, part_name, read_manifest, trees_schema, views_schema
+from .readers import read_manifest
+from .schema import SCHEMA_VERSION, TABLES, DatasetError, part_name, trees_schema, views_schema
 from .storage import Location, sha256_hex
 
 __all__ = ["SHARDS_FOLDER", "JOB_RECORD", "write_job_record", "shard_record_name", "write_shard_record", "read_shard_record", "finished_shards", "build_manifest",

@@ -1,0 +1,86 @@
+"""Readers of a finished dataset: its manifest, its part files, and each table through pyarrow, pandas, DuckDB,
+Ray Data and Hugging Face (torch: `torch_dataset`)."""
+from __future__ import annotations
+
+import json
+from typing import Iterable
+
+from .schema import FLOAT_OUTPUTS, TABLES, DatasetError, trees_schema, views_schema
+from .storage import Location
+
+__all__ = ["read_manifest", "part_files", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface"]
+
+
+def read_manifest(path: str | Location) -> dict:
+    """The dataset's manifest.json as a dict (DatasetError if the folder has none: job unfinished?)."""
+    location = path if isinstance(path, Location) else Location.resolve(path)
+    if not location.exists("manifest.json"):
+        raise DatasetError(f"{location.uri} has no manifest.json: not a finished treefarm dataset "
+                           f"(run `farm status {location.uri}` to see an unfinished job)")
+    try:
+        return json.loads(location.read_bytes("manifest.json"))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{location.path('manifest.json')} is not valid JSON: {exc}") from None
+
+
+def part_files(path: str | Location, table: str = "trees") -> tuple[Location, list[str]]:
+    """The manifest's part files of one table, as paths on the location's filesystem."""
+    if table not in TABLES:
+        raise DatasetError(f"unknown table {table!r}; known: {', '.join(TABLES)}")
+    location = path if isinstance(path, Location) else Location.resolve(path)
+    manifest = read_manifest(location)
+    return location, [location.path(shard[table]["path"]) for shard in manifest["shards"]]
+
+
+def open(path: str, table: str = "trees"):  # noqa: A001 - the reader's natural name: farm.dataset.open
+    """A `pyarrow.dataset.Dataset` over one table (`trees` or `views`) of a finished dataset."""
+    import pyarrow.dataset as ds
+
+    location, files = part_files(path, table)
+    schema = trees_schema() if table == "trees" else views_schema(read_manifest(location)["job"]["render"]["outputs"])
+    return ds.dataset(files, schema=schema, format="parquet", filesystem=location.filesystem)
+
+
+def to_pandas(path: str, table: str = "trees", columns: Iterable[str] | None = None):
+    """One table as a pandas DataFrame (pass `columns` to skip the heavy binary ones)."""
+    return open(path, table).to_table(columns=list(columns) if columns is not None else None).to_pandas()
+
+
+def duckdb_connect(path: str):
+    """A DuckDB connection with the dataset's tables registered as `trees` and `views`."""
+    import duckdb
+
+    connection = duckdb.connect()
+    for table in TABLES:
+        connection.register(table, open(path, table))
+    return connection
+
+
+def to_ray(path: str, table: str = "views"):
+    """One table as a `ray.data.Dataset` (rows in part order); call after `ray.init()` or let Ray start one."""
+    import ray.data
+
+    location, files = part_files(path, table)
+    return ray.data.read_parquet(files, filesystem=location.filesystem)
+
+
+def to_huggingface(path: str, table: str = "views", cache_dir: str | None = None, decode_images: bool = True):
+    """One table of a local dataset as a Hugging Face `datasets.Dataset` (`load_dataset("parquet")` on the manifest's
+    part files, split "train"). With `decode_images`, the 8-bit PNG columns of the views table (`sketch_*`, `mask`,
+    `order`, `normals`, `trunk_strokes`) read as `datasets.Image` (PIL images on access); the 16-bit float maps stay
+    PNG bytes, decoded with `farm.dataset.image_codec.decode_map` and their `_scale`/`_offset` columns."""
+    try:
+        import datasets
+    except ImportError:
+        raise DatasetError("reading a dataset with Hugging Face needs the `datasets` package: "
+                           "pip install datasets") from None
+    location, files = part_files(path, table)
+    if location.filesystem.type_name != "local":
+        raise DatasetError(f"to_huggingface reads local datasets; {path!r} is on {location.filesystem.type_name}")
+    loaded = datasets.load_dataset("parquet", data_files=files, split="train", cache_dir=cache_dir)
+    if decode_images and table == "views":
+        non_image = {"tree_id", "index", "shard", "view", "view_name", "camera_json"}
+        for column, feature in loaded.features.items():
+            if column not in non_image and column not in FLOAT_OUTPUTS and getattr(feature, "dtype", "") == "binary":
+                loaded = loaded.cast_column(column, datasets.Image())
+    return loaded
