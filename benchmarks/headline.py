@@ -29,7 +29,7 @@ HEADLINE = (
     HeadlineRun("weber_penn", "bench_weber_penn", ("--repeats", "3")),
     HeadlineRun("mesh", "bench_mesh", ("--repeats", "5")),
     HeadlineRun("colonization", "bench_colonization", ("--runs", "2")),
-    HeadlineRun("render", "bench_render", ("--repeats", "2", "--no-cycles")),
+    HeadlineRun("render", "bench_render", ("--repeats", "2", "--sizes", "256", "--no-cycles")),
     HeadlineRun("farm", "bench_farm", ("--trees-per-species", "2", "--repeats", "1")),
     HeadlineRun("library", "bench_library", ("--no-scaling", "maple", "palm", "sassafras")),
     HeadlineRun("inference", "bench_inference", ("--widths", "16", "--repeats", "3")),
