@@ -50,8 +50,9 @@ test: env
 golden: env
 	$(PY) tests/golden/goldens.py
 
+# The headline benchmarks on short settings (a few minutes on 2 cores), then docs/performance.md from their results.
 bench: env
-	$(PY) benchmarks/bench_weber_penn.py
+	$(PY) -m benchmarks.headline
 
 # The default models shipped in models/: the shipped data specs generated (once) into out/train-full, each
 # network trained on bench_train.py's budget recipe (BUDGET_SETTINGS: fixed epochs, seed 0; no time limit, so the

@@ -1,18 +1,17 @@
 """Blender outputs benchmark: Blender's start-up, seconds per FBX (one batch) and per asset of a `.blend` library.
 
 Trees: N grown trees of a small, a medium and a large preset. Needs `.venv-blender` (`make env`).
-Usage: python benchmarks/bench_blender_outputs.py [--assets N] [--presets NAME ...]
+Run: python -m benchmarks.bench_blender_outputs [--assets 4] [--presets NAME ...] [--library-assets 2]
 """
 from __future__ import annotations
 
-import argparse
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 import species
+from benchmarks.harness import Benchmark, arguments, time_case
 from farm.library.asset import build_asset
 from farm.library.blender_catalog import write_blender_library
 from farm.library.gltf_asset import asset_to_glb
@@ -23,34 +22,37 @@ from renderers.blender_assets import export_fbx_batch
 from renderers.impostor import CoverageRenderer
 
 PRESETS = ("sc_young_sapling", "maple", "balsam_fir")
-# The budget we hold these to (issue 11 gives none for the Blender outputs): a full asset without them in
+# The budget we hold these to (none is given for the Blender outputs): a full asset without them in
 # under 1 s per tree on one core, so the Blender outputs should cost about that again, and start-up be paid
 # once per batch, not per file.
 TARGET_S_PER_ASSET = 1.0
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__)
     parser.add_argument("--assets", type=int, default=4, help="trees per preset (default 4)")
     parser.add_argument("--presets", nargs="+", default=list(PRESETS))
     parser.add_argument("--library-assets", type=int, default=2,
                         help="library asset GLBs (all LODs, instanced leaves) to time as the farm job uses them")
     parser.add_argument("--library-species", default="maple")
     args = parser.parse_args(argv)
-    header = (f"{'preset':<18} {'trees':>5} {'triangles':>9} {'start-up s':>10} {'FBX s/file':>10} "
-              f"{'FBX MB':>7} {'.blend s/asset':>14} {'.blend MB':>9} {'target s':>8}")
-    print(header)
-    print("-" * len(header))
+    bench = Benchmark("blender_outputs", "Blender outputs: start-up, seconds per FBX and per .blend asset", args)
+    rows = []
     for preset in args.presets:
         row = time_blender_outputs(args.assets, preset=preset)
-        print(f"{preset:<18} {row['n_assets']:>5} {row['triangles_mean']:>9.0f} {row['startup_seconds']:>10.2f} "
-              f"{row['fbx_seconds_each']:>10.2f} {row['fbx_bytes_mean'] / 1e6:>7.2f} "
-              f"{row['asset_seconds_each']:>14.2f} {row['blend_bytes'] / 1e6:>9.2f} {TARGET_S_PER_ASSET:>8.1f}")
+        rows.append((preset, row["n_assets"], row["triangles_mean"], row["startup_seconds"], row["fbx_seconds_each"],
+                     row["fbx_bytes_mean"] / 1e6, row["asset_seconds_each"], row["blend_bytes"] / 1e6,
+                     TARGET_S_PER_ASSET))
+    bench.table("grown trees of a small, a medium and a large preset",
+                ["preset", "trees", "triangles", "start-up s", "FBX s/file", "FBX MB", ".blend s/asset", ".blend MB",
+                 "target s"], rows,
+                notes=["start-up: wall time of the FBX batch less the exports inside Blender (process, bpy import, "
+                       "job I/O)", "FBX s/file: import + export per GLB inside one Blender process", ".blend s/asset: "
+                       "import, mark, preview, tags per asset plus its share of the save (previews drawn from the "
+                       "mesh, none given)"])
     if args.library_assets:
-        library_asset_rows(args.library_assets, args.library_species)
-    print("start-up: wall time of the FBX batch less the exports inside Blender (process, bpy import, job I/O);\n"
-          "FBX s/file: import + export per GLB inside one Blender process; .blend s/asset: import, mark, preview,\n"
-          "tags per asset plus its share of the save (previews drawn from the mesh, none given).")
+        library_asset_rows(bench, args.library_assets, args.library_species)
+    bench.write()
 
 
 def time_blender_outputs(n_assets: int, preset: str = "balsam_fir", seed: int = 0) -> dict:
@@ -68,9 +70,8 @@ def time_blender_outputs(n_assets: int, preset: str = "balsam_fir", seed: int = 
             glbs.append(tmp / f"tree_{i:03d}.glb")
             glbs[-1].write_bytes(mesh.to_glb())
             triangles.append(len(mesh.bark.faces) + len(mesh.leaves.faces))
-        t0 = time.perf_counter()
-        rows = export_fbx_batch([(g, tmp / f"{g.stem}.fbx") for g in glbs])
-        fbx_wall = time.perf_counter() - t0
+        batch = time_case(lambda: export_fbx_batch([(g, tmp / f"{g.stem}.fbx") for g in glbs]), 1)
+        rows, fbx_wall = batch.result, batch.median
         fbx_inside = sum(r["seconds"] for r in rows)
         library = write_blender_library([{"id": g.stem, "glb_path": g, "tags": ["bench"], "catalog_path": "Bench"}
                                          for g in glbs], tmp / "bench.blend")
@@ -82,7 +83,7 @@ def time_blender_outputs(n_assets: int, preset: str = "balsam_fir", seed: int = 
                 "fbx_bytes_mean": float(np.mean([r["bytes"] for r in rows]))}
 
 
-def library_asset_rows(n_assets: int, species_name: str) -> None:
+def library_asset_rows(bench: Benchmark, n_assets: int, species_name: str) -> None:
     """What the library job asks of Blender per asset: one FBX per level from the asset GLB (one batch), and
     the asset's LOD0 in a .blend; from the instanced GLB and from the one with leaves baked (instanced=False)."""
     spec = parse_library_spec({"species": [species_name], "per_species": n_assets})
@@ -92,9 +93,7 @@ def library_asset_rows(n_assets: int, species_name: str) -> None:
         assets = [build_asset(species_name, seed, spec, renderer, StageTimer()) for seed in range(3, 3 + n_assets)]
     finally:
         renderer.close()
-    print(f"\nlibrary asset GLBs ({species_name}, {n_assets} assets, levels "
-          f"{', '.join(lv.name for lv in assets[0].levels)}; LOD0 {assets[0].levels[0].n_triangles} triangles)")
-    print(f"{'GLB':<12} {'batch wall s':>12} {'FBX s/asset':>11} {'.blend wall s':>13} {'.blend s/asset':>14}")
+    table = []
     for instanced in (True, False):
         with tempfile.TemporaryDirectory() as tmp:
             jobs, library = [], []
@@ -106,13 +105,14 @@ def library_asset_rows(n_assets: int, species_name: str) -> None:
                          for lv in asset.levels]
                 library.append({"id": asset.asset_id, "glb_path": glb, "node": f"{asset.asset_id}_LOD0",
                                 "tags": [species_name], "catalog_path": f"Trees/{species_name}"})
-            start = time.perf_counter()
-            rows = export_fbx_batch(jobs)
-            fbx_wall = time.perf_counter() - start
+            batch = time_case(lambda: export_fbx_batch(jobs), 1)
             written = write_blender_library(library, Path(tmp) / "library.blend")
             per_asset = (sum(r["seconds"] for r in written["assets"]) + written["save_seconds"]) / n_assets
-            print(f"{'instanced' if instanced else 'baked':<12} {fbx_wall:>12.2f} "
-                  f"{sum(r['seconds'] for r in rows) / n_assets:>11.2f} {written['seconds']:>13.2f} {per_asset:>14.2f}")
+            table.append(("instanced" if instanced else "baked", batch.median,
+                          sum(r["seconds"] for r in batch.result) / n_assets, written["seconds"], per_asset))
+    bench.table(f"library asset GLBs ({species_name}, {n_assets} assets, levels "
+                f"{', '.join(lv.name for lv in assets[0].levels)}; LOD0 {assets[0].levels[0].n_triangles} triangles)",
+                ["GLB", "batch wall s", "FBX s/asset", ".blend wall s", ".blend s/asset"], table)
 
 
 if __name__ == "__main__":

@@ -4,30 +4,24 @@ Data: the printed evaluation spec (`farm evaluate --print-data-spec`) cut to --t
 under ~/.cache/treefarm/bench-evaluate. One local Ray (2 CPUs) for the whole run, warmed by evaluating two trees per
 method first, so each timing is the job itself without Ray's start-up. Trees/s: the trees phase (Ray tasks: the
 tree rebuilt, the method, scoring with the default 20,000 surface samples, its row and panel written); the whole
-job adds metrics.parquet, summary.md and the plots, a fixed cost on the driver (matplotlib: ~5 s quiet).
-No rotation sweep. The photos method (Blender + SfM, ~1 min a tree) only with --methods ...,photos.
+job adds metrics.parquet, summary.md and the plots, a fixed cost on the driver (matplotlib).
+No rotation sweep. The photos method (Blender + SfM, far slower) only with --methods ...,photos.
 
-Run: .venv/bin/python benchmarks/bench_evaluate.py [--trees 16] [--methods params,sketch-depth,two-view,cloud]
+Run: python -m benchmarks.bench_evaluate [--trees 16] [--methods params,sketch-depth,two-view,cloud]
 """
 from __future__ import annotations
 
-import argparse
 import os
-import platform
-import sys
 import tempfile
-import time
 from pathlib import Path
 
+import ray
 import yaml
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from farm.evaluate.job import evaluation_data_spec, plan_evaluation, run_evaluation  # noqa: E402
-from farm.jobs import parse_spec  # noqa: E402
-from farm.pipeline import WORKER_ENV, run_job  # noqa: E402
-from farm.table import format_table  # noqa: E402
+from benchmarks.harness import Benchmark, arguments, time_case
+from farm.evaluate.job import evaluation_data_spec, plan_evaluation, run_evaluation
+from farm.jobs import parse_spec
+from farm.pipeline import WORKER_ENV, run_job
 
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "treefarm" / "bench-evaluate"
 TARGET = 1.8
@@ -46,9 +40,9 @@ def timed(data: Path, method: str, workers: int, trees: int | None) -> tuple[flo
     """(seconds of the whole job, seconds of its trees phase, trees)."""
     plan = plan_evaluation([str(data)], [method], part="all", trees=trees)
     with tempfile.TemporaryDirectory(prefix="bench-evaluate-") as folder:
-        start = time.perf_counter()
-        outcome = run_evaluation(plan, Path(folder) / "report", workers=workers, sweep_step=None, progress=False)
-        seconds = time.perf_counter() - start
+        job = time_case(lambda: run_evaluation(plan, Path(folder) / "report", workers=workers, sweep_step=None,
+                                               progress=False), 1)
+        seconds, outcome = job.median, job.result
     failed = int((outcome["rows"]["status"] != "ok").sum())
     if failed:
         print(f"  {method}: {failed} of {len(plan.units)} trees failed", flush=True)
@@ -56,31 +50,28 @@ def timed(data: Path, method: str, workers: int, trees: int | None) -> tuple[flo
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = arguments(__doc__)
     parser.add_argument("--trees", type=int, default=16)
     parser.add_argument("--methods", default="params,sketch-depth,two-view,cloud")
     args = parser.parse_args()
-    import ray
-
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING",
-             runtime_env={"env_vars": WORKER_ENV})
+    bench = Benchmark("evaluate", "Evaluation jobs: trees per second per method on 1 and 2 workers", args)
+    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING", runtime_env={"env_vars": WORKER_ENV})
     data = dataset(args.trees)
-    methods = [m for m in args.methods.split(",") if m]
     rows = []
-    for method in methods:
+    for method in [m for m in args.methods.split(",") if m]:
         timed(data, method, 2, 2)  # warm-up: worker processes, imports, networks
         one, one_trees, n = timed(data, method, 1, None)
         two, two_trees, _ = timed(data, method, 2, None)
         speedup = one_trees / two_trees
-        rows.append([method, n, f"{n / one_trees:.2f}", f"{n / two_trees:.2f}", f"{speedup:.2f}x",
+        rows.append([method, n, n / one_trees, n / two_trees, f"{speedup:.2f}x",
                      f"{one:.1f} / {two:.1f} s ({one / two:.2f}x)", "met" if speedup >= TARGET else "not met"])
         print(f"  {method}: {one:.1f} s with 1 worker ({one_trees:.1f} s of trees), {two:.1f} s with 2 "
               f"({two_trees:.1f} s)", flush=True)
     ray.shutdown()
-    print(f"\n## Evaluation speed ({args.trees} trees of the evaluation spec, {platform.processor() or 'cpu'}, "
-          f"{os.cpu_count()} cores)\n")
-    print(format_table(["method", "trees", "trees/s, 1 worker", "trees/s, 2 workers", "2 workers / 1",
-                        "whole job with its report, 1 / 2 workers", f"target >= {TARGET}x"], rows))
+    bench.table(f"{args.trees} trees of the evaluation spec per method",
+                ["method", "trees", "trees/s, 1 worker", "trees/s, 2 workers", "2 workers / 1",
+                 "whole job with its report, 1 / 2 workers", f"target >= {TARGET}x"], rows)
+    bench.write()
 
 
 if __name__ == "__main__":

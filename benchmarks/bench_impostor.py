@@ -2,27 +2,23 @@
 switch size (64 px) over renderers.impostor.QUALITY_AZIMUTHS, per preset, for each (axis share, sector overlap,
 alpha grown by N texels) variant, measured as the library measures it (`farm.library.asset.measure_chain`).
 
-The library's settings are renderers.impostor.AXIS_SHARE and SECTOR_OVERLAP, with the alpha not grown.
-Measured on the 45 presets (tree_seed(0, 0), least IoU at 64 px over the quality azimuths), mean: .718 with axis
-share 0.04 and no overlap, .737 with 0.2 and none, .745 with 0.2 and 0.15 (presets at >= 0.9: 6 -> 10); an
-overlap of 0.3 or 0.5 (every face on two planes) smears, .746 and .740. Alpha grown by one texel, then not grown
-(before slicing): maple .855 -> .894, balsam_fir .275 -> .414, douglas_fir .477 -> .545, cherry .752 -> .808 (at
-the impostor's switch size a texel is about a screen pixel, and a sparse crown grown by one each way goes far
-beyond its closed silhouette).
+The library's settings are renderers.impostor.AXIS_SHARE and SECTOR_OVERLAP, with the alpha not grown; the first
+column. docs/library.md ("Impostor") says what the alternatives give.
 
-Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_impostor.py [SPECIES ...]  (default: every preset;
-about 1 s per preset and variant on one core)
+Run: PYOPENGL_PLATFORM=egl python -m benchmarks.bench_impostor [SPECIES ...]  (default: every preset)
 """
 from __future__ import annotations
 
 import os
-import sys
 
 import numpy as np
 
+import species
+from benchmarks.harness import Benchmark, arguments
+
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
-# (axis share, sector overlap, alpha grown by texels): the library's, then the alternatives measured above.
+# (axis share, sector overlap, alpha grown by texels): the library's, then the alternatives.
 VARIANTS = ((0.2, 0.15, 0), (0.04, 0.0, 0), (0.2, 0.0, 0), (0.2, 0.3, 0), (0.2, 0.15, 1))
 
 
@@ -48,7 +44,12 @@ def least_iou(renderer, asset, cover, variant) -> float:
     return min(ious)
 
 
-def main(names: list[str]) -> None:
+def main() -> None:
+    parser = arguments(__doc__)
+    parser.add_argument("species", nargs="*", help="presets (default: every preset)")
+    args = parser.parse_args()
+    names = args.species or [preset.name for preset in species.list_presets()]
+    bench = Benchmark("impostor", "The impostor's slicing and alpha settings side by side", args)
     from tqdm import tqdm
 
     from farm.library.asset import build_asset, leaf_fractions
@@ -67,16 +68,14 @@ def main(names: list[str]) -> None:
         rows[name] = [least_iou(renderer, asset, cover, variant) for variant in VARIANTS]
     renderer.close()
     heads = [f"axis {a:g} overlap {o:g} grow {t}" for a, o, t in VARIANTS]
-    print(f"\nimpostor least IoU at its switch size (target {IOU_TARGET}); first column: the library's settings")
-    print(f"{'preset':28s} | " + " | ".join(f"{h:>24s}" for h in heads))
-    for name, values in rows.items():
-        print(f"{name:28s} | " + " | ".join(f"{v:24.3f}" for v in values))
     table = np.array(list(rows.values()))
-    print(f"{'mean':28s} | " + " | ".join(f"{v:24.3f}" for v in table.mean(axis=0)))
-    print(f"{'presets at the target':28s} | " + " | ".join(f"{int(c):24d}" for c in (table >= IOU_TARGET).sum(axis=0)))
+    bench.table(f"impostor least IoU at its switch size (target {IOU_TARGET}); first column: the library's settings",
+                ["preset", *heads],
+                [(name, *(f"{v:.3f}" for v in values)) for name, values in rows.items()]
+                + [("mean", *(f"{v:.3f}" for v in table.mean(axis=0))),
+                   ("presets at the target", *(int(c) for c in (table >= IOU_TARGET).sum(axis=0)))])
+    bench.write()
 
 
 if __name__ == "__main__":
-    import species
-
-    main(sys.argv[1:] or [preset.name for preset in species.list_presets()])
+    main()

@@ -6,23 +6,23 @@ untrained (timing does not depend on them); inputs are 256 px ink images, batch 
 torch.set_num_threads(1) under inference_mode; ONNX Runtime with intra_op_num_threads=1 (trainers.onnx_runtime).
 Prints median (and min) ms per image per backend, then the per-sketch total of both U-Nets at one width plus
 TreeSketchNet, each on its faster backend, against the issue's 0.5 s budget.
-Run: .venv/bin/python benchmarks/bench_inference.py [--widths 8,16,32,64] [--repeats 7]
+Run: python -m benchmarks.bench_inference [--widths 8,16,32,64] [--repeats 7]
 """
 from __future__ import annotations
 
-import argparse
-import importlib.util
-import statistics
-import tempfile
-import time
-from pathlib import Path
+from benchmarks.harness import Benchmark, arguments, pin_threads, time_case
 
-import numpy as np
-import torch
+pin_threads()
 
-from farm.table import format_table
-from trainers.onnx_runtime import OnnxModel, export_onnx
-from trainers.pix2pix import PIX2PIX_TASKS
+import importlib.util  # noqa: E402
+import tempfile  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from trainers.onnx_runtime import OnnxModel, export_onnx  # noqa: E402
+from trainers.pix2pix import PIX2PIX_TASKS  # noqa: E402
 
 BUDGET_MS = 500.0
 SIZE = 256
@@ -30,14 +30,8 @@ SIZE = 256
 
 def _times_ms(run, repeats: int) -> tuple[float, float]:
     """(median, min) ms of `run()` after two warm-up calls."""
-    run()
-    run()
-    samples = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run()
-        samples.append((time.perf_counter() - start) * 1e3)
-    return statistics.median(samples), min(samples)
+    timing = time_case(run, repeats, warmup=2)
+    return timing.ms(), 1000.0 * min(timing.wall)
 
 
 def measure(net: torch.nn.Module, example: torch.Tensor, output_names: list[str], output_shapes: dict,
@@ -76,10 +70,10 @@ def sketchnet_case(rng: np.random.Generator):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = arguments(__doc__, repeats=7)
     parser.add_argument("--widths", default="8,16,32,64", help="U-Net widths, comma separated")
-    parser.add_argument("--repeats", type=int, default=7)
     args = parser.parse_args()
+    bench = Benchmark("inference", "Inference per sketch on one core: torch against ONNX Runtime", args)
     widths = [int(w) for w in args.widths.split(",")]
     torch.set_num_threads(1)
     torch.set_num_interop_threads(1)
@@ -95,7 +89,7 @@ def main() -> None:
                 print(f"  measured unet-{name} width {width}", flush=True)
         case = sketchnet_case(np.random.default_rng(0))
         if isinstance(case, str):
-            print(f"  TreeSketchNet skipped: {case}")
+            bench.note(f"TreeSketchNet skipped: {case}")
         else:
             net, example, names, shapes = case
             results[("treesketchnet", "default")] = measure(net, example, names, shapes, folder, args.repeats)
@@ -105,9 +99,9 @@ def main() -> None:
         faster = "onnxruntime" if r["ort"] < r["torch"] else "torch"
         rows.append([network, str(width), f"{r['params'] / 1e6:.2f}", f"{r['onnx_mb']:.1f}", r["torch"],
                      r["torch_min"], r["ort"], r["ort_min"], f"{r['torch'] / r['ort']:.2f}x", faster])
-    print(f"\nms per {SIZE} px image, batch 1, one core (median of {args.repeats}, and min)")
-    print(format_table(["network", "width", "M params", "ONNX MB", "torch ms", "torch min", "ORT ms", "ORT min",
-                        "ORT speed-up", "faster"], rows))
+    bench.table(f"ms per {SIZE} px image, batch 1, one core (median of {args.repeats}, and min)",
+                ["network", "width", "M params", "ONNX MB", "torch ms", "torch min", "ORT ms", "ORT min",
+                 "ORT speed-up", "faster"], rows)
 
     tsn = results.get(("treesketchnet", "default"))
     tsn_ms = min(tsn["torch"], tsn["ort"]) if tsn else 0.0
@@ -117,9 +111,13 @@ def main() -> None:
                    for n in PIX2PIX_TASKS)
         total = pair + tsn_ms
         rows.append([str(width), pair, tsn_ms if tsn else "skipped", total, "yes" if total < BUDGET_MS else "no"])
-    print(f"\nper sketch: both U-Nets at one width{' + TreeSketchNet' if tsn else ''}, faster backend each, "
-          f"budget {BUDGET_MS:.0f} ms")
-    print(format_table(["U-Net width", "U-Nets ms", "TreeSketchNet ms", "total ms", "under budget"], rows))
+    bench.table(f"per sketch: both U-Nets at one width{' + TreeSketchNet' if tsn else ''}, faster backend each",
+                ["U-Net width", "U-Nets ms", "TreeSketchNet ms", "total ms", "under budget"], rows,
+                notes=[f"budget {BUDGET_MS:.0f} ms per sketch"])
+    if 16 in widths:
+        bench.figure("both U-Nets at width 16" + (" + TreeSketchNet" if tsn else ""),
+                     next(row[3] for row in rows if row[0] == "16"), "ms per sketch", f"budget {BUDGET_MS:.0f} ms")
+    bench.write()
 
 
 if __name__ == "__main__":

@@ -4,19 +4,18 @@ from the azimuths halfway between the octahedral atlas's horizon frames (its wor
 as the library measures them (`farm.library.asset.measure_chain`: closed silhouettes, LOD0's cards cut to their
 opaque share); seconds to render each atlas and its PNG bytes (albedo + normal, the library's encoding).
 
-Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_octahedral_impostor.py [SPECIES ...] [--all]
+Run: PYOPENGL_PLATFORM=egl python -m benchmarks.bench_octahedral_impostor [SPECIES ...] [--all]
      [--frames N]   (default: DEFAULT_PRESETS; --all: every preset; N frames per side, default 12)
 The figures are in docs/library.md ("Octahedral impostor").
 """
 from __future__ import annotations
 
-import argparse
-import time
 
 import numpy as np
 from tqdm import tqdm
 
 import species
+from benchmarks.harness import Benchmark, arguments, time_case
 from farm.library.asset import build_asset, leaf_fractions
 from farm.library.catalog import IOU_TARGET
 from farm.library.png_cache import PngCache
@@ -54,9 +53,8 @@ def preset_row(renderer, name: str, frames: int, pngs: PngCache) -> dict:
                "octahedral": lambda: render_octahedral_impostor(renderer, cover, frames, spec.impostor_tile)}
     row = {}
     for kind, render in renders.items():
-        start = time.perf_counter()
-        atlas = render()
-        seconds = time.perf_counter() - start
+        rendered = time_case(render, 1)
+        atlas, seconds = rendered.result, rendered.median
         row[kind] = (*measure(renderer, cover, points, atlas, QUALITY_AZIMUTHS, switch_px),
                      *measure(renderer, cover, points, atlas, between, switch_px), seconds,
                      len(pngs.encode(atlas.albedo)) + len(pngs.encode(atlas.normal)))
@@ -66,33 +64,29 @@ def preset_row(renderer, name: str, frames: int, pngs: PngCache) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__)
     parser.add_argument("species", nargs="*", help=f"presets (default: {', '.join(DEFAULT_PRESETS)})")
     parser.add_argument("--all", action="store_true", help="every preset")
     parser.add_argument("--frames", type=int, default=OCTAHEDRAL_FRAMES, help="octahedral frames per side")
     args = parser.parse_args()
     names = [p.name for p in species.list_presets()] if args.all else args.species or list(DEFAULT_PRESETS)
+    bench = Benchmark("octahedral_impostor", "The octahedral impostor beside the crossed planes", args)
     renderer, pngs = CoverageRenderer(64), PngCache()
     try:
         rows = {name: preset_row(renderer, name, args.frames, pngs) for name in tqdm(names, unit="preset")}
     finally:
         renderer.close()
-    print(f"\nimpostor IoU against LOD0 at 64 px (target {IOU_TARGET}), least / mean over the 8 quality azimuths "
-          f"(q) and the {len(between_frame_azimuths(args.frames))} azimuths between the {args.frames} x "
-          f"{args.frames} atlas's horizon frames (b); seconds to render; atlas PNG KB")
-    head = " | ".join(f"{kind[:5]} {column:>5s}" for kind in KINDS
-                      for column in ("q min", "q avg", "b min", "b avg", "s", "KB"))
-    print(f"{'preset':22s} | {head}")
-    for name, row in rows.items():
-        cells = [f"{v:11.3f}" if k < 4 else f"{v:11.2f}" if k == 4 else f"{v / 1024:11.0f}"
-                 for kind in KINDS for k, v in enumerate(row[kind])]
-        print(f"{name:22s} | " + " | ".join(cells))
+    columns = [f"{kind} {column}" for kind in KINDS for column in ("q min", "q avg", "b min", "b avg", "s", "KB")]
     table = np.array([[v for kind in KINDS for v in row[kind]] for row in rows.values()])
-    print(f"{'mean':22s} | " + " | ".join(f"{v:11.3f}" if k % 6 < 4 else f"{v:11.2f}" if k % 6 == 4
-                                          else f"{v / 1024:11.0f}" for k, v in enumerate(table.mean(axis=0))))
-    at_target = (table >= IOU_TARGET).sum(axis=0)
-    print(f"{'at the target':22s} | " + " | ".join(f"{int(c):11d}" if k % 6 < 4 else f"{'':11s}"
-                                                   for k, c in enumerate(at_target)))
+    cells = [[f"{v:.3f}" if k % 6 < 4 else f"{v:.2f}" if k % 6 == 4 else f"{v / 1024:.0f}" for k, v in enumerate(values)]
+             for values in [*table, table.mean(axis=0)]]
+    at_target = ["" if k % 6 >= 4 else int(c) for k, c in enumerate((table >= IOU_TARGET).sum(axis=0))]
+    bench.table(f"impostor IoU against LOD0 at 64 px (target {IOU_TARGET}), least / mean over the 8 quality azimuths "
+                f"(q) and the {len(between_frame_azimuths(args.frames))} azimuths between the {args.frames} x "
+                f"{args.frames} atlas's horizon frames (b); seconds to render; atlas PNG KB",
+                ["preset", *columns],
+                [[name, *row] for name, row in zip([*rows, "mean"], cells)] + [["at the target", *at_target]])
+    bench.write()
 
 
 if __name__ == "__main__":

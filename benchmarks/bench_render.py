@@ -1,35 +1,32 @@
-"""Render benchmark: time per view of each map and sketch style, and of the farm's default set, on one core.
+"""Render speed: milliseconds per view of each map and sketch style, and of the farm's default set, on one core.
 
-Tree: a Weber-Penn preset tree of about 100k triangles; sizes 256 and 608 px; Blender Cycles beside it when the
-Blender worker is installed. Usage: python benchmarks/bench_render.py [--repeats N] [--cycles-views N] [--no-cycles]
+Tree: the Weber-Penn preset tree closest to 100k triangles; sizes 256 and 608 px; rig tsn4 (4 views). Blender
+Cycles beside it when the Blender worker is installed (`make blender-env`).
+Run: python -m benchmarks.bench_render [--repeats 3] [--sizes 256,608] [--cycles-views 2] [--no-cycles]
 """
 from __future__ import annotations
 
-import os
+from benchmarks.harness import Benchmark, arguments, pin_threads, time_case
 
-# One core: set before numpy, OpenCV and Mesa's llvmpipe start their thread pools.
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS", "LP_NUM_THREADS"):
-    os.environ[_var] = "1"
+pin_threads()
 
-import argparse  # noqa: E402
-import time  # noqa: E402
+import tempfile  # noqa: E402
 
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
+from tqdm import tqdm  # noqa: E402
 
-cv2.setNumThreads(1)
+import species  # noqa: E402
+from renderers import DEFAULT_OUTPUTS, OUTPUTS, ViewRenderer, make_rig  # noqa: E402
 
 TARGET_TRIANGLES = 100_000
 CANDIDATES = ("lombardy_poplar", "silver_birch", "bonsai", "balsam_fir", "quaking_aspen")
-SIZES = (256, 608)
-TARGET_MS = 150.0  # issue 4: full default set at 256 px, one core
+TARGET_MS = 150.0  # the full default set at 256 px, one core
 TARGET_SPEEDUP = 10.0
 
 
 def pick_tree():
     """The candidate preset tree (seeds 0-3) whose triangle count is closest to TARGET_TRIANGLES."""
-    import species
-
     best = None
     for name in CANDIDATES:
         for seed in range(4):
@@ -42,29 +39,23 @@ def pick_tree():
     return best[1:]
 
 
-def time_outputs(renderer, mesh, skeleton, outputs, repeats: int) -> tuple[float, float]:
-    """Median milliseconds per view (CPU time of this process, all threads; wall time) of rendering `outputs`
-    for the 4 tsn4 views. CPU time is the figure to compare: on a shared machine wall time includes waiting."""
-    cpu, wall = [], []
-    for r in range(repeats):
-        start_cpu, start_wall = time.process_time(), time.perf_counter()
-        views = renderer.render(mesh, skeleton, "tsn4", list(outputs), np.random.default_rng(r))
-        cpu.append((time.process_time() - start_cpu) / len(views))
-        wall.append((time.perf_counter() - start_wall) / len(views))
-    return 1000.0 * float(np.median(cpu)), 1000.0 * float(np.median(wall))
+def time_outputs(renderer, mesh, skeleton, outputs, repeats: int):
+    """Timing per view of rendering `outputs` for the 4 tsn4 views (CPU time of this process, all threads, is the
+    figure to compare: on a shared machine wall time includes waiting)."""
+    seeds = iter(range(repeats + 1))
+    renderer.render(mesh, skeleton, "tsn4", list(outputs), np.random.default_rng(next(seeds)))  # upload, resize
+    timing = time_case(lambda: renderer.render(mesh, skeleton, "tsn4", list(outputs),
+                                               np.random.default_rng(next(seeds))), repeats)
+    return timing.scaled(len(timing.result))
 
 
 def cycles_ms(mesh, size: int, n_views: int) -> tuple[float | None, str]:
     """Cycles milliseconds per view (1 thread, 16 samples; the median over views after the first, which also
     builds the BVH) or (None, why not)."""
-    import tempfile
-
     try:
-        from renderers import blender
+        from renderers import blender  # needs the Blender worker's venv; reported when missing
     except ImportError as exc:
         return None, f"renderers.blender not importable: {exc}"
-    from renderers import make_rig
-
     points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
     cameras = make_rig("tsn4", points, size, np.random.default_rng(0))[:n_views]
     try:
@@ -76,63 +67,45 @@ def cycles_ms(mesh, size: int, n_views: int) -> tuple[float | None, str]:
     return 1000.0 * float(np.median(seconds)), "ok"
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--repeats", type=int, default=3)
+def main() -> None:
+    parser = arguments(__doc__, repeats=3)
+    parser.add_argument("--sizes", default="256,608", help="image sizes in px, comma separated")
     parser.add_argument("--cycles-views", type=int, default=2,
                         help="views Cycles renders per size, the first not counted (0 = skip)")
     parser.add_argument("--no-cycles", action="store_true")
     args = parser.parse_args()
-
-    from tqdm import tqdm
-
-    from renderers import DEFAULT_OUTPUTS, OUTPUTS, ViewRenderer
+    sizes = [int(s) for s in args.sizes.split(",")]
+    bench = Benchmark("render", "Rendering: milliseconds per view on one core", args)
+    cv2.setNumThreads(1)
 
     label, mesh, skeleton = pick_tree()
-    print(f"tree: {label}: {mesh.n_faces} triangles (bark {mesh.bark.n_faces}, leaves {mesh.leaves.n_faces}), "
-          f"{len(skeleton)} nodes; rig tsn4 (4 views); one core; median of {args.repeats} renders")
-    rows = {name: {} for name in (*OUTPUTS, "DEFAULT SET", "ALL OUTPUTS")}
-    renderer = ViewRenderer(SIZES[0])
-    jobs = [(size, name) for size in SIZES for name in rows]
-    for size, name in tqdm(jobs, desc="timing", unit="run"):
+    bench.note(f"tree: {label}: {mesh.n_faces} triangles (bark {mesh.bark.n_faces}, leaves {mesh.leaves.n_faces}), "
+               f"{len(skeleton)} nodes; rig tsn4 (4 views); one core; median of {args.repeats} renders")
+    names = (*OUTPUTS, "DEFAULT SET", "ALL OUTPUTS")
+    timings = {}
+    renderer = ViewRenderer(sizes[0])
+    for size, name in tqdm([(size, name) for size in sizes for name in names], desc="timing", unit="run"):
         renderer.size = size
         outputs = DEFAULT_OUTPUTS if name == "DEFAULT SET" else OUTPUTS if name == "ALL OUTPUTS" else (name,)
-        time_outputs(renderer, mesh, skeleton, outputs, 1)  # warm: upload, framebuffer resize
-        rows[name][size] = time_outputs(renderer, mesh, skeleton, outputs, args.repeats)
+        timings[name, size] = time_outputs(renderer, mesh, skeleton, outputs, args.repeats)
     renderer.close()
+    cycles = {size: (None, "skipped (--no-cycles)") if args.no_cycles or args.cycles_views == 0
+              else cycles_ms(mesh, size, args.cycles_views) for size in sizes}
 
-    cycles = {}
-    for size in SIZES:
-        if args.no_cycles or args.cycles_views == 0:
-            cycles[size] = (None, "skipped (--no-cycles)")
-        else:
-            cycles[size] = cycles_ms(mesh, size, args.cycles_views)
-
-    header = f"{'ms per view':<22}" + "".join(f"{f'{s} px cpu':>13}{f'{s} px wall':>13}" for s in SIZES)
-    print(header + "   reference")
-    print("-" * (len(header) + 40))
-    for name, by_size in rows.items():
-        ref = f"<= {TARGET_MS:.0f} ms at 256 px (issue 4)" if name == "DEFAULT SET" else ""
-        cells = "".join(f"{by_size[s][0]:>13.1f}{by_size[s][1]:>13.1f}" for s in SIZES)
-        print(f"{name:<22}{cells}   {ref}")
-    line = f"{'Cycles photo (16 spp)':<22}"
-    for size in SIZES:
-        ms, why = cycles[size]
-        line += f"{'':>13}{ms:>13.0f}" if ms is not None else f"{'':>13}{'n/a':>13}"
-    print(line + "   Blender Cycles CPU, 1 thread (wall, in the worker)")
-    for size in SIZES:
-        ms, why = cycles[size]
-        if ms is None:
-            print(f"  Cycles at {size} px: n/a ({why})")
-        else:
-            speedup = ms / rows["DEFAULT SET"][size][1]
-            print(f"  {size} px: default set is {speedup:.0f}x faster than Cycles, wall to wall "
-                  f"(target >= {TARGET_SPEEDUP:.0f}x)")
-    cpu_ms, wall_ms = rows["DEFAULT SET"][256]
-    verdict = "meets" if cpu_ms <= TARGET_MS else "misses"
-    print(f"default set at 256 px: {cpu_ms:.0f} ms/view CPU ({wall_ms:.0f} wall), {verdict} the {TARGET_MS:.0f} ms target")
-    return 0
+    rows = [[name, *[f"{timings[name, s].ms(cpu=True):.1f} / {timings[name, s].ms():.1f}" for s in sizes],
+             f"<= {TARGET_MS:.0f} ms at 256 px" if name == "DEFAULT SET" else ""] for name in names]
+    rows.append(["Cycles photo (16 spp, wall)", *[f"{cycles[s][0]:.0f}" if cycles[s][0] else "n/a" for s in sizes],
+                 "Blender Cycles CPU, 1 thread, in the worker"])
+    notes = [f"Cycles at {s} px: n/a ({cycles[s][1]})" for s in sizes if cycles[s][0] is None]
+    notes += [f"{s} px: the default set is {cycles[s][0] / timings['DEFAULT SET', s].ms():.0f}x faster than Cycles, "
+              f"wall to wall (target >= {TARGET_SPEEDUP:.0f}x)" for s in sizes if cycles[s][0] is not None]
+    bench.table("ms per view, CPU / wall", ["output", *[f"{s} px" for s in sizes], "reference"], rows, notes)
+    if 256 in sizes:
+        default = timings["DEFAULT SET", 256]
+        bench.figure("default render set at 256 px", default.ms(cpu=True), "ms per view (CPU)",
+                     f"wall {default.ms():.0f} ms; target <= {TARGET_MS:.0f} ms")
+    bench.write()
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    main()

@@ -9,33 +9,41 @@ to the side and LOD0 against LOD0 turned by 1 deg.
 - 1 and 4 deg: a view-sampled impostor (crossed planes, a ring of billboards, an octahedral atlas) shows from
   between its views a tree turned by up to half their spacing. LOD0 turned 1 deg is what a billboard with a
   view every 2 deg (180 frames around the tree) shows at worst, before any texel is lost; 4 deg, one with a
-  view every 8 deg (45 frames), still far more than the 16 triangles the issue allows an impostor can show.
+  view every 8 deg (45 frames), still far more than the 16 triangles allowed an impostor can show.
 
 Figures: least IoU over renderers.impostor.QUALITY_AZIMUTHS, both silhouettes closed as the library measures
 them, each level at its default switch size; assets built as `farm library` builds them (default spec).
 
-Run: PYOPENGL_PLATFORM=egl .venv/bin/python benchmarks/bench_silhouette_floor.py [SPECIES ...] [--no-twig-cards]
-(default: every preset, seed tree_seed(0, 0); about 3 s per preset on one core; --no-twig-cards: the spec's
-`twig_cards: false`, levels of tubes and leaf cards only)
-Reference: issue 11's target, IoU >= 0.9 at every switch (LOD1 512 px, LOD2 256, LOD3 128, impostor 64).
+Run: PYOPENGL_PLATFORM=egl python -m benchmarks.bench_silhouette_floor [SPECIES ...] [--no-twig-cards]
+(default: every preset, seed tree_seed(0, 0); --no-twig-cards: the spec's `twig_cards: false`, levels of tubes and
+leaf cards only)
+Reference: the target IoU >= 0.9 at every switch (LOD1 512 px, LOD2 256, LOD3 128, impostor 64).
 """
 from __future__ import annotations
 
 import os
-import sys
 
 import numpy as np
 
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import species
+from benchmarks.harness import Benchmark, arguments
+from farm.library.quality import FLOOR_MARGIN, SHIFT_PX, level_floors
 
-from farm.library.quality import FLOOR_MARGIN, SHIFT_PX, level_floors  # noqa: E402
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 TURNS_DEG = (1.0, 4.0)
 COLUMNS = ("library", f"LOD0 {SHIFT_PX:g} px aside", *(f"LOD0 turned {t:g} deg" for t in TURNS_DEG))
 
 
-def main(names: list[str], twig_cards: bool = True) -> None:
+def main() -> None:
+    parser = arguments(__doc__)
+    parser.add_argument("species", nargs="*", help="presets (default: every preset)")
+    parser.add_argument("--no-twig-cards", action="store_true", help="the spec's twig_cards: false")
+    args = parser.parse_args()
+    names = args.species or [preset.name for preset in species.list_presets()]
+    twig_cards = not args.no_twig_cards
+    bench = Benchmark("silhouette_floor" if twig_cards else "silhouette_floor_no_twig_cards",
+                      "Each level's least IoU beside what the measure itself allows", args)
     from tqdm import tqdm
 
     from farm.library.asset import build_asset, leaf_fractions
@@ -64,39 +72,33 @@ def main(names: list[str], twig_cards: bool = True) -> None:
                       for level in levels]
 
     for k, (level_name, switch_px) in enumerate(zip(level_names, switch_sizes)):
-        print(f"\n{level_name} at {switch_px} px: least silhouette IoU over 8 azimuths (target {IOU_TARGET})")
-        print(f"{'preset':28s} | " + " | ".join(f"{c:>20s}" for c in COLUMNS) + " | margin to 0.5 px | target")
-        for name, levels in rows.items():
-            margin = levels[k][0] - levels[k][1]
-            print(f"{name:28s} | " + " | ".join(f"{v:20.3f}" for v in levels[k])
-                  + f" | {margin:+16.3f} | {'meets' if margin >= -FLOOR_MARGIN else 'misses'}")
-    print(f"\nSummary over {len(rows)} presets (target {IOU_TARGET}); 'within .02' counts presets whose library "
-          "IoU is at least the half-pixel floor - 0.02")
-    head = ["level", "mean library", "mean 0.5 px", *(f"mean {t:g} deg" for t in TURNS_DEG), "library >= .9",
-            "0.5 px >= .9", *(f"{t:g} deg >= .9" for t in TURNS_DEG), "within .02"]
-    print(" | ".join(f"{h:>13s}" for h in head))
+        bench.table(f"{level_name} at {switch_px} px: least silhouette IoU over 8 azimuths (target {IOU_TARGET})",
+                    ["preset", *COLUMNS, "margin to 0.5 px", "target"],
+                    [(name, *(f"{v:.3f}" for v in levels[k]), f"{levels[k][0] - levels[k][1]:+.3f}",
+                      "meets" if levels[k][0] - levels[k][1] >= -FLOOR_MARGIN else "misses")
+                     for name, levels in rows.items()])
+    summary = []
     for k, level_name in enumerate(level_names):
         table = np.array([levels[k] for levels in rows.values()])
         within = int((table[:, 0] >= table[:, 1] - 0.02).sum())
         counts = (table >= IOU_TARGET).sum(axis=0)
-        print(" | ".join(f"{v:>13}" for v in [level_name, *(f"{m:.3f}" for m in table.mean(axis=0)),
-                                               *(int(c) for c in counts), within]))
-    print_stage_seconds(seconds)
+        summary.append([level_name, *(f"{m:.3f}" for m in table.mean(axis=0)), *(int(c) for c in counts), within])
+    bench.table(f"Summary over {len(rows)} presets (target {IOU_TARGET})",
+                ["level", "mean library", "mean 0.5 px", *(f"mean {t:g} deg" for t in TURNS_DEG), "library >= .9",
+                 "0.5 px >= .9", *(f"{t:g} deg >= .9" for t in TURNS_DEG), "within .02"], summary,
+                notes=["within .02: presets whose library IoU is at least the half-pixel floor - 0.02"])
+    stage_seconds(bench, seconds)
+    bench.write()
 
 
-def print_stage_seconds(seconds: dict[str, dict[str, float]]) -> None:
+def stage_seconds(bench: Benchmark, seconds: dict[str, dict[str, float]]) -> None:
     """Seconds of each build stage per preset (one process, warm after the first), and their medians."""
     keys = list(dict.fromkeys(k for sec in seconds.values() for k in sec))
-    print("\nSeconds per stage of `build_asset` (files not written)")
-    print(f"{'preset':28s}" + "".join(f"{k:>9s}" for k in keys) + f"{'total':>8s}")
-    for name, sec in seconds.items():
-        print(f"{name:28s}" + "".join(f"{sec.get(k, 0.0):9.3f}" for k in keys) + f"{sum(sec.values()):8.2f}")
-    print(f"{'median':28s}" + "".join(f"{np.median([s.get(k, 0.0) for s in seconds.values()]):9.3f}" for k in keys)
-          + f"{np.median([sum(s.values()) for s in seconds.values()]):8.2f}")
+    rows = [(name, *[sec.get(k, 0.0) for k in keys], sum(sec.values())) for name, sec in seconds.items()]
+    rows.append(("median", *[float(np.median([s.get(k, 0.0) for s in seconds.values()])) for k in keys],
+                 float(np.median([sum(s.values()) for s in seconds.values()]))))
+    bench.table("Seconds per stage of `build_asset` (files not written)", ["preset", *keys, "total"], rows)
 
 
 if __name__ == "__main__":
-    import species
-
-    arguments = [a for a in sys.argv[1:] if a != "--no-twig-cards"]
-    main(arguments or [preset.name for preset in species.list_presets()], twig_cards="--no-twig-cards" not in sys.argv[1:])
+    main()

@@ -4,14 +4,14 @@ growing and meshing the largest variants (each in its own process).
 
 Trees: every Weber-Penn preset at a few seeds, TreeSketchNet's dictionaries, and split-heavy and leaf-heavy
 variants (black_oak with segSplits[1] = 1.5, pine with 10,000 leaves among them). --before FILE adds the estimate of
-another size_estimate.py (say, the last commit's). Run: .venv/bin/python benchmarks/bench_size_estimate.py
+another size_estimate.py (say, the last commit's).
+Run: python -m benchmarks.bench_size_estimate [--seeds 3] [--before FILE] [--memory]
 """
 from __future__ import annotations
 
-import os
+from benchmarks.harness import ROOT, Benchmark, arguments, pin_threads
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # one core, before numpy loads
-    os.environ[_var] = "1"
+pin_threads()
 
 import argparse  # noqa: E402
 import contextlib  # noqa: E402
@@ -21,16 +21,13 @@ import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import species  # noqa: E402
-from farm.table import format_table  # noqa: E402
+from fixtures.sapling import TSN_DICTS  # noqa: E402
 from species.weber_penn import generator, size_estimate  # noqa: E402
 from species.weber_penn.params import WeberPennParams  # noqa: E402
-
-SAPLING_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "sapling"
 
 # name: (preset, changes to its sample); split-heavy first, then leaf-heavy.
 VARIANTS = {
@@ -61,7 +58,7 @@ def variant(name: str, seed: int) -> dict:
 
 
 def trees(seeds: int) -> list[tuple[str, dict]]:
-    out = [(path.stem, json.loads(path.read_text())) for path in sorted(SAPLING_DIR.glob("*.json"))]
+    out = [(path.stem, json.loads(path.read_text())) for path in sorted(TSN_DICTS.glob("*.json"))]
     presets = [preset.name for preset in species.list_presets() if preset.generator == "weber_penn"]
     out += [(f"{name} s{seed}", species.sample(name, np.random.default_rng(seed)))
             for name in presets for seed in range(seeds)]
@@ -138,20 +135,21 @@ def measure_one(name: str, seed: int) -> None:
                       "nodes": int(skeleton.n_nodes), "bark_faces": int(len(mesh.bark.faces))}))
 
 
-def memory_table(seeds: int) -> None:
+def memory_table(bench: Benchmark, seeds: int) -> None:
     rows = []
     for name in ("black_oak segSplits[1]=1.5", "pine leaves=10000", "balsam_fir leaves=3000"):
         for seed in range(seeds):
-            out = subprocess.run([sys.executable, __file__, "--one", name, str(seed)], check=True,
-                                 capture_output=True, text=True).stdout
+            out = subprocess.run([sys.executable, "-m", "benchmarks.bench_size_estimate", "--one", name, str(seed)],
+                                 cwd=ROOT, check=True, capture_output=True, text=True).stdout
             figures = json.loads(out.strip().splitlines()[-1])
             rows.append((f"{name} s{seed}", f"{figures['leaves']:,}", f"{figures['nodes']:,}",
                          f"{figures['bark_faces']:,}", f"{figures['seconds']:.1f}", f"{figures['peak_mib']:,.0f}"))
-    print(format_table(("tree", "leaves", "skeleton nodes", "bark faces", "grow+mesh s", "peak MiB"), rows))
+    bench.table("the largest variants grown and meshed, each in a process of its own",
+                ["tree", "leaves", "skeleton nodes", "bark faces", "grow+mesh s", "peak MiB"], rows)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = arguments(__doc__)
     parser.add_argument("--seeds", type=int, default=3)
     parser.add_argument("--before", help="another size_estimate.py to compare with")
     parser.add_argument("--memory", action="store_true", help="also grow and mesh the largest variants")
@@ -160,6 +158,7 @@ def main() -> None:
     if args.one:
         measure_one(args.one[0], int(args.one[1]))
         return
+    bench = Benchmark("size_estimate", "The Weber-Penn size estimate against what grows", args)
     before = load(args.before) if args.before else None
     header = ["tree", "real splines (largest level)", "nodes", "leaves"]
     if before:
@@ -180,11 +179,13 @@ def main() -> None:
         least = [min(m, r) for m, r in zip(least, ratios)]
         seconds.append(after[4])
         rows.append(row)
-    print(format_table(header, rows))
-    print(f"after: ratio estimate/real splines {least[0]:.2f}-{worst[0]:.2f}, nodes {least[1]:.2f}-{worst[1]:.2f}, "
-          f"leaves {least[2]:.2f}-{worst[2]:.2f}; estimate {1000 * max(seconds):.1f} ms at most")
+    bench.table("estimate against the grown tree, per tree", header, rows,
+                notes=[f"ratio estimate/real splines {least[0]:.2f}-{worst[0]:.2f}, nodes {least[1]:.2f}-"
+                       f"{worst[1]:.2f}, leaves {least[2]:.2f}-{worst[2]:.2f}; estimate {1000 * max(seconds):.1f} ms "
+                       "at most"])
     if args.memory:
-        memory_table(1)
+        memory_table(bench, 1)
+    bench.write()
 
 
 if __name__ == "__main__":

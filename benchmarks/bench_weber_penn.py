@@ -1,80 +1,74 @@
 """Grow-and-mesh speed of the Weber-Penn generator on one core, beside Blender's Sapling add-on.
 
-For each TreeSketchNet dictionary in ../shared/data/sapling and each Weber-Penn preset: median seconds to grow and
-mesh one tree, vertex and face counts, height and crown radius. Run: .venv/bin/python benchmarks/bench_weber_penn.py
+For each TreeSketchNet dictionary (the shared data's `sapling/` folder) and each Weber-Penn preset: median
+milliseconds to grow and to mesh one tree, vertex and face counts, height and crown radius, and for the
+dictionaries Sapling's seconds, height and crown radius (`fixtures/references/sapling.json`).
+Run: python -m benchmarks.bench_weber_penn [--repeats 7]
 """
 from __future__ import annotations
 
-import os
+from benchmarks.harness import Benchmark, arguments, pin_threads, time_case
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):  # one core, before numpy loads
-    os.environ[_var] = "1"
+pin_threads()
 
-import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import species  # noqa: E402
-from farm.table import format_table  # noqa: E402
-
-SAPLING_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "sapling"
-# Blender Sapling 0.3.4 on this machine: seconds to grow one mesh where measured, height and crown radius.
-SAPLING = json.loads((Path(__file__).resolve().parent / "references" / "sapling.json").read_text())
-SAPLING_MEDIAN_SECONDS = SAPLING["median_seconds"]
+from fixtures.sapling import TSN_DICTS, sapling_reference  # noqa: E402
 
 
-def time_tree(params: dict, repeats: int) -> tuple[float, float, float, object, object]:
-    """Median seconds of grow, of mesh, and of both, over `repeats` runs; plus the last skeleton and mesh."""
-    grow_s, mesh_s = [], []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        skeleton = species.grow(params, species.rng_for(params))
-        t1 = time.perf_counter()
-        mesh = species.build_mesh(skeleton, params)
-        t2 = time.perf_counter()
-        grow_s.append(t1 - t0)
-        mesh_s.append(t2 - t1)
-    total = [g + m for g, m in zip(grow_s, mesh_s)]
-    return statistics.median(grow_s), statistics.median(mesh_s), statistics.median(total), skeleton, mesh
+def time_tree(params: dict, repeats: int) -> tuple[float, float, object, object]:
+    """Median seconds of growing and of meshing the tree over `repeats` runs; its skeleton and mesh."""
+    grown = time_case(lambda: species.grow(params, species.rng_for(params)), repeats)
+    meshed = time_case(lambda: species.build_mesh(grown.result, params), repeats)
+    return grown.median, meshed.median, grown.result, meshed.result
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--repeats", type=int, default=7)
-    args = parser.parse_args()
+    args = arguments(__doc__, repeats=7).parse_args()
+    bench = Benchmark("weber_penn", "Weber-Penn grow and mesh on one core, beside Sapling", args)
     species.build_mesh(species.grow(species.sample("maple", np.random.default_rng(0)), np.random.default_rng(0)))
 
-    rows, totals = [], []
-    for path in sorted(SAPLING_DIR.glob("*.json")):
-        params = json.loads(path.read_text())
-        g, m, t, skeleton, mesh = time_tree(params, args.repeats)
-        totals.append(t)
-        reference = SAPLING["trees"][path.stem]
-        ref_h, ref_c = reference["height_m"], reference["crown_radius_m"]
-        sapling = reference.get("seconds")
-        rows.append((path.stem, round(g * 1000, 1), round(m * 1000, 1), round(t * 1000, 1),
-                     f"{sapling:.2f}" if sapling else "-", f"{sapling / t:.0f}x" if sapling else "-",
-                     mesh.n_vertices, mesh.n_faces, f"{skeleton.height:.2f} / {ref_h:.2f}",
-                     f"{skeleton.crown_radius:.2f} / {ref_c:.2f}"))
-    print("TreeSketchNet dictionaries (one core; Sapling 0.3.4 in Blender on this machine beside it)")
-    print(format_table(["dictionary", "grow_ms", "mesh_ms", "total_ms", "sapling_s", "speedup", "vertices", "faces",
-                        "height ours/sapling", "crown ours/sapling"], rows))
-    median = statistics.median(totals)
-    print(f"\nmedian over the five dictionaries: {median * 1000:.1f} ms per tree; Sapling {SAPLING_MEDIAN_SECONDS} s "
-          f"-> {SAPLING_MEDIAN_SECONDS / median:.0f}x faster (target >= 20x per dictionary)\n")
+    dictionaries = sorted(TSN_DICTS.glob("*.json"))
+    if dictionaries:
+        sapling = sapling_reference()
+        rows, totals = [], []
+        for path in dictionaries:
+            params = json.loads(path.read_text())
+            grow_s, mesh_s, skeleton, mesh = time_tree(params, args.repeats)
+            total = grow_s + mesh_s
+            totals.append(total)
+            reference = sapling["trees"][path.stem]
+            seconds = reference.get("seconds")
+            rows.append((path.stem, 1000 * grow_s, 1000 * mesh_s, 1000 * total, seconds or "-",
+                         f"{seconds / total:.0f}x" if seconds else "-", mesh.n_vertices, mesh.n_faces,
+                         f"{skeleton.height:.2f} / {reference['height_m']:.2f}",
+                         f"{skeleton.crown_radius:.2f} / {reference['crown_radius_m']:.2f}"))
+        bench.table("TreeSketchNet dictionaries, one core (Sapling 0.3.4 in Blender beside it)",
+                    ["dictionary", "grow ms", "mesh ms", "total ms", "Sapling s", "speed-up", "vertices", "faces",
+                     "height m ours / Sapling", "crown m ours / Sapling"], rows)
+        median = statistics.median(totals)
+        bench.figure("median grow + mesh over the dictionaries", 1000 * median, "ms per tree")
+        bench.figure("speed-up on Sapling's median", sapling["median_seconds"] / median, "x",
+                     f"Sapling {sapling['median_seconds']} s per tree; target >= 20x per dictionary")
+    else:
+        bench.note(f"no TreeSketchNet dictionaries in {TSN_DICTS}: the Sapling comparison is skipped")
 
-    rows = []
+    rows, totals = [], []
     for preset in species.list_presets("weber_penn"):
         params = species.sample(preset, np.random.default_rng(0))
-        g, m, t, skeleton, mesh = time_tree(params, args.repeats)
-        rows.append((preset.name, round(g * 1000, 1), round(m * 1000, 1), round(t * 1000, 1), mesh.n_vertices,
-                     mesh.n_faces, round(skeleton.height, 2), round(skeleton.crown_radius, 2)))
-    print("Weber-Penn presets (seed 0, one core)")
-    print(format_table(["preset", "grow_ms", "mesh_ms", "total_ms", "vertices", "faces", "height_m", "crown_m"], rows))
+        grow_s, mesh_s, skeleton, mesh = time_tree(params, args.repeats)
+        totals.append(grow_s + mesh_s)
+        rows.append((preset.name, 1000 * grow_s, 1000 * mesh_s, 1000 * (grow_s + mesh_s), mesh.n_vertices,
+                     mesh.n_faces, skeleton.height, skeleton.crown_radius))
+    bench.table("Weber-Penn presets (seed 0, one core)",
+                ["preset", "grow ms", "mesh ms", "total ms", "vertices", "faces", "height m", "crown m"], rows)
+    bench.figure("presets grown and meshed per second", 1 / statistics.median(totals), "trees/s",
+                 "one core, the median preset")
+    bench.write()
 
 
 if __name__ == "__main__":

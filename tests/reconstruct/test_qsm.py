@@ -12,7 +12,7 @@ import trimesh
 from reconstruct.qsm import (BRANCH_COLUMNS, QsmError, branch_table, qsm_measures, read_skeleton_ply,
                              segment_volumes, write_branch_csv, write_skeleton_ply)
 from species.skeleton import Skeleton
-from tests.species.skeleton_factory import random_tree
+from fixtures.skeletons import random_tree
 
 
 def vertical(z, radius) -> Skeleton:

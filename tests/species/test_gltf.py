@@ -12,7 +12,7 @@ from species.meshing.gltf import (CLAMP_TO_EDGE, Z_UP_TO_Y_UP, GlbBuffer, GlbErr
 from species.meshing.tubes_and_cards import build_mesh
 from species.tree_mesh import MeshError, MeshPart, TreeMesh
 from tests.gltf_validator import assert_valid_glb
-from tests.species.skeleton_factory import fork_with_leaves, random_tree, straight_trunk
+from fixtures.skeletons import fork_with_leaves, random_tree, straight_trunk
 
 
 @pytest.fixture(scope="module")

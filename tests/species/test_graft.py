@@ -6,7 +6,7 @@ from species.errors import ParameterError
 from species.lsystem.graft import extract_subtree, graft, pipe_smooth_radius, side_anchor, smooth_radius, subtree_mask
 from species.lsystem.lstring_io import lstring_to_tree
 from species.skeleton import Skeleton
-from tests.species.skeleton_factory import fork_with_leaves
+from fixtures.skeletons import fork_with_leaves
 
 
 def trunk(n=4, radius=0.1) -> Skeleton:

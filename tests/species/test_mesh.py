@@ -5,7 +5,7 @@ import pytest
 from species.errors import ParameterError
 from species.meshing.tubes_and_cards import MeshBuildError, build_mesh, radial_segments
 from species.skeleton import Skeleton
-from tests.species.skeleton_factory import fork_with_leaves, leaf_transforms, random_tree, straight_trunk
+from fixtures.skeletons import fork_with_leaves, leaf_transforms, random_tree, straight_trunk
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from species.meshing.ascii_numbers import AsciiNumberError, fixed6_rows, int_row
 from species.meshing.gltf import z_up_to_y_up
 from species.meshing.tubes_and_cards import build_mesh
 from species.meshing.obj import ObjError, tree_mesh_to_obj
-from tests.species.skeleton_factory import fork_with_leaves, random_tree, straight_trunk
+from fixtures.skeletons import fork_with_leaves, random_tree, straight_trunk
 
 
 @pytest.fixture(scope="module")

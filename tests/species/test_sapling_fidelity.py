@@ -1,22 +1,15 @@
-"""The Sapling differential harness (benchmarks/bench_sapling_fidelity.py) on its committed Sapling figures: the
-reference covers every harness dictionary, treefarm's side grows comparable rows, and the comparison is sound."""
-import importlib.util
+"""The Sapling differential comparison (`fixtures.sapling`, printed by benchmarks/bench_sapling_fidelity.py) on
+its committed Sapling figures: the reference covers every dictionary, treefarm's side grows comparable rows, and
+the comparison is sound."""
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import species
+from fixtures import sapling as fidelity
 
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_sapling_fidelity.py"
-_spec = importlib.util.spec_from_file_location("bench_sapling_fidelity", BENCH)
-harness = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = harness  # dataclasses look their module up while it loads
-_spec.loader.exec_module(harness)
-
-REFERENCE = json.loads(harness.REFERENCE.read_text())
+REFERENCE = json.loads(fidelity.FIDELITY_REFERENCE.read_text())
 # Small trees of each kind, so that treefarm's side of the test grows in seconds.
 FEW = ("sapling:quaking_aspen", "tsn:3_palm_3", "ours:palm_0")
 FEW_SEEDS = 4
@@ -24,22 +17,22 @@ FEW_SEEDS = 4
 
 @pytest.fixture(scope="module")
 def dictionaries():
-    return {h.name: h for h in harness.harness_dictionaries()}
+    return {h.name: h for h in fidelity.harness_dictionaries()}
 
 
 @pytest.fixture(scope="module")
 def few_records(dictionaries):
-    ours = {name: [{"seed": s, **harness.treefarm_figures(dictionaries[name].treefarm, s)}
+    ours = {name: [{"seed": s, **fidelity.treefarm_figures(dictionaries[name].treefarm, s)}
                    for s in range(FEW_SEEDS)] for name in FEW}
     sapling = {name: REFERENCE["trees"][name] for name in FEW}
-    return ours, harness.compare(ours, sapling, np.random.default_rng(0))
+    return ours, fidelity.compare(ours, sapling, np.random.default_rng(0))
 
 
 def test_reference_holds_every_harness_dictionary_over_at_least_24_seeds(dictionaries):
     assert len(dictionaries) >= 40
     assert sum(h.kind == "our_preset" for h in dictionaries.values()) >= 30
     assert REFERENCE["seeds"] >= 24 and {"blender", "sapling"} <= set(REFERENCE["versions"])
-    assert harness.stale_dictionaries(REFERENCE, list(dictionaries.values())) == []
+    assert fidelity.stale_dictionaries(REFERENCE, list(dictionaries.values())) == []
     for name in dictionaries:
         rows = REFERENCE["trees"][name]
         assert sorted(r["seed"] for r in rows) == list(range(REFERENCE["seeds"])), name
@@ -59,13 +52,13 @@ def test_our_preset_dictionaries_carry_ranges_and_no_realized_draws(dictionaries
     for h in dictionaries.values():
         if h.kind == "our_preset":
             assert h.treefarm["draws"] == "ranges"
-            assert not set(harness.REALIZED_ONLY_KEYS) & set(h.treefarm)
+            assert not set(fidelity.REALIZED_ONLY_KEYS) & set(h.treefarm)
             assert len(h.treefarm["curveV"]) == 4 and len(h.treefarm["splitAngleV"]) == 4
 
 
 def test_preset_ranges_read_the_half_widths_our_maple_draws_from():
     maple = species.get_preset("maple")
-    ranges = harness.preset_ranges(maple)
+    ranges = fidelity.preset_ranges(maple)
     assert ranges["scaleV"] == pytest.approx(0.8)
     assert ranges["scaleV0"] == pytest.approx(0.1) and ranges["leafScaleV"] == pytest.approx(0.15)
     assert ranges["curveV"] == [2, 10, 20, 0] and ranges["splitAngleV"] == [4, 4, 4, 0]
@@ -73,7 +66,7 @@ def test_preset_ranges_read_the_half_widths_our_maple_draws_from():
 
 def test_treesketchnet_dictionary_reaches_sapling_with_its_realized_scales():
     params = {"scale": 5.0, "scaleV": 0.5, "scale0": 1.0, "scaleV0": 0.9, "leafScale": 0.4, "leafScaleV": 0.5}
-    given = harness.realized_for_sapling(params)
+    given = fidelity.realized_for_sapling(params)
     assert given["scale"] == 5.5 and given["scale0"] == 0.9 and given["leafScale"] == 0.2
     assert given["scaleV"] == given["scaleV0"] == given["leafScaleV"] == 0.0
 
@@ -103,29 +96,29 @@ def test_comparison_has_every_measure_with_its_point_inside_its_interval(few_rec
 
 def test_bootstrap_of_a_sample_against_its_double_is_a_half():
     sample = np.arange(1.0, 26.0)
-    point, lo, hi = harness.bootstrap_ratio(sample, 2 * sample, np.random.default_rng(0))
+    point, lo, hi = fidelity.bootstrap_ratio(sample, 2 * sample, np.random.default_rng(0))
     assert point == 0.5 and lo < 0.5 < hi
     # Constant samples leave no noise: the interval is the point.
-    assert harness.bootstrap_ratio(np.full(9, 3.0), np.full(7, 2.0), np.random.default_rng(1)) == (1.5, 1.5, 1.5)
+    assert fidelity.bootstrap_ratio(np.full(9, 3.0), np.full(7, 2.0), np.random.default_rng(1)) == (1.5, 1.5, 1.5)
 
 
 def test_bootstrap_interval_narrows_as_samples_grow():
     rng = np.random.default_rng(2)
     small, large = rng.normal(10, 1, (2, 24)), rng.normal(10, 1, (2, 960))
-    _, lo_s, hi_s = harness.bootstrap_ratio(small[0], small[1], np.random.default_rng(3))
-    _, lo_l, hi_l = harness.bootstrap_ratio(large[0], large[1], np.random.default_rng(3))
+    _, lo_s, hi_s = fidelity.bootstrap_ratio(small[0], small[1], np.random.default_rng(3))
+    _, lo_l, hi_l = fidelity.bootstrap_ratio(large[0], large[1], np.random.default_rng(3))
     assert hi_l - lo_l < (hi_s - lo_s) / 3
     assert lo_l < 1 < hi_l
 
 
 def test_zero_counts_on_both_sides_are_the_same():
-    assert harness.bootstrap_ratio(np.zeros(5), np.zeros(5), np.random.default_rng(0)) == (1.0, 1.0, 1.0)
+    assert fidelity.bootstrap_ratio(np.zeros(5), np.zeros(5), np.random.default_rng(0)) == (1.0, 1.0, 1.0)
 
 
 def test_a_difference_is_flagged_only_when_the_interval_leaves_the_band():
-    assert harness.outside_band(0.95, 1.3, 0.10) == 0.0
-    assert harness.outside_band(1.2, 1.3, 0.10) == pytest.approx(np.log(1.2 / 1.1))
-    assert harness.outside_band(0.5, 0.8, 0.10) == pytest.approx(np.log(0.9 / 0.8))
+    assert fidelity.outside_band(0.95, 1.3, 0.10) == 0.0
+    assert fidelity.outside_band(1.2, 1.3, 0.10) == pytest.approx(np.log(1.2 / 1.1))
+    assert fidelity.outside_band(0.5, 0.8, 0.10) == pytest.approx(np.log(0.9 / 0.8))
 
 
 # Sapling's own presets, TreeSketchNet dictionaries and dictionaries from our presets that once differed in stems
@@ -140,8 +133,8 @@ HELD = ("sapling:acer", "sapling:douglas_fir", "sapling:quaking_aspen", "sapling
 def test_sapling_presets_and_our_ranges_grow_within_the_bands_of_sapling(dictionaries):
     names = [name for name in HELD if name in REFERENCE["trees"]]
     assert len(names) == len(HELD)
-    ours = {name: [{"seed": s, **harness.treefarm_figures(dictionaries[name].treefarm, s)}
-                   for s in range(harness.N_SEEDS)] for name in names}
-    records = harness.compare(ours, {name: REFERENCE["trees"][name] for name in names}, np.random.default_rng(0))
+    ours = {name: [{"seed": s, **fidelity.treefarm_figures(dictionaries[name].treefarm, s)}
+                   for s in range(fidelity.N_SEEDS)] for name in names}
+    records = fidelity.compare(ours, {name: REFERENCE["trees"][name] for name in names}, np.random.default_rng(0))
     flagged = [f"{r['name']} {r['measure']} {r.get('ratio', float('nan')):.3f}" for r in records if r["flag"]]
     assert not flagged, flagged

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from species.skeleton import Skeleton, SkeletonError
-from tests.species.skeleton_factory import fork_with_leaves
+from fixtures.skeletons import fork_with_leaves
 
 
 def fork() -> Skeleton:

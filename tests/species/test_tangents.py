@@ -7,7 +7,7 @@ import pytest
 
 from species.geometry import vertex_tangents
 from species.meshing import build_mesh
-from tests.species.skeleton_factory import random_tree
+from fixtures.skeletons import random_tree
 
 # A unit quad in the XY plane, facing +z, counter-clockwise.
 QUAD = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import species
+from fixtures.sapling import sapling_reference
 from species.weber_penn.assembly import SkeletonAssemblyError, WeberPennTree, assemble
 from species.weber_penn.generator import grow, grow_tree
 from species.weber_penn.params import WeberPennParams
@@ -14,8 +15,7 @@ from species.weber_penn.schema import SAPLING_KEYS
 
 SAPLING = Path(__file__).resolve().parents[3] / "shared" / "data" / "sapling"
 # Sapling 0.3.4's own height and crown radius for the same dictionaries (the figures the benchmark prints beside).
-SAPLING_REFERENCE = json.loads((Path(__file__).resolve().parents[2] / "benchmarks" / "references"
-                                / "sapling.json").read_text())["trees"]
+SAPLING_REFERENCE = sapling_reference()["trees"]
 
 
 def sapling_dict(name: str) -> dict:
