@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import torch
 
-from farm.dataset import part_files, reading_part
+from farm.dataset import read_columns, read_part
 from farm.dataset.storage import Location
 from farm.dataset.torch_dataset import ViewsDataset
 
@@ -190,16 +190,12 @@ def _sqlite_verdicts(location: Location) -> list[tuple[str, str, str, int]]:
 
 
 def _parquet_verdicts(location: Location) -> list[tuple[str, str, str, int]]:
-    import pyarrow.parquet as pq
-
     rows = []
     for name in location.list(REVIEWS_FOLDER):
         if not name.endswith(".parquet") or name.startswith((".", "_")):
             continue
-        file = location.path(f"{REVIEWS_FOLDER}/{name}")
-        with reading_part(file):
-            table = pq.read_table(file, columns=["tree_id", "reviewer", "verdict", "time"],
-                                  filesystem=location.filesystem)
+        table = read_part(location, location.path(f"{REVIEWS_FOLDER}/{name}"),
+                          ["tree_id", "reviewer", "verdict", "time"])
         times = table.column("time").cast("int64").to_pylist()
         rows += list(zip(table.column("tree_id").to_pylist(), table.column("reviewer").to_pylist(),
                          table.column("verdict").to_pylist(), times))
@@ -241,22 +237,10 @@ class Source:
         return [(self.spec_digest, tree_id) for tree_id in sorted(self.trees)]
 
 
-def _read_table(path: str, table: str, columns: list[str]):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    location, files = part_files(path, table)
-    tables = []
-    for file in files:
-        with reading_part(file):
-            tables.append(pq.read_table(file, columns=columns, filesystem=location.filesystem))
-    return pa.concat_tables(tables)
-
-
 def _open_source(task: Task, path: str) -> Source:
     manifest = task.check_dataset(path)
-    trees = _read_table(path, "trees", ["tree_id", "species", "params_json", "error"]).to_pylist()
-    views = _read_table(path, "views", ["tree_id"]).column("tree_id").to_numpy(zero_copy_only=False)
+    trees = read_columns(path, "trees", ["tree_id", "species", "params_json", "error"]).to_pylist()
+    views = read_columns(path, "views", ["tree_id"]).column("tree_id").to_numpy(zero_copy_only=False)
     rejected = rejected_trees(path) & {t["tree_id"] for t in trees}
     usable = {t["tree_id"]: (t["species"], t["params_json"]) for t in trees
               if t["error"] is None and t["params_json"] is not None and t["tree_id"] not in rejected}

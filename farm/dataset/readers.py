@@ -1,14 +1,16 @@
-"""Readers of a finished dataset: its manifest, its part files, and each table through pyarrow, pandas, DuckDB,
-Ray Data and Hugging Face (torch: `torch_dataset`)."""
+"""Readers of a finished dataset: its manifest, its part files, some columns of a table across them, and each
+table through pyarrow, pandas, DuckDB, Ray Data and Hugging Face (torch: `torch_dataset`)."""
 from __future__ import annotations
 
 import json
-from typing import Iterable
+from contextlib import contextmanager
+from typing import Iterable, Sequence
 
-from .schema import FLOAT_OUTPUTS, TABLES, DatasetError, trees_schema, views_schema
+from .schema import FLOAT_OUTPUTS, TABLES, DatasetError, reading_part, trees_schema, views_schema
 from .storage import Location
 
-__all__ = ["read_manifest", "part_files", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface"]
+__all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_part", "open", "to_pandas",
+           "duckdb_connect", "to_ray", "to_huggingface"]
 
 
 def read_manifest(path: str | Location) -> dict:
@@ -30,6 +32,46 @@ def part_files(path: str | Location, table: str = "trees") -> tuple[Location, li
     location = path if isinstance(path, Location) else Location.resolve(path)
     manifest = read_manifest(location)
     return location, [location.path(shard[table]["path"]) for shard in manifest["shards"]]
+
+
+def read_columns(path: str | Location, table: str, columns: Sequence[str], *, filters=None,
+                 memory_map: bool = False):
+    """Some columns of one table (`trees` or `views`) across the manifest's part files, as one `pyarrow.Table`
+    whose rows keep the part files' order (shard, then row).
+
+    filters    : a `pyarrow.compute` expression a row must match (`pc.field("tree_id") == "t"`), or None.
+    memory_map : map local part files rather than read them (the PNG bytes then stay in the page cache until used).
+    DatasetError for an unknown table, a dataset without a manifest, and a part file Parquet refuses (named).
+    """
+    import pyarrow as pa
+
+    location, files = part_files(path, table)
+    if not files:  # a manifest without shards: the asked columns, no rows
+        outputs = read_manifest(location)["job"]["render"]["outputs"]
+        schema = trees_schema() if table == "trees" else views_schema(outputs)
+        return pa.schema([schema.field(name) for name in columns]).empty_table()
+    return pa.concat_tables([read_part(location, file, columns, filters=filters, memory_map=memory_map)
+                             for file in files])
+
+
+def read_part(location: Location, file: str, columns: Sequence[str], *, filters=None, memory_map: bool = False):
+    """Some columns of one Parquet file on the location (`file` as `part_files` gives it), as a `pyarrow.Table`;
+    DatasetError naming the file when Parquet refuses it. `filters` and `memory_map` as in `read_columns`."""
+    import pyarrow.parquet as pq
+
+    with reading_part(file):
+        return pq.read_table(file, columns=list(columns), filters=filters, filesystem=location.filesystem,
+                             memory_map=memory_map and location.is_local)
+
+
+@contextmanager
+def open_part(location: Location, file: str):
+    """A `pyarrow.parquet.ParquetFile` of one file on the location, for reads by row group inside the block; a
+    read Parquet refuses there raises DatasetError naming the file."""
+    import pyarrow.parquet as pq
+
+    with reading_part(file), location.filesystem.open_input_file(file) as handle:
+        yield pq.ParquetFile(handle)
 
 
 def open(path: str, table: str = "trees"):  # noqa: A001 - the reader's natural name: farm.dataset.open

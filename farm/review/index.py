@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from farm.dataset import FLOAT_OUTPUTS, read_manifest, reading_part
+from farm.dataset import FLOAT_OUTPUTS, open_part, read_manifest, read_part
 from farm.dataset.storage import Location
 from species.errors import TreefarmError
 
@@ -54,16 +54,13 @@ class _RowGroupCache:
         self._lock = threading.Lock()
 
     def read(self, ref: TreeRef, columns: tuple[str, ...]):
-        import pyarrow.parquet as pq
-
         key = (ref.part, ref.row_group, columns)
         with self._lock:
             if key in self._tables:
                 self._tables.move_to_end(key)
                 return self._tables[key]
-        file = self.location.path(ref.part)
-        with reading_part(file), self.location.filesystem.open_input_file(file) as handle:
-            table = pq.ParquetFile(handle).read_row_group(ref.row_group, columns=list(columns))
+        with open_part(self.location, self.location.path(ref.part)) as parquet:
+            table = parquet.read_row_group(ref.row_group, columns=list(columns))
         with self._lock:
             self._tables[key] = table
             while len(self._tables) > _CACHE_ENTRIES:
@@ -74,10 +71,8 @@ class _RowGroupCache:
 def _row_refs(location: Location, part: str, columns: list[str]):
     """The light columns of one part file and a TreeRef for each of its rows."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    with reading_part(location.path(part)), location.filesystem.open_input_file(location.path(part)) as handle:
-        parquet = pq.ParquetFile(handle)
+    with open_part(location, location.path(part)) as parquet:
         groups = [parquet.read_row_group(g, columns=columns) for g in range(parquet.num_row_groups)]
     refs = [TreeRef(part, g, r) for g, table in enumerate(groups) for r in range(table.num_rows)]
     return (pa.concat_tables(groups) if groups else None), refs
@@ -171,15 +166,11 @@ class DatasetIndex:
     # ------------------------------------------------------------------ QA
     def compute_qa(self, batch: dict) -> QaFlags:
         """Flags of one batch (shard): tree checks from its trees part, ink checks from its sketches."""
-        import pyarrow.parquet as pq
-
         shard = next(s for s in self.manifest["shards"] if f"part-{s['shard']:05d}" == batch["id"])
         trees_file, views_file = (self.location.path(shard[table]["path"]) for table in ("trees", "views"))
-        with reading_part(trees_file), self.location.filesystem.open_input_file(trees_file) as handle:
-            flags = tree_flags(pq.read_table(handle, columns=TREE_COLUMNS))
+        flags = tree_flags(read_part(self.location, trees_file, TREE_COLUMNS))
         if self.sketch_output is not None:
-            with reading_part(views_file), self.location.filesystem.open_input_file(views_file) as handle:
-                views = pq.read_table(handle, columns=["tree_id", self.sketch_output])
+            views = read_part(self.location, views_file, ["tree_id", self.sketch_output])
             flags = flags + ink_flags(views["tree_id"].to_pylist(), views[self.sketch_output].to_pylist())
         return flags
 
