@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import torch
 
-from farm.dataset import read_columns, read_part
+from farm.dataset import parse_format_json, read_columns, read_format_json, read_part
 from farm.dataset.storage import Location
 from farm.dataset.torch_dataset import ViewsDataset
 
@@ -52,6 +52,7 @@ DEFAULT_FRACTIONS = (0.8, 0.1, 0.1)
 _SPLIT_FORMAT = "treefarm-split"
 _SPLIT_VERSION = 1
 _SPLIT_RULE = "sha256(spec_digest + '/' + tree_id)[:8] / 2**64 against cumulative fractions"
+_SPLIT_HINT = "allowed a split `Split.save` wrote (split.json in a training run folder)"
 
 # What `farm review` stores (farm/review/store.py, farm/review/export.py), read here without importing the review
 # package: the SQLite file beside the dataset and its table, and the exported Parquet parts.
@@ -138,12 +139,11 @@ class Split:
     @classmethod
     def from_json(cls, text: str, source: str = "split") -> "Split":
         """A split from `to_json` text; TrainingDataError (naming `source`) for anything else."""
-        try:
-            content = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise TrainingDataError(f"{source} is not valid JSON: {exc}") from None
-        if not isinstance(content, dict) or content.get("format") != _SPLIT_FORMAT:
-            raise TrainingDataError(f"{source} is not a treefarm split (no \"format\": \"{_SPLIT_FORMAT}\")")
+        content = parse_format_json(text, _SPLIT_FORMAT, source=source, hint=_SPLIT_HINT, error=TrainingDataError)
+        return cls._from_content(content, source)
+
+    @classmethod
+    def _from_content(cls, content: dict, source: str) -> "Split":
         if content.get("version") != _SPLIT_VERSION:
             raise TrainingDataError(f"{source} has split version {content.get('version')!r}: allowed "
                                     f"{_SPLIT_VERSION}")
@@ -168,9 +168,8 @@ class Split:
     @classmethod
     def load(cls, path: str | Path) -> "Split":
         path = Path(path)
-        if not path.is_file():
-            raise TrainingDataError(f"split file {path} does not exist")
-        return cls.from_json(path.read_text(), str(path))
+        return cls._from_content(read_format_json(Location.resolve(str(path.parent)), path.name, _SPLIT_FORMAT,
+                                                  hint=_SPLIT_HINT, error=TrainingDataError), str(path))
 
 
 # ---------------------------------------------------------------------------------------------- reviews

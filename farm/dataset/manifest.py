@@ -14,7 +14,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .readers import read_manifest
-from .schema import SCHEMA_VERSION, TABLES, DatasetError, part_name, trees_schema, views_schema
+from .schema import DATASET_FORMAT, SCHEMA_VERSION, TABLES, DatasetError, part_name, trees_schema, views_schema
 from .storage import Location, sha256_hex
 
 __all__ = ["SHARDS_FOLDER", "JOB_RECORD", "write_job_record", "shard_record_name", "write_shard_record", "read_shard_record", "finished_shards", "build_manifest",
@@ -111,7 +111,7 @@ def build_manifest(spec, records: dict[int, dict], wall_seconds: float) -> dict:
     n_trees = sum(r["trees"]["rows"] for r in shards)
     n_views = sum(r["views"]["rows"] for r in shards)
     return {
-        "format": "treefarm-dataset",
+        "format": DATASET_FORMAT,
         "schema_version": SCHEMA_VERSION,
         "job": spec.to_dict(),
         "spec_digest": spec.digest(),

@@ -2,11 +2,11 @@
 table through pyarrow, pandas, DuckDB, Ray Data and Hugging Face (torch: `torch_dataset`)."""
 from __future__ import annotations
 
-import json
 from contextlib import contextmanager
 from typing import Iterable, Sequence
 
-from .schema import FLOAT_OUTPUTS, TABLES, DatasetError, reading_part, trees_schema, views_schema
+from .format_json import read_format_json
+from .schema import DATASET_FORMAT, FLOAT_OUTPUTS, TABLES, DatasetError, reading_part, trees_schema, views_schema
 from .storage import Location
 
 __all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_part", "open", "to_pandas",
@@ -14,15 +14,12 @@ __all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_par
 
 
 def read_manifest(path: str | Location) -> dict:
-    """The dataset's manifest.json as a dict (DatasetError if the folder has none: job unfinished?)."""
+    """The dataset's manifest.json as a dict; DatasetError if the folder has none (job unfinished?) or it is not
+    a treefarm dataset's manifest."""
     location = path if isinstance(path, Location) else Location.resolve(path)
-    if not location.exists("manifest.json"):
-        raise DatasetError(f"{location.uri} has no manifest.json: not a finished treefarm dataset "
-                           f"(run `farm status {location.uri}` to see an unfinished job)")
-    try:
-        return json.loads(location.read_bytes("manifest.json"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{location.path('manifest.json')} is not valid JSON: {exc}") from None
+    return read_format_json(location, "manifest.json", DATASET_FORMAT,
+                            hint=f"not a finished treefarm dataset (run `farm status {location.uri}` to see an "
+                                 f"unfinished job)")
 
 
 def part_files(path: str | Location, table: str = "trees") -> tuple[Location, list[str]]:

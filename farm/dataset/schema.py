@@ -15,9 +15,11 @@ from species.errors import TreefarmError
 from species.skeleton import Skeleton, SkeletonError
 
 
-__all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
+__all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
            "trees_schema", "views_schema", "skeleton_from_row", "part_name", "serialize_table"]
 
+# manifest.json's "format" (docs/dataset.md).
+DATASET_FORMAT = "treefarm-dataset"
 SCHEMA_VERSION = 1
 TABLES = ("trees", "views")
 # Renderer outputs that are float maps, stored as 16-bit PNG with `<name>_scale` and `<name>_offset` columns.
