@@ -11,14 +11,16 @@ from __future__ import annotations
 
 from .format_json import parse_format_json, read_format_json
 from .readers import (duckdb_connect, open, open_part, part_files, read_columns, read_manifest, read_part,
-                      to_huggingface, to_pandas, to_ray)
-from .schema import (DATASET_FORMAT, FLOAT_OUTPUTS, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError,
-                     part_name, reading_part, serialize_table, skeleton_from_row, trees_schema, views_schema)
+                      stored_float_outputs, to_huggingface, to_pandas, to_ray)
+from .schema import (DATASET_FORMAT, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, float_outputs_of,
+                     output_columns, part_name, reading_part, serialize_table, skeleton_from_row, trees_schema,
+                     views_schema)
 from .storage import Location
 
-__all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError",
-           "reading_part", "trees_schema", "views_schema", "skeleton_from_row", "part_name", "serialize_table",
-           "read_manifest", "part_files", "read_columns", "read_part", "open_part", "open", "to_pandas",
+__all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
+           "trees_schema", "views_schema", "float_outputs_of", "output_columns", "skeleton_from_row", "part_name",
+           "serialize_table", "read_manifest", "part_files", "read_columns", "read_part", "open_part",
+           "stored_float_outputs", "open", "to_pandas",
            "duckdb_connect", "to_ray", "to_huggingface", "parse_format_json", "read_format_json", "Location",
            "ViewsDataset"]
 

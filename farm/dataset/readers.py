@@ -6,11 +6,12 @@ from contextlib import contextmanager
 from typing import Iterable, Sequence
 
 from .format_json import read_format_json
-from .schema import DATASET_FORMAT, FLOAT_OUTPUTS, TABLES, DatasetError, reading_part, trees_schema, views_schema
+from .schema import (DATASET_FORMAT, TABLES, DatasetError, float_outputs_of, reading_part, trees_schema,
+                     views_schema)
 from .storage import Location
 
-__all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_part", "open", "to_pandas",
-           "duckdb_connect", "to_ray", "to_huggingface"]
+__all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_part", "stored_float_outputs", "open",
+           "to_pandas", "duckdb_connect", "to_ray", "to_huggingface"]
 
 
 def read_manifest(path: str | Location) -> dict:
@@ -43,9 +44,11 @@ def read_columns(path: str | Location, table: str, columns: Sequence[str], *, fi
     import pyarrow as pa
 
     location, files = part_files(path, table)
-    if not files:  # a manifest without shards: the asked columns, no rows
+    if not files:
+        # A manifest without shards: the asked columns, no rows. A views schema with every output's scale and
+        # offset holds any column a views part can have.
         outputs = read_manifest(location)["job"]["render"]["outputs"]
-        schema = trees_schema() if table == "trees" else views_schema(outputs)
+        schema = trees_schema() if table == "trees" else views_schema(outputs, float_outputs=outputs)
         return pa.schema([schema.field(name) for name in columns]).empty_table()
     return pa.concat_tables([read_part(location, file, columns, filters=filters, memory_map=memory_map)
                              for file in files])
@@ -71,12 +74,27 @@ def open_part(location: Location, file: str):
         yield pq.ParquetFile(handle)
 
 
+def stored_float_outputs(path: str | Location) -> frozenset[str]:
+    """The outputs a dataset stores as float maps: those its views part files store with `<name>_scale` and
+    `<name>_offset` columns (read from the first part's schema; none for a dataset without parts)."""
+    import pyarrow.parquet as pq
+
+    location, files = part_files(path, "views")
+    if not files:
+        return frozenset()
+    with reading_part(files[0]):
+        return float_outputs_of(pq.read_schema(files[0], filesystem=location.filesystem).names)
+
+
 def open(path: str, table: str = "trees"):  # noqa: A001 - the reader's natural name: farm.dataset.open
     """A `pyarrow.dataset.Dataset` over one table (`trees` or `views`) of a finished dataset."""
     import pyarrow.dataset as ds
 
     location, files = part_files(path, table)
-    schema = trees_schema() if table == "trees" else views_schema(read_manifest(location)["job"]["render"]["outputs"])
+    if table == "trees":
+        schema = trees_schema()
+    else:
+        schema = views_schema(read_manifest(location)["job"]["render"]["outputs"], stored_float_outputs(location))
     return ds.dataset(files, schema=schema, format="parquet", filesystem=location.filesystem)
 
 
@@ -118,8 +136,9 @@ def to_huggingface(path: str, table: str = "views", cache_dir: str | None = None
         raise DatasetError(f"to_huggingface reads local datasets; {path!r} is on {location.filesystem.type_name}")
     loaded = datasets.load_dataset("parquet", data_files=files, split="train", cache_dir=cache_dir)
     if decode_images and table == "views":
-        non_image = {"tree_id", "index", "shard", "view", "view_name", "camera_json"}
+        non_image = {"tree_id", "index", "shard", "view", "view_name", "camera_json",
+                     *float_outputs_of(loaded.features)}
         for column, feature in loaded.features.items():
-            if column not in non_image and column not in FLOAT_OUTPUTS and getattr(feature, "dtype", "") == "binary":
+            if column not in non_image and getattr(feature, "dtype", "") == "binary":
                 loaded = loaded.cast_column(column, datasets.Image())
     return loaded

@@ -9,9 +9,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .readers import read_columns, read_manifest
-from .schema import FLOAT_OUTPUTS, DatasetError
-from .image_codec import METRIC_MAPS, decode_map
+from .image_codec import decode_map
+from .readers import read_columns, read_manifest, stored_float_outputs
+from .schema import DatasetError, output_columns
 
 __all__ = ["ViewsDataset"]
 
@@ -43,9 +43,8 @@ class ViewsDataset(_torch().utils.data.Dataset):
         for name in self.outputs:
             if name not in stored:
                 raise DatasetError(f"output {name!r} is not in this dataset: stored {', '.join(stored)}")
-        columns = ["tree_id", "index", "view", "view_name", "camera_json"]
-        for name in self.outputs:
-            columns += [name] + ([f"{name}_scale", f"{name}_offset"] if name in FLOAT_OUTPUTS else [])
+        columns = ["tree_id", "index", "view", "view_name", "camera_json",
+                   *output_columns(self.outputs, stored_float_outputs(path))]
         self.table = read_columns(path, "views", columns, memory_map=True)
         self.params: dict[str, dict] | None = None
         if with_params:
@@ -65,8 +64,7 @@ class ViewsDataset(_torch().utils.data.Dataset):
         out = {"tree_id": row["tree_id"], "index": row["index"], "view": row["view"],
                "view_name": row["view_name"], "camera": json.loads(row["camera_json"])}
         for name in self.outputs:
-            image = decode_map(row[name], row.get(f"{name}_scale"), row.get(f"{name}_offset"),
-                               metric=name in METRIC_MAPS)
+            image = decode_map(row[name], row.get(f"{name}_scale"), row.get(f"{name}_offset"))
             image = image[None] if image.ndim == 2 else np.moveaxis(image, 2, 0)
             out[name] = torch.from_numpy(np.ascontiguousarray(image))
         if self.params is not None:

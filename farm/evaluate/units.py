@@ -49,8 +49,8 @@ def load_tree(unit: Unit) -> HeldOutTree:
     import pyarrow.compute as pc
 
     import species
-    from farm.dataset import FLOAT_OUTPUTS, read_columns, read_manifest
-    from farm.dataset.image_codec import METRIC_MAPS, decode_map
+    from farm.dataset import output_columns, read_columns, read_manifest, stored_float_outputs
+    from farm.dataset.image_codec import decode_map
     from renderers import Camera
 
     this_tree = pc.field("tree_id") == unit.tree_id
@@ -65,14 +65,11 @@ def load_tree(unit: Unit) -> HeldOutTree:
     needs = METHODS[unit.method].needs
     stored = read_manifest(unit.dataset)["job"]["render"]["outputs"]
     outputs = [o for o in (*needs.outputs, *needs.optional) if o in stored]
-    columns = ["tree_id", "view_name", "camera_json"]
-    for o in outputs:
-        columns += [o] + ([f"{o}_scale", f"{o}_offset"] if o in FLOAT_OUTPUTS else [])
+    columns = ["tree_id", "view_name", "camera_json", *output_columns(outputs, stored_float_outputs(unit.dataset))]
     wanted = {dataset_view: view for view, dataset_view in unit.views}
     for row in read_columns(unit.dataset, "views", columns, filters=this_tree).to_pylist():
         if row["view_name"] in wanted:
-            images = {o: decode_map(row[o], row.get(f"{o}_scale"), row.get(f"{o}_offset"), metric=o in METRIC_MAPS)
-                      for o in outputs}
+            images = {o: decode_map(row[o], row.get(f"{o}_scale"), row.get(f"{o}_offset")) for o in outputs}
             tree.views[wanted[row["view_name"]]] = (Camera.from_dict(json.loads(row["camera_json"])), images)
     missing = sorted(set(wanted.values()) - set(tree.views))
     if missing:

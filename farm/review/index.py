@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from farm.dataset import FLOAT_OUTPUTS, open_part, read_manifest, read_part
-from farm.dataset.storage import Location
+from farm.dataset import Location, open_part, output_columns, read_manifest, read_part, stored_float_outputs
+from farm.dataset.image_codec import decode_map, encode_map
+from renderers import METRIC_MAPS
 from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
@@ -88,6 +89,7 @@ class DatasetIndex:
         self.location = Location.resolve(path)
         self.manifest = read_manifest(self.location)
         self.outputs: list[str] = list(self.manifest["job"]["render"]["outputs"])
+        self.float_outputs = stored_float_outputs(self.location)
         self.sketch_output = next((o for o in self.outputs if o.startswith("sketch")), None)
         self.name = self.manifest["job"]["name"]
         self._cache = _RowGroupCache(self.location)
@@ -159,7 +161,7 @@ class DatasetIndex:
             self.ref(tree_id)
             raise NotFound(f"tree {tree_id!r} has no view {view}")
         ref = matches[0]
-        columns = (output, f"{output}_scale", f"{output}_offset") if output in FLOAT_OUTPUTS else (output,)
+        columns = tuple(output_columns([output], self.float_outputs))
         row = self._cache.read(ref, columns).slice(ref.row, 1).to_pylist()[0]
         return viewable_png(output, row[output], row.get(f"{output}_scale"), row.get(f"{output}_offset"))
 
@@ -176,14 +178,13 @@ class DatasetIndex:
 
 
 def viewable_png(output: str, png: bytes, scale: float | None, offset: float | None) -> bytes:
-    """A stored map as an 8-bit PNG: depth near = bright on black; [0, 1] maps with 1 = far inverted; labels spread."""
-    from farm.dataset.image_codec import METRIC_MAPS, decode_map, encode_map
-
+    """A stored map as an 8-bit PNG: depth near = bright on black; [0, 1] maps with 1 = far inverted; labels spread.
+    `scale` and `offset` are a float map's (None for an 8-bit map)."""
     if png is None:
         raise NotFound(f"output {output!r} is empty for this view")
-    if output not in FLOAT_OUTPUTS and output not in LABEL_MAPS:
+    if scale is None and output not in LABEL_MAPS:
         return png
-    image = decode_map(png, scale, offset, metric=output in METRIC_MAPS)
+    image = decode_map(png, scale, offset)
     if output in LABEL_MAPS:
         shown = image.astype(np.float64) * (255 // max(1, int(image.max())))
     elif output in METRIC_MAPS:

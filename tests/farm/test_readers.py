@@ -78,7 +78,7 @@ def test_hugging_face_datasets_reads_the_views_with_8_bit_maps_as_images(standin
     row = views[0]
     assert isinstance(row["sketch_tsn"], Image.Image) and row["sketch_tsn"].size == (SIZE, SIZE)
     assert isinstance(row["mask"], Image.Image) and int(np.asarray(row["mask"]).max()) <= 2
-    depth = decode_map(row["depth"], row["depth_scale"], row["depth_offset"], metric=True)
+    depth = decode_map(row["depth"], row["depth_scale"], row["depth_offset"])
     assert depth.shape == (SIZE, SIZE) and depth.max() > 0
     trees = dataset.to_huggingface(path, "trees", cache_dir=str(tmp_path / "hf"))
     assert sorted(trees["index"]) == list(range(6))
