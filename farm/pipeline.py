@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from renderers import FLOAT_OUTPUTS
 from species.errors import TreefarmError
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
@@ -137,7 +138,7 @@ def run_shard(spec: PipelineSpec, plan: ShardPlan, location: Location, builder, 
             on_tree(len(tree_rows))
     start = time.perf_counter()
     trees_bytes = serialize_table(tree_rows, trees_schema())
-    views_bytes = serialize_table(all_view_rows, views_schema(spec.tables.view_outputs))
+    views_bytes = serialize_table(all_view_rows, views_schema(spec.tables.view_outputs, FLOAT_OUTPUTS))
     location.write_atomic(part_name("trees", plan.shard), trees_bytes)
     location.write_atomic(part_name("views", plan.shard), views_bytes)
     stages: dict[str, float] = {}

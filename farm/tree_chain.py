@@ -14,8 +14,9 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+import renderers
 
-from .dataset import FLOAT_OUTPUTS, trees_schema
+from .dataset import trees_schema
 from .dataset.image_codec import encode_map
 
 __all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
@@ -96,8 +97,6 @@ class SpeciesChain:
 
     def renderer(self):
         if self._renderer is None:
-            import renderers
-
             self._renderer = renderers.ViewRenderer(size=self.spec.render.size)
         return self._renderer
 
@@ -170,19 +169,20 @@ def failed_tree_row(spec, index: int, shard: int, species_name: str, seed: int, 
 
 
 def view_rows(spec, index: int, shard: int, views: list) -> list[dict]:
-    """Views-table rows of one tree: camera JSON and each output as PNG (16-bit with scale/offset for floats)."""
+    """Views-table rows of one tree: camera JSON and each output as PNG (16-bit with scale/offset for the outputs
+    `renderers.OUTPUTS` declares float32, metric or not as it declares)."""
     rows = []
     for view in sorted(views, key=lambda v: v.index):
         row = {"tree_id": tree_id(spec.name, index), "index": index, "shard": shard, "view": int(view.index),
                "view_name": str(view.name), "camera_json": to_json(view.camera.to_dict())}
         for name in spec.tables.view_outputs:
-            image = np.asarray(view.images[name])
-            if (name in FLOAT_OUTPUTS) == (image.dtype == np.uint8):
+            image, output = np.asarray(view.images[name]), renderers.OUTPUTS[name]
+            if output.is_float == (image.dtype == np.uint8):
                 raise TypeError(f"output {name!r} came back as {image.dtype}; the views schema stores it as "
-                                f"{'a float' if name in FLOAT_OUTPUTS else 'a uint8'} map")
-            png, scale, offset = encode_map(name, image)
+                                f"{'a float' if output.is_float else 'a uint8'} map")
+            png, scale, offset = encode_map(name, image, metric=output.metric)
             row[name] = png
-            if name in FLOAT_OUTPUTS:
+            if output.is_float:
                 row[f"{name}_scale"], row[f"{name}_offset"] = scale, offset
         rows.append(row)
     return rows

@@ -12,6 +12,8 @@ import numpy as np
 
 from species.meshing.png import png_bytes
 
+from .views import METRIC_MAPS
+
 __all__ = ["to_rgb8", "viewable", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
 
 LABEL_PX = 18
@@ -35,7 +37,7 @@ def viewable(name: str, image: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8 picture of a renderer output by its name: metric depth scaled to its own range (near
     bright, background black), label maps (mask, order) spread over grey levels, the rest as `to_rgb8`."""
     img = np.asarray(image)
-    if name in ("depth", "depth_back"):
+    if name in METRIC_MAPS:
         hit = img > 0
         if hit.any():
             lo, hi = float(img[hit].min()), float(img[hit].max())

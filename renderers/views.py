@@ -4,6 +4,7 @@ In: TreeMesh, Skeleton, rig name or Cameras, output names, rng; out: a list of R
 """
 from __future__ import annotations
 
+from collections.abc import Set
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Callable, Sequence
@@ -19,7 +20,8 @@ from .camera import Camera, CameraError, make_rig, rig_parts
 from .maps import DepthRenderer, combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
-__all__ = ["ViewRenderer", "RenderedView", "OUTPUTS", "DEFAULT_OUTPUTS", "OutputError", "check_outputs"]
+__all__ = ["ViewRenderer", "RenderedView", "Output", "OUTPUTS", "FLOAT_OUTPUTS", "METRIC_MAPS", "DEFAULT_OUTPUTS",
+           "OutputError", "check_outputs"]
 
 
 class OutputError(TreefarmError):
@@ -70,25 +72,79 @@ class _ViewFrame:
         return sketch.crown_region(leaves if leaves.any() else self.visible[1] > 0)
 
 
-# Output name -> function of the view frame. Array types are the renderers contract (see renderers/__init__.py).
-OUTPUTS: dict[str, Callable[[_ViewFrame], np.ndarray]] = {
-    "depth": lambda f: f.visible[0],
-    "depth01": lambda f: f.camera.depth01(f.visible[0]),
-    "mask": lambda f: f.visible[1],
-    "order": lambda f: f.visible[2],
-    "normals": lambda f: f.normals,
-    "silhouette": lambda f: silhouette_map(f.camera, f.visible[0], f.back),
-    "silhouette_envelope": lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back),
-    "depth_back": lambda f: f.back,
-    "trunk_strokes": lambda f: f.trunk[0],
-    "trunk_depth": lambda f: f.trunk[1],
-    "sketch_tsn": lambda f: sketch.sketch_tsn(f.parts.bark > 0, f.parts.leaves > 0),
-    "sketch_edges": lambda f: sketch.sketch_edges(f.normals, f.visible[1]),
-    "sketch_strokes": lambda f: sketch.sketch_strokes(f.camera, f.skeleton),
-    "sketch_strokes_brush": lambda f: sketch.sketch_strokes_brush(f.camera, f.skeleton),
-    "sketch_crown": lambda f: sketch.sketch_crown(f.crown),
-    "sketch_hand": lambda f: sketch.sketch_hand(f.camera, f.skeleton, f.crown, f.rng),
+@dataclass(frozen=True)
+class Output:
+    """One render output: how a view frame makes it, and the array it comes back as (the renderers contract,
+    renderers/__init__.py); the dataset stores a uint8 output as an 8-bit PNG, a float32 one as a 16-bit PNG
+    with scale and offset.
+
+    make   : function of the view frame -> (H, W) or (H, W, 3) array of `dtype`.
+    dtype  : numpy.uint8 or numpy.float32.
+    metric : float32 in metres with 0 = background (depth maps); False for uint8 and for float32 in [0, 1].
+    """
+
+    make: Callable[[_ViewFrame], np.ndarray]
+    dtype: np.dtype
+    metric: bool = False
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dtype", np.dtype(self.dtype))
+        if self.dtype not in (np.uint8, np.float32):
+            raise OutputError(f"an output of dtype {self.dtype} is invalid: allowed uint8 or float32")
+        if self.metric and self.dtype != np.float32:
+            raise OutputError(f"a metric output of dtype {self.dtype} is invalid: allowed float32 (metres)")
+
+    @property
+    def is_float(self) -> bool:
+        return self.dtype == np.float32
+
+
+_U8, _F32 = np.uint8, np.float32
+# Output name -> its entry: adding an output is one entry here (FLOAT_OUTPUTS and METRIC_MAPS follow from it).
+OUTPUTS: dict[str, Output] = {
+    "depth": Output(lambda f: f.visible[0], _F32, metric=True),
+    "depth01": Output(lambda f: f.camera.depth01(f.visible[0]), _F32),
+    "mask": Output(lambda f: f.visible[1], _U8),
+    "order": Output(lambda f: f.visible[2], _U8),
+    "normals": Output(lambda f: f.normals, _U8),
+    "silhouette": Output(lambda f: silhouette_map(f.camera, f.visible[0], f.back), _F32),
+    "silhouette_envelope": Output(lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back), _F32),
+    "depth_back": Output(lambda f: f.back, _F32, metric=True),
+    "trunk_strokes": Output(lambda f: f.trunk[0], _U8),
+    "trunk_depth": Output(lambda f: f.trunk[1], _F32),
+    "sketch_tsn": Output(lambda f: sketch.sketch_tsn(f.parts.bark > 0, f.parts.leaves > 0), _U8),
+    "sketch_edges": Output(lambda f: sketch.sketch_edges(f.normals, f.visible[1]), _U8),
+    "sketch_strokes": Output(lambda f: sketch.sketch_strokes(f.camera, f.skeleton), _U8),
+    "sketch_strokes_brush": Output(lambda f: sketch.sketch_strokes_brush(f.camera, f.skeleton), _U8),
+    "sketch_crown": Output(lambda f: sketch.sketch_crown(f.crown), _U8),
+    "sketch_hand": Output(lambda f: sketch.sketch_hand(f.camera, f.skeleton, f.crown, f.rng), _U8),
 }
+
+
+class _OutputNames(Set):
+    """The names of the OUTPUTS entries that pass a test, read from OUTPUTS at each use: an output registered
+    later (a plugin's, a test's) is in it too, which a set computed at import would miss."""
+
+    def __init__(self, test: Callable[[Output], bool], description: str):
+        self._test, self._description = test, description
+
+    def __contains__(self, name) -> bool:
+        return name in OUTPUTS and self._test(OUTPUTS[name])
+
+    def __iter__(self):
+        return (name for name, output in list(OUTPUTS.items()) if self._test(output))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+    def __repr__(self) -> str:
+        return f"<{self._description}: {', '.join(self)}>"
+
+
+# The outputs stored as float maps (16-bit PNG with `<name>_scale` and `<name>_offset` columns), and those of them
+# in metres with 0 = background.
+FLOAT_OUTPUTS = _OutputNames(lambda output: output.is_float, "float32 outputs")
+METRIC_MAPS = _OutputNames(lambda output: output.metric, "metric outputs")
 DEFAULT_OUTPUTS = ("depth", "mask", "silhouette", "trunk_strokes", "trunk_depth", "sketch_tsn")
 
 
@@ -170,7 +226,7 @@ class ViewRenderer:
         for index, camera in enumerate(cameras):
             frame = _ViewFrame(self._gl, camera, skeleton, "order" in names,
                                np.random.default_rng(int(view_seeds[index])))
-            views.append(RenderedView(index, camera.name, camera, {n: OUTPUTS[n](frame) for n in names}))
+            views.append(RenderedView(index, camera.name, camera, {n: OUTPUTS[n].make(frame) for n in names}))
         return views
 
 

@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import torch
 
-from farm.dataset import part_files, reading_part
+from farm.dataset import parse_format_json, read_columns, read_format_json, read_part
 from farm.dataset.storage import Location
 from farm.dataset.torch_dataset import ViewsDataset
 
@@ -52,6 +52,7 @@ DEFAULT_FRACTIONS = (0.8, 0.1, 0.1)
 _SPLIT_FORMAT = "treefarm-split"
 _SPLIT_VERSION = 1
 _SPLIT_RULE = "sha256(spec_digest + '/' + tree_id)[:8] / 2**64 against cumulative fractions"
+_SPLIT_HINT = "allowed a split `Split.save` wrote (split.json in a training run folder)"
 
 # What `farm review` stores (farm/review/store.py, farm/review/export.py), read here without importing the review
 # package: the SQLite file beside the dataset and its table, and the exported Parquet parts.
@@ -138,12 +139,11 @@ class Split:
     @classmethod
     def from_json(cls, text: str, source: str = "split") -> "Split":
         """A split from `to_json` text; TrainingDataError (naming `source`) for anything else."""
-        try:
-            content = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise TrainingDataError(f"{source} is not valid JSON: {exc}") from None
-        if not isinstance(content, dict) or content.get("format") != _SPLIT_FORMAT:
-            raise TrainingDataError(f"{source} is not a treefarm split (no \"format\": \"{_SPLIT_FORMAT}\")")
+        content = parse_format_json(text, _SPLIT_FORMAT, source=source, hint=_SPLIT_HINT, error=TrainingDataError)
+        return cls._from_content(content, source)
+
+    @classmethod
+    def _from_content(cls, content: dict, source: str) -> "Split":
         if content.get("version") != _SPLIT_VERSION:
             raise TrainingDataError(f"{source} has split version {content.get('version')!r}: allowed "
                                     f"{_SPLIT_VERSION}")
@@ -168,9 +168,8 @@ class Split:
     @classmethod
     def load(cls, path: str | Path) -> "Split":
         path = Path(path)
-        if not path.is_file():
-            raise TrainingDataError(f"split file {path} does not exist")
-        return cls.from_json(path.read_text(), str(path))
+        return cls._from_content(read_format_json(Location.resolve(str(path.parent)), path.name, _SPLIT_FORMAT,
+                                                  hint=_SPLIT_HINT, error=TrainingDataError), str(path))
 
 
 # ---------------------------------------------------------------------------------------------- reviews
@@ -190,16 +189,12 @@ def _sqlite_verdicts(location: Location) -> list[tuple[str, str, str, int]]:
 
 
 def _parquet_verdicts(location: Location) -> list[tuple[str, str, str, int]]:
-    import pyarrow.parquet as pq
-
     rows = []
     for name in location.list(REVIEWS_FOLDER):
         if not name.endswith(".parquet") or name.startswith((".", "_")):
             continue
-        file = location.path(f"{REVIEWS_FOLDER}/{name}")
-        with reading_part(file):
-            table = pq.read_table(file, columns=["tree_id", "reviewer", "verdict", "time"],
-                                  filesystem=location.filesystem)
+        table = read_part(location, location.path(f"{REVIEWS_FOLDER}/{name}"),
+                          ["tree_id", "reviewer", "verdict", "time"])
         times = table.column("time").cast("int64").to_pylist()
         rows += list(zip(table.column("tree_id").to_pylist(), table.column("reviewer").to_pylist(),
                          table.column("verdict").to_pylist(), times))
@@ -241,22 +236,10 @@ class Source:
         return [(self.spec_digest, tree_id) for tree_id in sorted(self.trees)]
 
 
-def _read_table(path: str, table: str, columns: list[str]):
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    location, files = part_files(path, table)
-    tables = []
-    for file in files:
-        with reading_part(file):
-            tables.append(pq.read_table(file, columns=columns, filesystem=location.filesystem))
-    return pa.concat_tables(tables)
-
-
 def _open_source(task: Task, path: str) -> Source:
     manifest = task.check_dataset(path)
-    trees = _read_table(path, "trees", ["tree_id", "species", "params_json", "error"]).to_pylist()
-    views = _read_table(path, "views", ["tree_id"]).column("tree_id").to_numpy(zero_copy_only=False)
+    trees = read_columns(path, "trees", ["tree_id", "species", "params_json", "error"]).to_pylist()
+    views = read_columns(path, "views", ["tree_id"]).column("tree_id").to_numpy(zero_copy_only=False)
     rejected = rejected_trees(path) & {t["tree_id"] for t in trees}
     usable = {t["tree_id"]: (t["species"], t["params_json"]) for t in trees
               if t["error"] is None and t["params_json"] is not None and t["tree_id"] not in rejected}

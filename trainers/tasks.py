@@ -15,7 +15,6 @@ from species.errors import TreefarmError
 __all__ = ["Task", "TASKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task", "print_data_spec"]
 
 SPECS_DIR = Path(__file__).resolve().parent / "specs"
-_DATASET_FORMAT = "treefarm-dataset"  # manifest.json's `format` (docs/dataset.md)
 
 
 class TrainingDataError(TreefarmError):
@@ -83,10 +82,6 @@ class Task:
             manifest = read_manifest(location)
         except DatasetError as exc:
             raise TrainingDataError(f"{exc}; for task {self.name}, {self._how_to_make()}") from None
-        if not isinstance(manifest, dict) or manifest.get("format") != _DATASET_FORMAT:
-            raise TrainingDataError(f"{path}/manifest.json is not a treefarm dataset manifest (format "
-                                    f"{manifest.get('format') if isinstance(manifest, dict) else None!r}, "
-                                    f"expected {_DATASET_FORMAT!r})")
         render = manifest.get("job", {}).get("render", {})
         stored = list(render.get("outputs", []))
         for output in self.required_outputs:

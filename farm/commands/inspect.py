@@ -60,8 +60,9 @@ def contact_rows(path: str, n_rows: int) -> list:
     import pyarrow as pa
     import pyarrow.compute as pc
 
-    from farm.dataset import FLOAT_OUTPUTS, open as open_table, read_manifest
-    from farm.dataset.image_codec import METRIC_MAPS, decode_map
+    from farm.dataset import open as open_table, read_manifest
+    from farm.dataset.image_codec import decode_map
+    from renderers import METRIC_MAPS
 
     outputs = read_manifest(path)["job"]["render"]["outputs"]
     trees = open_table(path, "trees").to_table(columns=["tree_id", "species", "error"])
@@ -73,9 +74,8 @@ def contact_rows(path: str, n_rows: int) -> list:
     for view in sorted(views, key=lambda v: v["index"]):
         cells = []
         for name in outputs:
-            scale = view.get(f"{name}_scale") if name in FLOAT_OUTPUTS else None
-            offset = view.get(f"{name}_offset") if name in FLOAT_OUTPUTS else None
-            image = decode_map(view[name], scale, offset, metric=name in METRIC_MAPS)
+            # A float map's row holds its scale and offset; an 8-bit map's has neither (None).
+            image = decode_map(view[name], view.get(f"{name}_scale"), view.get(f"{name}_offset"))
             if name in METRIC_MAPS and image.max() > 0:  # metres to [0, 1] for display
                 image = image / image.max()
             elif name in LABEL_MAPS:  # small class labels (0, 1, 2, ...) spread over the grey range

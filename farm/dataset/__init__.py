@@ -1,21 +1,27 @@
 """The treefarm dataset format, a floor of its own: what `farm generate` writes and every reader opens.
 
 Layout: manifest.json, trees/part-NNNNN.parquet, views/part-NNNNN.parquet (docs/dataset.md). Modules: `schema`
-(the tables and their part files' bytes), `readers` (the manifest, part files, pyarrow, pandas, DuckDB, Ray Data,
-Hugging Face), `manifest` (shard records, the manifest, validation), `storage` (a local folder or object-store
-prefix), `image_codec` (maps as PNG) and `torch_dataset` (a torch `Dataset` over the views). It imports only
-`species`, numpy, pyarrow and the image libraries.
+(the tables and their part files' bytes), `readers` (the manifest, part files, columns across them, pyarrow,
+pandas, DuckDB, Ray Data, Hugging Face), `manifest` (shard records, the manifest, validation), `storage` (a local
+folder or object-store prefix), `format_json` (JSON files that name their format, checked), `image_codec` (maps as
+PNG) and `torch_dataset` (a torch `Dataset` over the views). It imports only `species`, numpy, pyarrow and the
+image libraries.
 """
 from __future__ import annotations
 
-from .readers import duckdb_connect, open, part_files, read_manifest, to_huggingface, to_pandas, to_ray
-from .schema import (FLOAT_OUTPUTS, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, part_name, reading_part,
-                     serialize_table, skeleton_from_row, trees_schema, views_schema)
+from .format_json import parse_format_json, read_format_json
+from .readers import (duckdb_connect, open, open_part, part_files, read_columns, read_manifest, read_part,
+                      stored_float_outputs, to_huggingface, to_pandas, to_ray)
+from .schema import (DATASET_FORMAT, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, float_outputs_of,
+                     output_columns, part_name, reading_part, serialize_table, skeleton_from_row, trees_schema,
+                     views_schema)
 from .storage import Location
 
-__all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
-           "trees_schema", "views_schema", "skeleton_from_row", "part_name", "serialize_table", "read_manifest",
-           "part_files", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface", "Location",
+__all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
+           "trees_schema", "views_schema", "float_outputs_of", "output_columns", "skeleton_from_row", "part_name",
+           "serialize_table", "read_manifest", "part_files", "read_columns", "read_part", "open_part",
+           "stored_float_outputs", "open", "to_pandas",
+           "duckdb_connect", "to_ray", "to_huggingface", "parse_format_json", "read_format_json", "Location",
            "ViewsDataset"]
 
 

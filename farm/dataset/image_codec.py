@@ -1,6 +1,10 @@
 """PNG encoding of rendered maps for the views table: uint8 maps as 8-bit PNG, float maps as 16-bit PNG.
 
-A float map is stored as pixel values p (uint16) with per-image `scale` and `offset`: value = offset + scale * p.
+A float map is stored as pixel values p (uint16) with per-image `scale` and `offset`: value = offset + scale * p,
+except that p = 0 decodes to 0. A metric map (metres, 0 = background) fits the 16-bit range to each image's
+foreground, so precision follows the tree's size, and keeps pixel 0 for its background; every other float map lies
+in [0, 1], with scale 1/65535 and offset 0 (so its p = 0 is 0 anyway). Which outputs are metric is the renderers'
+declaration (`renderers.OUTPUTS`), passed in by the writer; a reader needs only the stored scale and offset.
 Encoding is deterministic (libpng via OpenCV, fixed compression level, no timestamps or text chunks).
 `encode_pixels` is the codec's PNG writer for pixels already quantized (`farm render` writes its map files with
 it). Pictures that are not maps (textures, thumbnails, contact sheets) go through `species.meshing.png`.
@@ -11,12 +15,9 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-__all__ = ["encode_map", "decode_map", "encode_pixels", "ImageCodecError", "METRIC_MAPS", "PNG_COMPRESSION"]
+__all__ = ["encode_map", "decode_map", "encode_pixels", "ImageCodecError", "PNG_COMPRESSION"]
 
 PNG_COMPRESSION = 3
-# Float maps in metres: 0 means background and stays 0; the 16-bit range is fitted to each image's
-# foreground, so precision follows the tree's size. Every other float map lies in [0, 1].
-METRIC_MAPS = frozenset({"depth", "depth_back"})
 _UINT16_MAX = 65535
 
 
@@ -50,11 +51,13 @@ def encode_pixels(pixels: np.ndarray, compression: int | None = PNG_COMPRESSION)
     return buffer.tobytes()
 
 
-def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float | None]:
+def encode_map(name: str, image: np.ndarray, metric: bool = False) -> tuple[bytes, float | None, float | None]:
     """One rendered map as (PNG bytes, scale, offset); scale and offset are None for uint8 maps.
 
-    image : (H, W) or (H, W, 3); uint8 (stored as is) or float32 (stored as 16-bit: metres for
-            METRIC_MAPS with 0 = background, otherwise values in [0, 1]).
+    name   : the output's name, for messages.
+    image  : (H, W) or (H, W, 3); uint8 (stored as is) or float32 (stored as 16-bit).
+    metric : a float map in metres with 0 = background (`renderers.OUTPUTS[name].metric`); otherwise a float map
+             holds values in [0, 1].
     """
     image = np.asarray(image)
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
@@ -66,7 +69,7 @@ def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float
     if not np.all(np.isfinite(image)):
         raise ImageCodecError(f"map {name!r} contains NaN or infinity")
     values = image.astype(np.float64)
-    if name in METRIC_MAPS:
+    if metric:
         foreground = values > 0
         if not foreground.any():
             return encode_pixels(np.zeros(image.shape, np.uint16)), 1.0, 0.0
@@ -82,12 +85,9 @@ def encode_map(name: str, image: np.ndarray) -> tuple[bytes, float | None, float
     return encode_pixels(pixels), 1.0 / _UINT16_MAX, 0.0
 
 
-def decode_map(png: bytes, scale: float | None = None, offset: float | None = None,
-               metric: bool = False) -> np.ndarray:
-    """Inverse of `encode_map`: uint8 array for 8-bit PNGs, float32 (offset + scale * p) for 16-bit ones.
-
-    metric : keep pixel 0 as 0 (background of a METRIC_MAPS map).
-    """
+def decode_map(png: bytes, scale: float | None = None, offset: float | None = None) -> np.ndarray:
+    """Inverse of `encode_map`: uint8 array for 8-bit PNGs, float32 (offset + scale * p, and 0 where p = 0: a metric
+    map's background) for 16-bit ones."""
     cv2 = _cv2()
     pixels = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_UNCHANGED)
     if pixels is None:
@@ -99,6 +99,5 @@ def decode_map(png: bytes, scale: float | None = None, offset: float | None = No
     if scale is None or offset is None:
         raise ImageCodecError("a 16-bit map needs its scale and offset to decode")
     values = (offset + scale * pixels.astype(np.float64)).astype(np.float32)
-    if metric:
-        values[pixels == 0] = 0.0
+    values[pixels == 0] = 0.0
     return values

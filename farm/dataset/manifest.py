@@ -14,7 +14,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .readers import read_manifest
-from .schema import SCHEMA_VERSION, TABLES, DatasetError, part_name, trees_schema, views_schema
+from .schema import (DATASET_FORMAT, SCHEMA_VERSION, TABLES, DatasetError, float_outputs_of, part_name,
+                     trees_schema, views_schema)
 from .storage import Location, sha256_hex
 
 __all__ = ["SHARDS_FOLDER", "JOB_RECORD", "write_job_record", "shard_record_name", "write_shard_record", "read_shard_record", "finished_shards", "build_manifest",
@@ -111,7 +112,7 @@ def build_manifest(spec, records: dict[int, dict], wall_seconds: float) -> dict:
     n_trees = sum(r["trees"]["rows"] for r in shards)
     n_views = sum(r["views"]["rows"] for r in shards)
     return {
-        "format": "treefarm-dataset",
+        "format": DATASET_FORMAT,
         "schema_version": SCHEMA_VERSION,
         "job": spec.to_dict(),
         "spec_digest": spec.digest(),
@@ -159,7 +160,9 @@ def validate_dataset(path: str) -> list[Problem]:
     if manifest.get("schema_version") != SCHEMA_VERSION:
         return [Problem(location.path("manifest.json"),
                         f"schema_version {manifest.get('schema_version')!r}; this code reads {SCHEMA_VERSION}")]
-    schemas = {"trees": trees_schema(), "views": views_schema(manifest["job"]["render"]["outputs"])}
+    outputs = manifest["job"]["render"]["outputs"]
+    # The float maps are those the first readable views part stores with scale and offset; every part must agree.
+    schemas = {"trees": trees_schema(), "views": None}
     problems = []
     for shard in manifest["shards"]:
         for table in TABLES:
@@ -185,6 +188,8 @@ def validate_dataset(path: str) -> list[Problem]:
             except (pyarrow.ArrowException, OSError) as exc:
                 problems.append(Problem(full, f"unreadable Parquet: {exc}"))
                 continue
+            if schemas[table] is None:
+                schemas[table] = views_schema(outputs, float_outputs_of(schema.names))
             if not schema.equals(schemas[table], check_metadata=False):
                 problems.append(Problem(full, f"schema differs from the {table} schema"))
             elif rows != entry["rows"]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 from contextlib import contextmanager
-from typing import Sequence
+from typing import Collection, Iterable, Sequence
 
 import numpy as np
 
@@ -15,14 +15,14 @@ from species.errors import TreefarmError
 from species.skeleton import Skeleton, SkeletonError
 
 
-__all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
-           "trees_schema", "views_schema", "skeleton_from_row", "part_name", "serialize_table"]
+__all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
+           "trees_schema", "views_schema", "float_outputs_of", "output_columns", "skeleton_from_row", "part_name",
+           "serialize_table"]
 
+# manifest.json's "format" (docs/dataset.md).
+DATASET_FORMAT = "treefarm-dataset"
 SCHEMA_VERSION = 1
 TABLES = ("trees", "views")
-# Renderer outputs that are float maps, stored as 16-bit PNG with `<name>_scale` and `<name>_offset` columns.
-FLOAT_OUTPUTS = frozenset({"depth", "depth01", "silhouette", "silhouette_envelope", "depth_back",
-                           "trunk_depth"})
 # The trees-table columns a Skeleton is stored in, flattened row-major: (N, 3) positions, (M, 4, 4) leaves.
 SKELETON_COLUMNS = ("positions", "parent", "radius", "order", "leaves", "leaf_node")
 # Fixed writer options: part files are compared byte for byte across runs.
@@ -70,17 +70,32 @@ def trees_schema():
     ], metadata={"treefarm.table": "trees", "treefarm.schema_version": str(SCHEMA_VERSION)})
 
 
-def views_schema(outputs: Sequence[str]):
-    """One row per (tree, view): camera JSON and one PNG column per output (plus scale/offset for float maps)."""
+def views_schema(outputs: Sequence[str], float_outputs: Collection[str]):
+    """One row per (tree, view): camera JSON and one PNG column per output, plus `<name>_scale` and
+    `<name>_offset` for the float maps among them (`float_outputs`: the writer learns them from
+    `renderers.FLOAT_OUTPUTS`, a reader from the stored part files, `float_outputs_of`)."""
     pa = _pa()
     fields = [("tree_id", pa.string()), ("index", pa.int64()), ("shard", pa.int32()), ("view", pa.int32()),
               ("view_name", pa.string()), ("camera_json", pa.string())]
     for name in outputs:
         fields.append((name, pa.binary()))
-        if name in FLOAT_OUTPUTS:
+        if name in float_outputs:
             fields += [(f"{name}_scale", pa.float64()), (f"{name}_offset", pa.float64())]
     return pa.schema(fields, metadata={"treefarm.table": "views", "treefarm.schema_version": str(SCHEMA_VERSION),
                                        "treefarm.outputs": json.dumps(list(outputs))})
+
+
+def float_outputs_of(columns: Iterable[str]) -> frozenset[str]:
+    """The float maps among a views table's columns (a schema's `names`, a table's `column_names`): the outputs
+    stored with `<name>_scale` and `<name>_offset` columns."""
+    names = set(columns)
+    return frozenset(name for name in names if f"{name}_scale" in names and f"{name}_offset" in names)
+
+
+def output_columns(outputs: Iterable[str], float_outputs: Collection[str]) -> list[str]:
+    """The views-table columns of some outputs: each output's PNG column, then its scale and offset if a float map."""
+    return [column for name in outputs
+            for column in ((name, f"{name}_scale", f"{name}_offset") if name in float_outputs else (name,))]
 
 
 def skeleton_from_row(row: dict) -> Skeleton:

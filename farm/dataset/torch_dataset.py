@@ -9,9 +9,9 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .readers import part_files, read_manifest
-from .schema import FLOAT_OUTPUTS, DatasetError, reading_part
-from .image_codec import METRIC_MAPS, decode_map
+from .image_codec import decode_map
+from .readers import read_columns, read_manifest, stored_float_outputs
+from .schema import DatasetError, output_columns
 
 __all__ = ["ViewsDataset"]
 
@@ -38,39 +38,23 @@ class ViewsDataset(_torch().utils.data.Dataset):
 
     def __init__(self, path: str, outputs: Sequence[str] | None = None, with_params: bool = False,
                  transform: Callable[[dict], dict] | None = None):
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
         stored = read_manifest(path)["job"]["render"]["outputs"]
         self.outputs = list(stored if outputs is None else outputs)
         for name in self.outputs:
             if name not in stored:
                 raise DatasetError(f"output {name!r} is not in this dataset: stored {', '.join(stored)}")
-        location, files = part_files(path, "views")
-        columns = ["tree_id", "index", "view", "view_name", "camera_json"]
-        for name in self.outputs:
-            columns += [name] + ([f"{name}_scale", f"{name}_offset"] if name in FLOAT_OUTPUTS else [])
-        tables = []
-        for file in files:
-            with reading_part(file):
-                tables.append(pq.read_table(file, columns=columns, filesystem=location.filesystem,
-                                            memory_map=location.is_local))
-        self.table = pa.concat_tables(tables) if tables else None
+        columns = ["tree_id", "index", "view", "view_name", "camera_json",
+                   *output_columns(self.outputs, stored_float_outputs(path))]
+        self.table = read_columns(path, "views", columns, memory_map=True)
         self.params: dict[str, dict] | None = None
         if with_params:
-            _, tree_files = part_files(path, "trees")
-            tree_tables = []
-            for file in tree_files:
-                with reading_part(file):
-                    tree_tables.append(pq.read_table(file, columns=["tree_id", "params_json"],
-                                                     filesystem=location.filesystem))
-            trees = pa.concat_tables(tree_tables)
+            trees = read_columns(path, "trees", ["tree_id", "params_json"])
             self.params = {row["tree_id"]: json.loads(row["params_json"]) for row in trees.to_pylist()
                            if row["params_json"] is not None}
         self.transform = transform
 
     def __len__(self) -> int:
-        return 0 if self.table is None else self.table.num_rows
+        return self.table.num_rows
 
     def __getitem__(self, item: int) -> dict:
         torch = _torch()
@@ -80,8 +64,7 @@ class ViewsDataset(_torch().utils.data.Dataset):
         out = {"tree_id": row["tree_id"], "index": row["index"], "view": row["view"],
                "view_name": row["view_name"], "camera": json.loads(row["camera_json"])}
         for name in self.outputs:
-            image = decode_map(row[name], row.get(f"{name}_scale"), row.get(f"{name}_offset"),
-                               metric=name in METRIC_MAPS)
+            image = decode_map(row[name], row.get(f"{name}_scale"), row.get(f"{name}_offset"))
             image = image[None] if image.ndim == 2 else np.moveaxis(image, 2, 0)
             out[name] = torch.from_numpy(np.ascontiguousarray(image))
         if self.params is not None:

@@ -90,21 +90,15 @@ def serves(method: str, rig: str, outputs: Sequence[str]) -> tuple[tuple[tuple[s
 
 
 def _open_dataset(path: str, part: str) -> DatasetInfo:
-    import pyarrow.parquet as pq
-
-    from farm.dataset import DatasetError, part_files, read_manifest, reading_part
+    from farm.dataset import DatasetError, read_columns, read_manifest
     from trainers.data import split_part
 
     try:
         manifest = read_manifest(path)
     except DatasetError as error:
         raise EvaluationError(f"--data {path}: {error}") from None
-    location, files = part_files(path, "trees")
-    ids = []
-    for file in files:
-        with reading_part(file):
-            table = pq.read_table(file, columns=["tree_id", "index", "error"], filesystem=location.filesystem)
-        ids += [(r["index"], r["tree_id"]) for r in table.to_pylist() if r["error"] is None]
+    trees = read_columns(path, "trees", ["tree_id", "index", "error"]).to_pylist()
+    ids = [(r["index"], r["tree_id"]) for r in trees if r["error"] is None]
     digest = manifest["spec_digest"]
     kept = [tree for _, tree in sorted(ids) if part == "all" or split_part((digest, tree)) == part]
     render = manifest["job"].get("render", {})

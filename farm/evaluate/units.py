@@ -47,25 +47,17 @@ class Unit:
 def load_tree(unit: Unit) -> HeldOutTree:
     """The unit's true tree (`species.rebuild` of the stored dictionary) and the views its method reads."""
     import pyarrow.compute as pc
-    import pyarrow.parquet as pq
 
     import species
-    from farm.dataset import FLOAT_OUTPUTS, part_files, read_manifest, reading_part
-    from farm.dataset.image_codec import METRIC_MAPS, decode_map
+    from farm.dataset import output_columns, read_columns, read_manifest, stored_float_outputs
+    from farm.dataset.image_codec import decode_map
     from renderers import Camera
 
-    location, files = part_files(unit.dataset, "trees")
-    params, name = None, None
-    for file in files:
-        with reading_part(file):
-            table = pq.read_table(file, columns=["tree_id", "species", "params_json"], filesystem=location.filesystem,
-                                  filters=pc.field("tree_id") == unit.tree_id)
-        if table.num_rows:
-            row = table.to_pylist()[0]
-            params, name = json.loads(row["params_json"]), row["species"]
-            break
-    if params is None:
+    this_tree = pc.field("tree_id") == unit.tree_id
+    found = read_columns(unit.dataset, "trees", ["tree_id", "species", "params_json"], filters=this_tree).to_pylist()
+    if not found:
         raise EvaluationError(f"tree {unit.tree_id} is not in {unit.dataset}")
+    params, name = json.loads(found[0]["params_json"]), found[0]["species"]
     skeleton, mesh = species.rebuild(params)
     tree = HeldOutTree(unit.dataset, unit.spec_digest, unit.tree_id, name, params, skeleton, mesh)
     if not unit.views:
@@ -73,20 +65,12 @@ def load_tree(unit: Unit) -> HeldOutTree:
     needs = METHODS[unit.method].needs
     stored = read_manifest(unit.dataset)["job"]["render"]["outputs"]
     outputs = [o for o in (*needs.outputs, *needs.optional) if o in stored]
-    columns = ["tree_id", "view_name", "camera_json"]
-    for o in outputs:
-        columns += [o] + ([f"{o}_scale", f"{o}_offset"] if o in FLOAT_OUTPUTS else [])
+    columns = ["tree_id", "view_name", "camera_json", *output_columns(outputs, stored_float_outputs(unit.dataset))]
     wanted = {dataset_view: view for view, dataset_view in unit.views}
-    location, files = part_files(unit.dataset, "views")
-    for file in files:
-        with reading_part(file):
-            table = pq.read_table(file, columns=columns, filesystem=location.filesystem,
-                                  filters=(pc.field("tree_id") == unit.tree_id))
-        for row in table.to_pylist():
-            if row["view_name"] in wanted:
-                images = {o: decode_map(row[o], row.get(f"{o}_scale"), row.get(f"{o}_offset"), metric=o in METRIC_MAPS)
-                          for o in outputs}
-                tree.views[wanted[row["view_name"]]] = (Camera.from_dict(json.loads(row["camera_json"])), images)
+    for row in read_columns(unit.dataset, "views", columns, filters=this_tree).to_pylist():
+        if row["view_name"] in wanted:
+            images = {o: decode_map(row[o], row.get(f"{o}_scale"), row.get(f"{o}_offset")) for o in outputs}
+            tree.views[wanted[row["view_name"]]] = (Camera.from_dict(json.loads(row["camera_json"])), images)
     missing = sorted(set(wanted.values()) - set(tree.views))
     if missing:
         raise EvaluationError(f"tree {unit.tree_id} of {unit.dataset} has no {', '.join(missing)} view")

@@ -12,8 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from farm.dataset import FLOAT_OUTPUTS, read_manifest, reading_part
-from farm.dataset.storage import Location
+from farm.dataset import Location, open_part, output_columns, read_manifest, read_part, stored_float_outputs
+from farm.dataset.image_codec import decode_map, encode_map
+from renderers import METRIC_MAPS
 from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
@@ -54,16 +55,13 @@ class _RowGroupCache:
         self._lock = threading.Lock()
 
     def read(self, ref: TreeRef, columns: tuple[str, ...]):
-        import pyarrow.parquet as pq
-
         key = (ref.part, ref.row_group, columns)
         with self._lock:
             if key in self._tables:
                 self._tables.move_to_end(key)
                 return self._tables[key]
-        file = self.location.path(ref.part)
-        with reading_part(file), self.location.filesystem.open_input_file(file) as handle:
-            table = pq.ParquetFile(handle).read_row_group(ref.row_group, columns=list(columns))
+        with open_part(self.location, self.location.path(ref.part)) as parquet:
+            table = parquet.read_row_group(ref.row_group, columns=list(columns))
         with self._lock:
             self._tables[key] = table
             while len(self._tables) > _CACHE_ENTRIES:
@@ -74,10 +72,8 @@ class _RowGroupCache:
 def _row_refs(location: Location, part: str, columns: list[str]):
     """The light columns of one part file and a TreeRef for each of its rows."""
     import pyarrow as pa
-    import pyarrow.parquet as pq
 
-    with reading_part(location.path(part)), location.filesystem.open_input_file(location.path(part)) as handle:
-        parquet = pq.ParquetFile(handle)
+    with open_part(location, location.path(part)) as parquet:
         groups = [parquet.read_row_group(g, columns=columns) for g in range(parquet.num_row_groups)]
     refs = [TreeRef(part, g, r) for g, table in enumerate(groups) for r in range(table.num_rows)]
     return (pa.concat_tables(groups) if groups else None), refs
@@ -93,6 +89,7 @@ class DatasetIndex:
         self.location = Location.resolve(path)
         self.manifest = read_manifest(self.location)
         self.outputs: list[str] = list(self.manifest["job"]["render"]["outputs"])
+        self.float_outputs = stored_float_outputs(self.location)
         self.sketch_output = next((o for o in self.outputs if o.startswith("sketch")), None)
         self.name = self.manifest["job"]["name"]
         self._cache = _RowGroupCache(self.location)
@@ -164,35 +161,30 @@ class DatasetIndex:
             self.ref(tree_id)
             raise NotFound(f"tree {tree_id!r} has no view {view}")
         ref = matches[0]
-        columns = (output, f"{output}_scale", f"{output}_offset") if output in FLOAT_OUTPUTS else (output,)
+        columns = tuple(output_columns([output], self.float_outputs))
         row = self._cache.read(ref, columns).slice(ref.row, 1).to_pylist()[0]
         return viewable_png(output, row[output], row.get(f"{output}_scale"), row.get(f"{output}_offset"))
 
     # ------------------------------------------------------------------ QA
     def compute_qa(self, batch: dict) -> QaFlags:
         """Flags of one batch (shard): tree checks from its trees part, ink checks from its sketches."""
-        import pyarrow.parquet as pq
-
         shard = next(s for s in self.manifest["shards"] if f"part-{s['shard']:05d}" == batch["id"])
         trees_file, views_file = (self.location.path(shard[table]["path"]) for table in ("trees", "views"))
-        with reading_part(trees_file), self.location.filesystem.open_input_file(trees_file) as handle:
-            flags = tree_flags(pq.read_table(handle, columns=TREE_COLUMNS))
+        flags = tree_flags(read_part(self.location, trees_file, TREE_COLUMNS))
         if self.sketch_output is not None:
-            with reading_part(views_file), self.location.filesystem.open_input_file(views_file) as handle:
-                views = pq.read_table(handle, columns=["tree_id", self.sketch_output])
+            views = read_part(self.location, views_file, ["tree_id", self.sketch_output])
             flags = flags + ink_flags(views["tree_id"].to_pylist(), views[self.sketch_output].to_pylist())
         return flags
 
 
 def viewable_png(output: str, png: bytes, scale: float | None, offset: float | None) -> bytes:
-    """A stored map as an 8-bit PNG: depth near = bright on black; [0, 1] maps with 1 = far inverted; labels spread."""
-    from farm.dataset.image_codec import METRIC_MAPS, decode_map, encode_map
-
+    """A stored map as an 8-bit PNG: depth near = bright on black; [0, 1] maps with 1 = far inverted; labels spread.
+    `scale` and `offset` are a float map's (None for an 8-bit map)."""
     if png is None:
         raise NotFound(f"output {output!r} is empty for this view")
-    if output not in FLOAT_OUTPUTS and output not in LABEL_MAPS:
+    if scale is None and output not in LABEL_MAPS:
         return png
-    image = decode_map(png, scale, offset, metric=output in METRIC_MAPS)
+    image = decode_map(png, scale, offset)
     if output in LABEL_MAPS:
         shown = image.astype(np.float64) * (255 // max(1, int(image.max())))
     elif output in METRIC_MAPS:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from farm.dataset import Location, read_format_json
 from farm.evaluate.job import FORMAT, ID_COLUMNS, JOB_FILE, METRICS_FILE
 from farm.evaluate.report import GALLERY_METRIC, metric_columns
 
@@ -53,16 +54,9 @@ class EvaluationReport:
         import pandas as pd
 
         self.path = Path(path)
-        job_file, metrics_file = self.path / JOB_FILE, self.path / METRICS_FILE
-        if not job_file.is_file():
-            raise ReviewError(f"{self.path} is not an evaluation report: it holds no {JOB_FILE}")
-        try:
-            self.job = json.loads(job_file.read_text())
-        except ValueError as exc:
-            raise ReviewError(f"{job_file} is not valid JSON ({exc}): allowed the file `farm evaluate` wrote") from None
-        if not isinstance(self.job, dict) or self.job.get("format") != FORMAT:
-            found = self.job.get("format") if isinstance(self.job, dict) else None
-            raise ReviewError(f"{job_file} has format {found!r}: allowed {FORMAT!r}")
+        metrics_file = self.path / METRICS_FILE
+        self.job = read_format_json(Location.resolve(str(self.path)), JOB_FILE, FORMAT, error=ReviewError,
+                                    hint="not an evaluation report (allowed a folder `farm evaluate --out` wrote)")
         if not metrics_file.is_file():
             raise ReviewError(f"{self.path} holds no {METRICS_FILE}: the evaluation has not finished "
                               f"(rerun `farm evaluate ... --out {self.path}` to complete it)")

@@ -21,9 +21,10 @@ def test_uint8_rgb_map_round_trips_exactly_in_rgb_order():
 def test_metric_depth_round_trips_within_one_step_and_keeps_background_zero():
     depth = np.random.default_rng(1).uniform(3.0, 9.0, (16, 16)).astype(np.float32)
     depth[:4] = 0.0
-    png, scale, offset = encode_map("depth", depth)
+    png, scale, offset = encode_map("depth", depth, metric=True)
     assert Image.open(io.BytesIO(png)).mode.startswith("I;16")
-    back = decode_map(png, scale, offset, metric=True)
+    assert offset != 0  # the 16-bit range starts at the nearest foreground depth
+    back = decode_map(png, scale, offset)
     assert np.all(back[:4] == 0)
     assert np.max(np.abs(back[4:] - depth[4:])) <= scale
 
@@ -60,3 +61,11 @@ def test_quantized_pixels_are_written_as_they_are(pixels):
 def test_pixels_of_another_dtype_or_channel_count_are_rejected(pixels):
     with pytest.raises(ImageCodecError, match="allowed"):
         encode_pixels(pixels)
+
+
+def test_a_unit_range_map_is_stored_with_offset_zero_so_its_pixel_zero_is_zero_as_a_metric_background():
+    image = np.random.default_rng(4).uniform(0, 1, (8, 8)).astype(np.float32)
+    image[0] = 0.0
+    png, scale, offset = encode_map("trunk_depth", image)
+    assert (scale, offset) == (1 / 65535, 0.0)
+    assert np.all(decode_map(png, scale, offset)[0] == 0)

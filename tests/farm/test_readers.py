@@ -78,7 +78,7 @@ def test_hugging_face_datasets_reads_the_views_with_8_bit_maps_as_images(standin
     row = views[0]
     assert isinstance(row["sketch_tsn"], Image.Image) and row["sketch_tsn"].size == (SIZE, SIZE)
     assert isinstance(row["mask"], Image.Image) and int(np.asarray(row["mask"]).max()) <= 2
-    depth = decode_map(row["depth"], row["depth_scale"], row["depth_offset"], metric=True)
+    depth = decode_map(row["depth"], row["depth_scale"], row["depth_offset"])
     assert depth.shape == (SIZE, SIZE) and depth.max() > 0
     trees = dataset.to_huggingface(path, "trees", cache_dir=str(tmp_path / "hf"))
     assert sorted(trees["index"]) == list(range(6))
@@ -91,3 +91,44 @@ def test_manifest_counts_failures_and_checksums_every_part(standin_dataset):
     assert manifest["failures"][0]["species"] == "broken"
     assert all(len(s[t]["sha256"]) == 64 for s in manifest["shards"] for t in ("trees", "views"))
     assert json.loads(json.dumps(manifest)) == manifest
+
+
+# ------------------------------------------------------------------------------------------ read_columns
+def test_read_columns_reads_only_the_asked_columns_in_part_order(standin_dataset):
+    spec, path = standin_dataset
+    trees = dataset.read_columns(path, "trees", ["index", "species"])
+    assert trees.column_names == ["index", "species"]
+    assert trees["index"].to_pylist() == list(range(spec.n_trees))  # shard by shard, rows in shard order
+    views = dataset.read_columns(path, "views", ["tree_id", "view", "depth_scale"])
+    assert views.column_names == ["tree_id", "view", "depth_scale"] and views.num_rows == 10
+    keys = list(zip(views["tree_id"].to_pylist(), views["view"].to_pylist()))
+    assert keys == sorted(keys)
+
+
+def test_read_columns_keeps_the_rows_a_filter_matches(standin_dataset):
+    import pyarrow.compute as pc
+
+    _, path = standin_dataset
+    last = dataset.read_columns(path, "views", ["tree_id"])["tree_id"][-1].as_py()
+    one = dataset.read_columns(path, "views", ["tree_id", "view"], filters=pc.field("tree_id") == last,
+                               memory_map=True)
+    assert one.to_pylist() == [{"tree_id": last, "view": 0}, {"tree_id": last, "view": 1}]
+
+
+def test_read_columns_names_a_damaged_part_file(standin_dataset, tmp_path):
+    import shutil
+
+    _, path = standin_dataset
+    copy = tmp_path / "damaged"
+    shutil.copytree(path, copy)
+    part = copy / "views/part-00001.parquet"
+    part.write_bytes(part.read_bytes()[:200])
+    with pytest.raises(dataset.DatasetError, match=r"part file .*views/part-00001\.parquet cannot be read"):
+        dataset.read_columns(str(copy), "views", ["tree_id"])
+    assert dataset.read_columns(str(copy), "trees", ["tree_id"]).num_rows == 6  # the other table still reads
+
+
+def test_read_columns_refuses_an_unknown_table(standin_dataset):
+    _, path = standin_dataset
+    with pytest.raises(dataset.DatasetError, match="unknown table 'leaves'; known: trees, views"):
+        dataset.read_columns(path, "leaves", ["tree_id"])

@@ -6,7 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from renderers import DEFAULT_OUTPUTS, OUTPUTS, CameraError, OutputError, write_contact_sheet
+from renderers import (DEFAULT_OUTPUTS, FLOAT_OUTPUTS, METRIC_MAPS, OUTPUTS, CameraError, Output, OutputError,
+                       write_contact_sheet)
 from renderers.camera import perspective_camera
 from species.tree_mesh import MeshPart, TreeMesh
 
@@ -26,6 +27,30 @@ def test_every_contract_output_has_its_shape_and_dtype(all_outputs):
         for name, (tail, dtype) in CONTRACT.items():
             assert view.images[name].shape == (h, w) + tail, name
             assert view.images[name].dtype == dtype, name
+
+
+def test_every_output_comes_back_as_the_dtype_its_entry_declares(all_outputs):
+    for view in all_outputs["tsn4"]:
+        for name, output in OUTPUTS.items():
+            assert view.images[name].dtype == output.dtype, name
+            if output.metric:  # metres, 0 = background
+                assert view.images[name].min() == 0 and view.images[name].max() > 0, name
+            elif output.is_float:
+                assert 0 <= view.images[name].min() and view.images[name].max() <= 1, name
+
+
+def test_float_and_metric_names_follow_the_entries_even_one_registered_later(monkeypatch):
+    assert set(FLOAT_OUTPUTS) == {"depth", "depth01", "silhouette", "silhouette_envelope", "depth_back", "trunk_depth"}
+    assert set(METRIC_MAPS) == {"depth", "depth_back"} and "mask" not in FLOAT_OUTPUTS
+    monkeypatch.setitem(OUTPUTS, "test_metres", Output(lambda frame: frame.visible[0], np.float32, metric=True))
+    assert "test_metres" in FLOAT_OUTPUTS and "test_metres" in METRIC_MAPS and len(METRIC_MAPS) == 3
+
+
+@pytest.mark.parametrize("dtype, metric, named", [(np.float64, False, "dtype float64"),
+                                                   (np.uint8, True, "metric output of dtype uint8")])
+def test_an_entry_of_another_dtype_or_a_metric_uint8_one_is_refused(dtype, metric, named):
+    with pytest.raises(OutputError, match=named):
+        Output(lambda frame: frame.visible[0], dtype, metric=metric)
 
 
 def test_views_carry_index_name_and_json_camera(all_outputs):

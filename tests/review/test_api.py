@@ -150,7 +150,7 @@ def test_depth_is_served_as_an_8_bit_png_bright_near_and_black_background(server
     with client(base, token) as api:
         png = api.get(f"/api/trees/{row['tree_id']}/views/{row['view']}/depth.png").content
     shown = decode_map(png)
-    metres = decode_map(row["depth"], row["depth_scale"], row["depth_offset"], metric=True)
+    metres = decode_map(row["depth"], row["depth_scale"], row["depth_offset"])
     assert shown.dtype == np.uint8 and shown.shape == metres.shape == (64, 64)
     assert np.array_equal(shown == 0, metres == 0)
     foreground = metres > 0
