@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     import reconstruct
-    from farm.commands.tree import write_tree
+    from species.meshing import write_tree
 
     check_workers(args.workers)
     clouds = reconstruct_cloud.cloud_inputs(args)

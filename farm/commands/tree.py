@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 from species.errors import TreefarmError, user_path
+from species.meshing import write_tree
 
 from farm.commands import CommandLineError, check_flag_int
 
@@ -53,16 +54,6 @@ def grow_tree(params: dict):
     start = time.perf_counter()
     skeleton, mesh = species.rebuild(params)
     return skeleton, mesh, time.perf_counter() - start
-
-
-def write_tree(mesh, path: Path, fmt: str) -> list[Path]:
-    """Write one tree as `path` (GLB) or as OBJ + MTL + textures beside it; returns the files written."""
-    files = {path.name: mesh.to_glb()} if fmt == "glb" else mesh.to_obj()
-    with user_path(path, "write"):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        for name, data in files.items():
-            (path.parent / name).write_bytes(data)
-    return [path.parent / name for name in files]
 
 
 def load_params(path: str) -> dict:
