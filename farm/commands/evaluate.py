@@ -18,6 +18,8 @@ import sys
 from farm.commands import CommandLineError, check_flag_int
 from farm.commands.ray_options import add_ray_options, check_workers
 
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
+
 DEFAULT_METHODS = "sketch-depth,params,two-view,cloud"
 
 

@@ -10,6 +10,8 @@ import sys
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
 
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("generate", help="grow, render and write a dataset of trees (resumable)",

@@ -11,6 +11,9 @@ import sys
 
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
+from farm.table import format_table
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
 def register(subparsers) -> None:
@@ -59,7 +62,6 @@ def _print_floors(folder: str, progress: bool) -> None:
     from farm.library.catalog import refresh_catalog_tables
     from farm.library.quality import FLOOR_MARGIN, library_floors, store_floors
     from farm.dataset.storage import Location
-    from farm.table import format_table
 
     floors = library_floors(folder, progress=progress)
     store_floors(Location.resolve(folder), floors)

@@ -22,6 +22,10 @@ from pathlib import Path
 
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
+from farm.table import format_table
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module, and trainers
+# imports torch and MLflow (start-up time).
 
 TASK_NAMES = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
 
@@ -126,11 +130,10 @@ def run_train(args: argparse.Namespace) -> int:
     check_workers(args.workers)
     from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
+    from trainers.data import open_data
     from trainers.models import register_result
     from trainers.registry import open_registry
     from trainers.training import train
-
-    from trainers.data import open_data
 
     settings = _settings(args)
     # Before Ray starts: a registry that cannot be opened or data that cannot train this task fail at once.
@@ -146,8 +149,6 @@ def run_train(args: argparse.Namespace) -> int:
 
 
 def _print_result(task: str, result, version, registry) -> None:
-    from farm.table import format_table
-
     network = result.network
     rows = [[key, f"{result.test_metrics[key]:.4g}", f"{result.baseline_metrics.get(key, float('nan')):.4g}"]
             for key in sorted(result.test_metrics)]
@@ -166,11 +167,10 @@ def run_retrain(args: argparse.Namespace) -> int:
     check_workers(args.workers)
     from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
+    from trainers.data import open_data
     from trainers.models import retrain
     from trainers.networks import TrainSettings
     from trainers.registry import open_registry
-
-    from trainers.data import open_data
 
     registry = open_registry(args.models)
     open_data(args.task, folders)
