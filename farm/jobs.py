@@ -14,6 +14,9 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+import renderers
+import species
+from renderers import CameraError, rig_parts
 from species.errors import TreefarmError
 
 __all__ = ["JobSpec", "RenderSpec", "JobSpecError", "PipelineSpec", "DatasetTables", "load_spec", "parse_spec",
@@ -222,8 +225,6 @@ def check_resources(raw: Any) -> dict[str, float]:
 
 def preset_names() -> list[str]:
     """The names of every species preset (`species.list_presets()`), the default set a spec may name."""
-    import species
-
     return [p.name for p in species.list_presets()]
 
 
@@ -234,14 +235,10 @@ _RENDER_KEYS = {"rig", "size", "outputs"}
 
 
 def _known_outputs() -> Sequence[str]:
-    import renderers
-
     return renderers.OUTPUTS
 
 
 def _check_rig(rig: Any) -> None:
-    from renderers import CameraError, rig_parts
-
     try:
         rig_parts(rig)
     except CameraError:
@@ -250,8 +247,6 @@ def _check_rig(rig: Any) -> None:
 
 
 def _default_outputs() -> Sequence[str]:
-    import renderers
-
     return renderers.DEFAULT_OUTPUTS
 
 

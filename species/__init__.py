@@ -29,6 +29,8 @@ __all__ = [
 def sapling_preset(path) -> dict:
     """The dictionary of a Sapling preset file (.py as Blender's add-on saves it, or .json), as the add-on loads
     it, with `draws: ranges`: `species.grow` draws its variation ranges as Sapling does."""
+    # Imported here: the weber_penn package loads on first use, so `import species` (the farm CLI's start-up) stays
+    # cheap.
     from .weber_penn.sapling_preset import read_sapling_preset
 
     return read_sapling_preset(path)

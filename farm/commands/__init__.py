@@ -12,7 +12,7 @@ def check_flag_int(flag: str, value: int, low: int, high: int | None = None) -> 
     """`value` of the integer option `flag` when in [low, high] (no upper bound when high is None); else a
     CommandLineError naming the flag, the value and the range. Checked before anything is written.
     The range check is the job spec's (`farm.jobs.check_int`); only the wording is a command line's."""
-    from farm.jobs import JobSpecError, check_int
+    from farm.jobs import JobSpecError, check_int  # here: farm.jobs imports renderers (the CLI's start-up time)
 
     try:
         return check_int(flag, value, low, high)

@@ -16,6 +16,9 @@ import argparse
 import sys
 
 from farm.commands import CommandLineError, check_flag_int
+from farm.commands.ray_options import add_ray_options, check_workers
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 DEFAULT_METHODS = "sketch-depth,params,two-view,cloud"
 
@@ -34,8 +37,7 @@ def register(subparsers) -> None:
     parser.add_argument("--trees", type=int, help="at most N held-out trees per dataset (spread evenly)")
     parser.add_argument("--part", default="test", help="the split part: test (default), val, or all")
     parser.add_argument("--inputs", help="a folder of real clouds and sketches (docs/evaluation.md)")
-    parser.add_argument("--workers", type=int, help="trees evaluated at once (default: the CPUs)")
-    parser.add_argument("--address", help="join a running Ray cluster (default: a local Ray)")
+    add_ray_options(parser, workers_help="trees evaluated at once (default: the CPUs)")
     parser.add_argument("--sweep-step", type=float, default=5.0,
                         help="rotation sweep step, degrees (default 5: 72 views; 0: no sweep)")
     parser.add_argument("--surface-samples", type=int, default=20_000,
@@ -76,8 +78,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise CommandLineError("--out REPORT_DIR is required (the report folder)")
-    if args.workers is not None:
-        check_flag_int("--workers", args.workers, 1)
+    check_workers(args.workers)
     check_flag_int("--surface-samples", args.surface_samples, 0)
     if not 0 <= args.sweep_step <= 360:
         raise CommandLineError(f"--sweep-step {args.sweep_step} is invalid: allowed degrees in (0, 360], or 0 for "

@@ -9,9 +9,12 @@ import argparse
 import json
 from pathlib import Path
 
+import species
 from species.errors import user_path
 
 from farm.commands import CommandLineError
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
 def register(subparsers) -> None:
@@ -25,8 +28,6 @@ def register(subparsers) -> None:
 
 
 def _rebuild(params_json: str, name: str):
-    import species
-
     return species.rebuild(json.loads(params_json), name=name)[1]
 
 

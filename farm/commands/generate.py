@@ -8,6 +8,9 @@ import argparse
 import sys
 
 from farm.commands import CommandLineError
+from farm.commands.ray_options import add_ray_options, check_workers
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
 def register(subparsers) -> None:
@@ -16,8 +19,7 @@ def register(subparsers) -> None:
     parser.add_argument("spec", nargs="?", help="job spec YAML (default: the built-in job)")
     parser.add_argument("--out", help="output folder or URI (s3://, gs://); default: the spec's `output`")
     parser.add_argument("--trees", type=int, help="total number of trees, split over the spec's species")
-    parser.add_argument("--workers", type=int, help="worker actors (default: one per CPU)")
-    parser.add_argument("--address", help="join this Ray cluster instead of starting a local one")
+    add_ray_options(parser, workers_help="worker actors (default: one per CPU)")
     parser.add_argument("--print-spec", action="store_true", help="print the (default) spec as YAML and exit")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(run=run)
@@ -42,6 +44,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or spec.output
     if not out:
         raise CommandLineError("no output location: pass --out DIR (or set `output` in the spec)")
+    check_workers(args.workers)
     from farm.pipeline import run_job
 
     manifest = run_job(spec, out, workers=args.workers, address=args.address, progress=not args.quiet)

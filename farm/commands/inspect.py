@@ -13,6 +13,8 @@ from species.errors import user_path
 
 from farm.commands import check_flag_int
 
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("inspect", help="summary table and contact sheet PNG of a dataset",

@@ -10,6 +10,10 @@ import argparse
 import sys
 
 from farm.commands import CommandLineError
+from farm.commands.ray_options import add_ray_options, check_workers
+from farm.table import format_table
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
 def register(subparsers) -> None:
@@ -19,8 +23,7 @@ def register(subparsers) -> None:
     parser.add_argument("folder", nargs="?", help="the library folder (for validate and add)")
     parser.add_argument("--out", help="output folder of a library job")
     parser.add_argument("--per-species", type=int, help="variants per species (overrides the spec)")
-    parser.add_argument("--workers", type=int, help="worker actors (default: one per CPU)")
-    parser.add_argument("--address", help="join this Ray cluster instead of starting a local one")
+    add_ray_options(parser, workers_help="worker actors (default: one per CPU)")
     parser.add_argument("--species", help="(add) the species preset of the new asset; (build) the species to "
                         "build, NAME[,NAME], from the spec's (default: all)")
     parser.add_argument("--seed", type=int, help="(add) the tree seed of the new asset")
@@ -59,7 +62,6 @@ def _print_floors(folder: str, progress: bool) -> None:
     from farm.library.catalog import refresh_catalog_tables
     from farm.library.quality import FLOOR_MARGIN, library_floors, store_floors
     from farm.dataset.storage import Location
-    from farm.table import format_table
 
     floors = library_floors(folder, progress=progress)
     store_floors(Location.resolve(folder), floors)
@@ -109,8 +111,7 @@ def run(args: argparse.Namespace) -> int:
     spec = _load(args)
     if not args.out:
         raise CommandLineError("no output location: pass --out DIR")
-    if args.workers is not None and args.workers < 1:
-        raise CommandLineError(f"--workers {args.workers} is invalid: allowed an integer >= 1")
+    check_workers(args.workers)
     from farm.library.job import run_library
 
     result = run_library(spec, args.out, workers=args.workers, address=args.address, progress=not args.quiet)

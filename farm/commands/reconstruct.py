@@ -27,6 +27,7 @@ import numpy as np
 from species.errors import user_path
 
 from farm.commands import CommandLineError, reconstruct_cloud
+from farm.commands.ray_options import check_workers
 
 METHODS = ("params", "sketch-depth", "two-view", "cloud", "photos")
 
@@ -123,8 +124,9 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     import reconstruct
-    from farm.commands.tree import write_tree
+    from species.meshing import write_tree
 
+    check_workers(args.workers)
     clouds = reconstruct_cloud.cloud_inputs(args)
     if clouds is not None:
         if args.height is not None and not (np.isfinite(args.height) and args.height > 0):

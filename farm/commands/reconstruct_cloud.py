@@ -21,6 +21,7 @@ from pathlib import Path
 from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
+from farm.commands.ray_options import add_ray_options
 
 SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "dbh_m", "total_volume_m3", "branches",
                    "faces", "seconds", "message")
@@ -38,8 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--poses", choices=("auto", "known", "estimate"), default="auto",
                        help="photos: known (the folder's cameras.json), estimate (SfM's own, aligned onto "
                             "cameras.json when there is one) or auto (known when cameras.json lists every photo)")
-    group.add_argument("--workers", type=int, help="batch: Ray tasks at once (default: the CPUs)")
-    group.add_argument("--address", help="batch: a Ray cluster to join (default: a local Ray)")
+    add_ray_options(group, workers_help="batch: Ray tasks at once (default: the CPUs)",
+                    address_help="batch: a Ray cluster to join (default: a local Ray)")
 
 
 def _is_cloud(path: Path) -> bool:

@@ -13,9 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+import species
 from species.errors import user_path
 
 from farm.commands import CommandLineError, check_flag_int
+from farm.commands.tree import load_params
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 BACKENDS = ("pyrender", "blender")
 # Float maps in [0, 1] are written as 16-bit PNGs: value = round(x * 65535).
@@ -42,11 +46,7 @@ def register(subparsers) -> None:
 
 
 def _tree_params(args: argparse.Namespace) -> dict:
-    import species
-
     if args.params:
-        from farm.commands.tree import load_params
-
         return load_params(args.params)
     if not args.species:
         raise CommandLineError("give --species NAME (see `farm species`) or --params DICT.json")
@@ -134,7 +134,6 @@ def _photo_sheet_rows(photos) -> list:
 
 
 def run(args: argparse.Namespace) -> int:
-    import species
     from renderers import DEFAULT_OUTPUTS, check_outputs, rig_parts
 
     outputs = check_outputs(DEFAULT_OUTPUTS if args.styles is None

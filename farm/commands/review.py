@@ -12,6 +12,8 @@ import sys
 
 from farm.commands import check_flag_int
 
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("review", help="review a dataset in a browser or VR headset; `review export DIR`",

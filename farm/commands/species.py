@@ -3,7 +3,10 @@ from __future__ import annotations
 
 import argparse
 
+import species
+
 from farm.commands import CommandLineError
+from farm.table import format_table
 
 
 def register(subparsers) -> None:
@@ -13,9 +16,6 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import species
-    from farm.table import format_table
-
     if args.generator is not None and args.generator not in species.GENERATORS:
         raise CommandLineError(f"unknown generator {args.generator!r}; known: "
                                f"{', '.join(sorted(species.GENERATORS))}")

@@ -21,6 +21,11 @@ import sys
 from pathlib import Path
 
 from farm.commands import CommandLineError
+from farm.commands.ray_options import add_ray_options, check_workers
+from farm.table import format_table
+
+# What a command runs is imported inside its functions: `farm --help` loads every command module, and trainers
+# imports torch and MLflow (start-up time).
 
 TASK_NAMES = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
 
@@ -61,9 +66,8 @@ def _task_arguments(parser: argparse.ArgumentParser) -> None:
                         help="learning rate over the run: constant (default) or cosine down to 0 by the last epoch")
     parser.add_argument("--seed", type=int, default=0, help="seed of initialisation, order and augmentation")
     parser.add_argument("--time-budget", type=float, metavar="SECONDS", help="stop training after this long")
-    parser.add_argument("--workers", type=int, default=1, help="Ray Train workers (data-parallel; default 1)")
+    add_ray_options(parser, workers_help="Ray Train workers (data-parallel; default 1)", workers_default=1)
     parser.add_argument("--gpus", type=int, default=0, help="GPUs over all workers (default 0: CPU)")
-    parser.add_argument("--address", help="join this Ray cluster instead of starting a local one")
     parser.add_argument("--run-dir", help="the run's folder (default runs/TASK-<digest>); the same one resumes")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -123,13 +127,13 @@ def run_train(args: argparse.Namespace) -> int:
         sys.stdout.write(print_data_spec(args.task))
         return 0
     folders = _need_data(args)
+    check_workers(args.workers)
     from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
+    from trainers.data import open_data
     from trainers.models import register_result
     from trainers.registry import open_registry
     from trainers.training import train
-
-    from trainers.data import open_data
 
     settings = _settings(args)
     # Before Ray starts: a registry that cannot be opened or data that cannot train this task fail at once.
@@ -145,8 +149,6 @@ def run_train(args: argparse.Namespace) -> int:
 
 
 def _print_result(task: str, result, version, registry) -> None:
-    from farm.table import format_table
-
     network = result.network
     rows = [[key, f"{result.test_metrics[key]:.4g}", f"{result.baseline_metrics.get(key, float('nan')):.4g}"]
             for key in sorted(result.test_metrics)]
@@ -162,13 +164,13 @@ def _print_result(task: str, result, version, registry) -> None:
 
 def run_retrain(args: argparse.Namespace) -> int:
     folders = _need_data(args)
+    check_workers(args.workers)
     from farm.dataset.manifest import code_version
     from farm.pipeline import ray_connection
+    from trainers.data import open_data
     from trainers.models import retrain
     from trainers.networks import TrainSettings
     from trainers.registry import open_registry
-
-    from trainers.data import open_data
 
     registry = open_registry(args.models)
     open_data(args.task, folders)

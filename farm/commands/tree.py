@@ -19,9 +19,17 @@ import os
 import time
 from pathlib import Path
 
+import numpy as np
+
+import species
 from species.errors import TreefarmError, user_path
+from species.meshing import write_tree
 
 from farm.commands import CommandLineError, check_flag_int
+from farm.table import format_table
+
+# species.weber_penn is imported where a --params file is read: it is the one generator `farm --help` would
+# otherwise load (start-up time).
 
 FORMATS = ("glb", "obj")
 
@@ -48,21 +56,9 @@ def register(subparsers) -> None:
 
 def grow_tree(params: dict):
     """Grow and mesh one dictionary with the rng its own seed defines; returns (skeleton, mesh, seconds)."""
-    import species
-
     start = time.perf_counter()
     skeleton, mesh = species.rebuild(params)
     return skeleton, mesh, time.perf_counter() - start
-
-
-def write_tree(mesh, path: Path, fmt: str) -> list[Path]:
-    """Write one tree as `path` (GLB) or as OBJ + MTL + textures beside it; returns the files written."""
-    files = {path.name: mesh.to_glb()} if fmt == "glb" else mesh.to_obj()
-    with user_path(path, "write"):
-        path.parent.mkdir(parents=True, exist_ok=True)
-        for name, data in files.items():
-            (path.parent / name).write_bytes(data)
-    return [path.parent / name for name in files]
 
 
 def load_params(path: str) -> dict:
@@ -168,10 +164,6 @@ def _reading(path: str, params: dict, preset) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    import numpy as np
-    import species
-    from farm.table import format_table
-
     check_flag_int("--seed", args.seed, 0)
     rows = []
     if args.species:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+# What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser("validate", help="check schema and checksums; name any damaged file",

@@ -11,7 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
+from farm.table import format_table
+
+from .report import summary_table
 from .units import METRICS_FILE, EvaluationError
+
+# reconstruct.scoring's METRICS is imported where used: the reconstruct package imports torch.
 
 __all__ = ["Change", "compare_reports", "parse_gate", "broken_gates", "format_changes"]
 
@@ -41,8 +46,6 @@ class Change:
 
 def _summary(report: str | Path) -> dict:
     import pandas as pd
-
-    from .report import summary_table
 
     path = Path(report) / METRICS_FILE
     if not path.is_file():
@@ -90,7 +93,6 @@ def broken_gates(changes: Sequence[Change], gates: Sequence[tuple[str, float]]) 
 
 
 def format_changes(changes: Sequence[Change]) -> str:
-    from farm.table import format_table
     from reconstruct.scoring import METRICS
 
     rows = [[f"{c.method} ({c.source})", METRICS[c.metric].label if c.metric in METRICS else c.metric,

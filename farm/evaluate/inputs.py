@@ -20,8 +20,13 @@ from typing import Sequence
 
 import numpy as np
 
+from renderers.impostor import closed_silhouette
+from species.errors import user_path
+
 from .methods import MethodContext, MethodResult, joined_share
 from .units import EvaluationError, Unit
+
+# reconstruct is imported where used: the package imports torch.
 
 __all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "outline_iou"]
 
@@ -102,9 +107,6 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
     from reconstruct import metrics
     from reconstruct.scoring import depth_picture
     from scipy.ndimage import binary_fill_holes
-
-    from renderers.impostor import closed_silhouette
-    from species.errors import user_path
 
     net = ctx.net("sketchnet")
     image = read_image(str(path))

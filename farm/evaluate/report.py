@@ -12,7 +12,15 @@ from pathlib import Path
 
 import numpy as np
 
+from farm.dataset.manifest import code_version
+from farm.table import format_table
+from species.meshing.png import png_bytes
+from trainers.registry import open_registry
+from trainers.tasks import get_task
+
 from .units import ID_COLUMNS, write_atomically
+
+# reconstruct.scoring and trainers.models are imported where used: both packages import torch.
 
 __all__ = ["write_report", "metric_columns", "summary_table", "registered_scores", "GALLERY_METRIC", "SUMMARY_FILE"]
 
@@ -75,9 +83,6 @@ def registered_scores(task: str, models: str | None) -> dict[str, float]:
         path = DEFAULT_MODELS / task / "metrics_report.json"
         test = json.loads(path.read_text()).get("test", {}) if path.exists() else {}
     else:
-        from trainers.registry import open_registry
-        from trainers.tasks import get_task
-
         registry = open_registry(models)
         name = get_task(task).model_name
         found = registry.champion(name) or registry.latest(name)
@@ -104,8 +109,6 @@ def _cell(stats: dict | None) -> str:
 
 
 def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, table: dict) -> str:
-    from farm.dataset.manifest import code_version
-    from farm.table import format_table
     from reconstruct.scoring import METRICS
 
     lines = ["# Evaluation", "",
@@ -227,8 +230,6 @@ def _distribution_plot(rows, by: str, path: Path) -> Path | None:
 def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
     """The method's best, median and worst trees by its gallery metric: their panels stacked, labelled."""
     import cv2
-
-    from species.meshing.png import png_bytes
 
     ok = rows[(rows["method"] == method) & (rows["status"] == "ok") & rows["panel"].notna()] \
         if "panel" in rows else rows.iloc[0:0]

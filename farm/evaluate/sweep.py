@@ -11,7 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
+from species.errors import TreefarmError
+
 from .units import load_tree, worker_context, write_atomically
+
+# reconstruct is imported where used (in the Ray task): the package imports torch.
 
 __all__ = ["run_sweep", "SWEEP_FILE", "sweep_tree"]
 
@@ -27,7 +31,6 @@ def sweep_tree(plan):
 def _sweep_task(unit, models, settings, step: float) -> dict:
     import reconstruct
     from reconstruct import metrics
-    from species.errors import TreefarmError
 
     ctx = worker_context(models, settings)
     tree = load_tree(unit)

@@ -21,6 +21,16 @@ from typing import Sequence
 
 import numpy as np
 
+from renderers.alpha_coverage import coverage_tree
+from renderers.framing import framing_points
+from renderers.impostor import (QUALITY_AZIMUTHS, CoverageRenderer, closed_silhouette, silhouette_iou,
+                                switch_camera)
+
+from ..dataset.storage import Location
+from ..tree_chain import StageTimer
+from .asset import build_asset, leaf_fractions
+from .records import read_library_spec
+
 __all__ = ["SHIFT_PX", "FLOOR_MARGIN", "LevelFloor", "level_floors", "asset_floors", "library_floors",
            "floors_record_path", "store_floors", "stored_floors"]
 
@@ -50,8 +60,6 @@ class LevelFloor:
 def level_floors(renderer, cover, points, switch_px: int, turns_deg: Sequence[float] = ()) -> tuple[float, ...]:
     """(half-pixel floor, one floor per turn in `turns_deg`) of LOD0's coverage tree `cover` at `switch_px`: the
     least IoU over the quality azimuths (for the half pixel, over a move across and a move up)."""
-    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
-
     def silhouette(camera) -> np.ndarray:
         return closed_silhouette(renderer.coverage(cover, camera))
 
@@ -71,11 +79,6 @@ def level_floors(renderer, cover, points, switch_px: int, turns_deg: Sequence[fl
 
 def asset_floors(asset, renderer) -> list[LevelFloor]:
     """The floor and margin of each level after LOD0 (LOD1..LOD3, the impostor) of a built `LibraryAsset`."""
-    from renderers.alpha_coverage import coverage_tree
-    from renderers.framing import framing_points
-
-    from .asset import leaf_fractions
-
     lod0_fraction, _ = leaf_fractions(asset.leaf_atlases["summer"])
     cover = coverage_tree(asset.lod0, lod0_fraction)
     points = framing_points(asset.lod0)
@@ -87,13 +90,6 @@ def asset_floors(asset, renderer) -> list[LevelFloor]:
 def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
     """Every catalogued asset of a library folder rebuilt with the library's spec and measured (`asset_floors`)."""
     from tqdm import tqdm
-
-    from farm.dataset.storage import Location
-    from farm.tree_chain import StageTimer
-    from renderers.impostor import CoverageRenderer
-
-    from .asset import build_asset
-    from .records import read_library_spec
 
     location = Location.resolve(path)
     spec = read_library_spec(location)

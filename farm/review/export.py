@@ -5,6 +5,7 @@ written whole under a temporary name and renamed, sorted by tree id then reviewe
 """
 from __future__ import annotations
 
+from farm.dataset import read_manifest
 from farm.dataset.storage import Location
 
 from .store import ReviewStore
@@ -26,8 +27,6 @@ def export_reviews(dataset: str, store: ReviewStore) -> tuple[str, int]:
     """Write every stored verdict to DATASET/reviews/part-00000.parquet; returns (path, rows)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
-
-    from farm.dataset import read_manifest
 
     location = Location.resolve(dataset)
     read_manifest(location)  # a dataset, not any folder

@@ -9,6 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from farm.dataset.image_codec import decode_map
+
 __all__ = ["FLAGS", "QA_VERSION", "QaFlags", "tree_flags", "sketch_ink", "ink_flags", "TREE_COLUMNS",
            "BELOW_GROUND_M", "LEAF_FAR_FRACTION", "JUMP_FRACTION", "JUMP_TIMES_MEAN", "MIN_TRIANGLES",
            "HUGE_TRIANGLES", "HUGE_EXTENT_M", "MIN_INK"]
@@ -161,8 +163,6 @@ def tree_flags(table) -> QaFlags:
 
 def sketch_ink(png: bytes) -> float:
     """Fraction of dark pixels (< 128) of a sketch PNG (black lines on white)."""
-    from farm.dataset.image_codec import decode_map
-
     image = decode_map(png)
     return float(np.count_nonzero(image < 128)) / max(image.size, 1)
 

@@ -18,6 +18,9 @@ from farm.evaluate.report import GALLERY_METRIC, metric_columns
 from .index import NotFound
 from .store import ReviewError
 
+# reconstruct.scoring's METRICS is imported where used: the reconstruct package imports torch, which the review
+# server does not otherwise need.
+
 __all__ = ["EvaluationReport", "is_report", "ROW_FILTERS"]
 
 # Query fields of a rows request (besides the token).

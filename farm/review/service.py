@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from farm.dataset.storage import Location
+
 from .index import DatasetIndex, NotFound
 from .qa import FLAGS
 from .store import DB_NAME, VERDICTS, ReviewError, ReviewStore, check_verdict
@@ -23,8 +25,6 @@ NO_VERDICT, ANY_FLAG, NO_FLAG = "none", "any", "none"
 
 def default_db_path(dataset: str) -> Path:
     """`reviews.sqlite` in the dataset folder (a local folder: SQLite needs a local file)."""
-    from farm.dataset.storage import Location
-
     location = Location.resolve(dataset)
     if not location.is_local:
         raise ReviewError(f"{dataset} is not a local folder: pass --db PATH for the reviews database")

@@ -1,5 +1,5 @@
-"""A skeleton as triangles: bark tubes and leaf cards, their procedural textures, and the glTF (GLB) and OBJ
-writers.
+"""A skeleton as triangles: bark tubes and leaf cards, their procedural textures, the glTF (GLB) and OBJ
+writers, and a tree's files on disk (`write_tree`).
 """
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from .textures import (bark_colour, bark_png, bark_texture, BARK_TEXTURE_SEED, f
 from .gltf import (ARRAY_BUFFER, CLAMP_TO_EDGE, ELEMENT_ARRAY_BUFFER, GlbBuffer, GlbError, GlbWriter, read_accessor,
     node_matrix, read_glb_chunks, read_glb_json, REPEAT, tree_mesh_to_glb, TRIANGLES, z_up_to_y_up, Z_UP_TO_Y_UP)
 from .obj import ObjError, tree_mesh_to_obj
+from .tree_files import write_tree
 from .ascii_numbers import AsciiNumberError, FIXED6_MAX_MAGNITUDE, fixed6_rows, INT_MAX_MAGNITUDE, int_rows
 from ..tree_mesh import MESH_WRITERS
 
@@ -25,5 +26,5 @@ __all__ = [
     "z_up_to_y_up", "Z_UP_TO_Y_UP", "GlbError", "ARRAY_BUFFER", "ELEMENT_ARRAY_BUFFER", "REPEAT", "CLAMP_TO_EDGE",
     "TRIANGLES",
     "tree_mesh_to_obj", "ObjError", "fixed6_rows", "int_rows", "AsciiNumberError", "FIXED6_MAX_MAGNITUDE",
-    "INT_MAX_MAGNITUDE",
+    "INT_MAX_MAGNITUDE", "write_tree",
 ]

@@ -30,6 +30,7 @@ def finished_dataset(tmp_path_factory, ray_session) -> Path:
     return path
 
 
+WORKERS_0 = "--workers 0 is invalid: allowed an integer >= 1"
 BAD_INPUTS = [
     # (argv, words of the one line); {tmp} is a folder of inputs, {good} a valid dictionary, {data} a dataset copy,
     # {damaged} the copy with a truncated trees part file
@@ -48,6 +49,13 @@ BAD_INPUTS = [
     (["review", "{data}", "--port", "99999"], "--port 99999"),
     (["review", "export", "{data}", "--db", "{tmp}/in"], "--db"),
     (["generate", "--trees", "0", "--out", "{tmp}/job", "--quiet"], "trees"),
+    # every command on Ray refuses --workers below 1 before it starts Ray or writes anything
+    (["generate", "--out", "{tmp}/job", "--quiet", "--workers", "0"], WORKERS_0),
+    (["library", "--out", "{tmp}/library", "--quiet", "--workers", "0"], WORKERS_0),
+    (["evaluate", "--data", "{data}", "--out", "{tmp}/report", "--workers", "0"], WORKERS_0),
+    (["train", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
+    (["retrain", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
+    (["reconstruct", "{tmp}/in", "--out", "{tmp}/trees", "--workers", "0"], WORKERS_0),
 ]
 
 

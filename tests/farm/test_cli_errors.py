@@ -7,8 +7,8 @@ from functools import partial
 import pytest
 
 import farm.pipeline
-import farm.table
 from farm.cli import BUG_REPORT, main
+from farm.commands import species as species_command
 from farm.commands import tree as tree_command
 from farm.jobs import parse_spec, spec_to_yaml
 from farm_standins import REFUSAL, broken_chain, refusing_chain, standin_spec
@@ -68,7 +68,7 @@ def test_a_file_error_of_a_path_the_user_never_named_is_a_bug(tmp_path, capsys, 
 
 @pytest.mark.parametrize("module, name, error, argv", [
     (tree_command, "grow_tree", KeyError("stage_seconds"), ["tree", "--species", "maple", "--out", "{tmp}/m.glb"]),
-    (farm.table, "format_table", ValueError("column widths disagree"), ["species"]),
+    (species_command, "format_table", ValueError("column widths disagree"), ["species"]),
 ])
 def test_an_internal_error_prints_its_traceback_and_asks_for_a_report(tmp_path, capsys, monkeypatch,
                                                                       module, name, error, argv):

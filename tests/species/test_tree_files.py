@@ -1,4 +1,6 @@
-"""Grown trees as files: every preset's GLB passes the Khronos validator and round-trips through trimesh."""
+"""Grown trees as files: every preset's GLB passes the Khronos validator and round-trips through trimesh, and
+`species.meshing.write_tree` writes a tree's GLB, or its OBJ with the MTL and textures, where it is told."""
+import dataclasses
 import io
 
 import numpy as np
@@ -6,6 +8,8 @@ import pytest
 import trimesh
 
 import species
+from species.errors import PathError
+from species.meshing import write_tree
 from tests.gltf_validator import assert_valid_glb
 
 PRESETS = [p.name for p in species.list_presets()]
@@ -37,3 +41,28 @@ def test_bark_has_no_nan_no_degenerate_faces_and_sits_on_the_ground():
     assert np.isfinite(bark.vertices).all()
     assert bark.face_areas.min() > 0
     assert bark.vertices[:, 2].min() == pytest.approx(0.0, abs=0.02)
+
+
+@pytest.fixture(scope="module")
+def maple():
+    return dataclasses.replace(grown_mesh("maple"), name="maple")
+
+
+def test_write_tree_puts_the_glb_bytes_in_the_named_file_making_its_folders(maple, tmp_path):
+    path = tmp_path / "made" / "here" / "tree.glb"
+    assert write_tree(maple, path, "glb") == [path]
+    assert path.read_bytes() == maple.to_glb()
+
+
+def test_write_tree_puts_an_obj_beside_its_mtl_and_textures_the_obj_first(maple, tmp_path):
+    files = write_tree(maple, tmp_path / "maple.obj", "obj")
+    expected = maple.to_obj()
+    assert files[0] == tmp_path / "maple.obj" and sorted(p.name for p in files) == sorted(expected)
+    assert all((tmp_path / name).read_bytes() == data for name, data in expected.items())
+
+
+def test_write_tree_names_the_path_it_cannot_write(maple, tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    with pytest.raises(PathError, match="cannot write .*a_file/tree.glb"):
+        write_tree(maple, blocker / "tree.glb", "glb")
