@@ -62,7 +62,7 @@ def main(names: list[str], scaling: bool = True, twig_cards: bool = True) -> Non
     from farm.library.spec import parse_library_spec
     from farm.dataset.storage import Location
     from farm.tree_chain import StageTimer, tree_seed
-    from renderers.impostor import CoverageRenderer
+    from renderers.gl_coverage import CoverageRenderer
     from species.meshing.png import png_bytes
 
     spec = parse_library_spec({"species": {n: 1 for n in names}, "formats": ["glb", "usd", "obj", "collision"],

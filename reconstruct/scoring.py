@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from renderers import Camera, ViewRenderer, main_branches
-from renderers.impostor import closed_silhouette
+from renderers.silhouette_metric import closed_silhouette
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 

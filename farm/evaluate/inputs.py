@@ -103,7 +103,7 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
     from reconstruct.scoring import depth_picture
     from scipy.ndimage import binary_fill_holes
 
-    from renderers.impostor import closed_silhouette
+    from renderers.silhouette_metric import closed_silhouette
     from species.errors import user_path
 
     net = ctx.net("sketchnet")

@@ -3,7 +3,7 @@
 An engine's temporal anti-aliasing jitters the camera by sub-pixel offsets every frame, so a level whose silhouette
 differs from LOD0's by no more than LOD0's own half-pixel shift pops no more than LOD0 already shimmers. The floor
 of a level: LOD0's coverage silhouette at the level's switch size against the same camera with its principal point
-moved SHIFT_PX across, then up; the least IoU over renderers.impostor.QUALITY_AZIMUTHS (both silhouettes closed
+moved SHIFT_PX across, then up; the least IoU over renderers.silhouette_metric.QUALITY_AZIMUTHS (both silhouettes closed
 as the library measures them). A level meets the restated target when its least IoU is at least its floor minus
 FLOOR_MARGIN. `level_floors` also gives the floors of LOD0 turned by given angles (what a view-sampled impostor
 shows between its views), for `benchmarks/bench_silhouette_floor.py`.
@@ -50,7 +50,7 @@ class LevelFloor:
 def level_floors(renderer, cover, points, switch_px: int, turns_deg: Sequence[float] = ()) -> tuple[float, ...]:
     """(half-pixel floor, one floor per turn in `turns_deg`) of LOD0's coverage tree `cover` at `switch_px`: the
     least IoU over the quality azimuths (for the half pixel, over a move across and a move up)."""
-    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
+    from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 
     def silhouette(camera) -> np.ndarray:
         return closed_silhouette(renderer.coverage(cover, camera))
@@ -90,7 +90,7 @@ def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
 
     from farm.dataset.storage import Location
     from farm.tree_chain import StageTimer
-    from renderers.impostor import CoverageRenderer
+    from renderers.gl_coverage import CoverageRenderer
 
     from .asset import build_asset
     from .records import read_library_spec
