@@ -19,7 +19,7 @@ from farm.library.spec import parse_library_spec
 from farm.tree_chain import StageTimer
 from renderers.blender import BlenderError
 from renderers.blender_assets import export_fbx_batch
-from renderers.impostor import CoverageRenderer
+from renderers.gl_coverage import CoverageRenderer
 
 PRESETS = ("sc_young_sapling", "maple", "balsam_fir")
 # The budget we hold these to (none is given for the Blender outputs): a full asset without them in

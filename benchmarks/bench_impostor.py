@@ -1,5 +1,5 @@
 """The impostor's slicing and alpha settings side by side: least silhouette IoU against LOD0 at the impostor's
-switch size (64 px) over renderers.impostor.QUALITY_AZIMUTHS, per preset, for each (axis share, sector overlap,
+switch size (64 px) over renderers.silhouette_metric.QUALITY_AZIMUTHS, per preset, for each (axis share, sector overlap,
 alpha grown by N texels) variant, measured as the library measures it (`farm.library.asset.measure_chain`).
 
 The library's settings are renderers.impostor.AXIS_SHARE and SECTOR_OVERLAP, with the alpha not grown; the first
@@ -25,8 +25,8 @@ VARIANTS = ((0.2, 0.15, 0), (0.04, 0.0, 0), (0.2, 0.0, 0), (0.2, 0.3, 0), (0.2, 
 def least_iou(renderer, asset, cover, variant) -> float:
     from renderers.alpha_coverage import triangle_coverage
     from renderers.framing import framing_points
-    from renderers.impostor import (QUALITY_AZIMUTHS, closed_silhouette, render_impostor, silhouette_iou,
-                                    switch_camera)
+    from renderers.impostor import render_impostor
+    from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 
     axis_share, overlap, texels = variant
     atlas = render_impostor(renderer, cover, tile=asset.impostor.tile, axis_share=axis_share,
@@ -57,7 +57,7 @@ def main() -> None:
     from farm.library.spec import parse_library_spec
     from farm.tree_chain import StageTimer, tree_seed
     from renderers.alpha_coverage import coverage_tree
-    from renderers.impostor import CoverageRenderer
+    from renderers.gl_coverage import CoverageRenderer
 
     renderer = CoverageRenderer(64)
     rows = {}

@@ -22,7 +22,11 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from trainers.onnx_runtime import OnnxModel, export_onnx  # noqa: E402
-from trainers.pix2pix import PIX2PIX_TASKS  # noqa: E402
+from trainers.pix2pix import task_channels, task_generator  # noqa: E402
+from trainers.tasks import TASKS  # noqa: E402
+
+# The depth networks of the task registry, labelled as the tables name them (unet-silhouette, unet-trunk).
+UNETS = {name.removeprefix("pix2pix-"): task for name, task in TASKS.items() if task.network == "pix2pix"}
 
 BUDGET_MS = 500.0
 SIZE = 256
@@ -80,11 +84,12 @@ def main() -> None:
     results: dict[tuple[str, int | str], dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        for name, task in PIX2PIX_TASKS.items():
+        for name, task in UNETS.items():
+            in_channels, out_channels = task_channels(task)
             for width in widths:
-                net = task.generator(width=width, generator=torch.Generator().manual_seed(0))
-                example = torch.rand(1, task.in_channels, SIZE, SIZE, generator=torch.Generator().manual_seed(1))
-                out = {"output": (None, task.out_channels, SIZE, SIZE)}
+                net = task_generator(task, width=width, generator=torch.Generator().manual_seed(0))
+                example = torch.rand(1, in_channels, SIZE, SIZE, generator=torch.Generator().manual_seed(1))
+                out = {"output": (None, out_channels, SIZE, SIZE)}
                 results[(f"unet-{name}", width)] = measure(net, example, ["output"], out, folder, args.repeats)
                 print(f"  measured unet-{name} width {width}", flush=True)
         case = sketchnet_case(np.random.default_rng(0))
@@ -108,7 +113,7 @@ def main() -> None:
     rows = []
     for width in widths:
         pair = sum(min(results[(f"unet-{n}", width)]["torch"], results[(f"unet-{n}", width)]["ort"])
-                   for n in PIX2PIX_TASKS)
+                   for n in UNETS)
         total = pair + tsn_ms
         rows.append([str(width), pair, tsn_ms if tsn else "skipped", total, "yes" if total < BUDGET_MS else "no"])
     bench.table(f"per sketch: both U-Nets at one width{' + TreeSketchNet' if tsn else ''}, faster backend each",

@@ -1,8 +1,8 @@
 """The octahedral impostor beside the crossed planes, per preset: least and mean silhouette IoU against LOD0 at the
-impostor's switch size (64 px), from renderers.impostor.QUALITY_AZIMUTHS (halfway between the crossed planes) and
-from the azimuths halfway between the octahedral atlas's horizon frames (its worst case at the horizon), measured
-as the library measures them (`farm.library.asset.measure_chain`: closed silhouettes, LOD0's cards cut to their
-opaque share); seconds to render each atlas and its PNG bytes (albedo + normal, the library's encoding).
+impostor's switch size (64 px), from renderers.silhouette_metric.QUALITY_AZIMUTHS (halfway between the crossed
+planes) and from the azimuths halfway between the octahedral atlas's horizon frames (its worst case at the horizon),
+measured as the library measures them (`farm.library.asset.measure_chain`: closed silhouettes, LOD0's cards cut to
+their opaque share); seconds to render each atlas and its PNG bytes (albedo + normal, the library's encoding).
 
 Run: PYOPENGL_PLATFORM=egl python -m benchmarks.bench_octahedral_impostor [SPECIES ...] [--all]
      [--frames N]   (default: DEFAULT_PRESETS; --all: every preset; N frames per side, default 12)
@@ -23,8 +23,9 @@ from farm.library.spec import DEFAULT_IMPOSTOR_TILE, parse_library_spec
 from farm.tree_chain import StageTimer, tree_seed
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
-from renderers.impostor import (QUALITY_AZIMUTHS, CoverageRenderer, closed_silhouette, render_impostor,
-                                silhouette_iou, switch_camera)
+from renderers.gl_coverage import CoverageRenderer
+from renderers.impostor import render_impostor
+from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import OCTAHEDRAL_FRAMES, between_frame_azimuths, render_octahedral_impostor
 
 DEFAULT_PRESETS = ("maple", "pine", "palm", "balsam_fir", "sc_young_sapling")

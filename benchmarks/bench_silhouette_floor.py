@@ -11,7 +11,7 @@ to the side and LOD0 against LOD0 turned by 1 deg.
   view every 2 deg (180 frames around the tree) shows at worst, before any texel is lost; 4 deg, one with a
   view every 8 deg (45 frames), still far more than the 16 triangles allowed an impostor can show.
 
-Figures: least IoU over renderers.impostor.QUALITY_AZIMUTHS, both silhouettes closed as the library measures
+Figures: least IoU over renderers.silhouette_metric.QUALITY_AZIMUTHS, both silhouettes closed as the library measures
 them, each level at its default switch size; assets built as `farm library` builds them (default spec).
 
 Run: PYOPENGL_PLATFORM=egl python -m benchmarks.bench_silhouette_floor [SPECIES ...] [--no-twig-cards]
@@ -52,7 +52,7 @@ def main() -> None:
     from farm.tree_chain import StageTimer, tree_seed
     from renderers.alpha_coverage import coverage_tree
     from renderers.framing import framing_points
-    from renderers.impostor import CoverageRenderer
+    from renderers.gl_coverage import CoverageRenderer
 
     renderer = CoverageRenderer(64)  # one EGL context for every size: the viewport follows the camera
     rows, seconds = {}, {}

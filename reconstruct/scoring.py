@@ -16,7 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from renderers import Camera, ViewRenderer, main_branches
-from renderers.impostor import closed_silhouette
+from renderers.silhouette_metric import closed_silhouette
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
@@ -146,17 +146,18 @@ def network_depth_error(net, task_name: str, images: dict) -> tuple[float, float
     import time
 
     from trainers.data import TARGET_BACKGROUND
-    from trainers.pix2pix import PIX2PIX_TASKS, targets_from_views
+    from trainers.pix2pix import targets_from_views
     from trainers.preprocess import apply_crop
+    from trainers.tasks import get_task
 
-    task = PIX2PIX_TASKS[task_name]
+    task = get_task(f"pix2pix-{task_name}")
+    source, target_name = task.inputs[0], task.targets[0]
     start = time.perf_counter()
-    prediction, prepared = net.predict_view(images[task.input_output])
+    prediction, prepared = net.predict_view(images[source])
     seconds = time.perf_counter() - start
     size = net.input_size
-    cut = {task.input_output: apply_crop(images[task.input_output], prepared.crop, size, 255),
-           task.target_output: apply_crop(images[task.target_output], prepared.crop, size,
-                                          TARGET_BACKGROUND[task.target_output])}
+    cut = {source: apply_crop(images[source], prepared.crop, size, 255),
+           target_name: apply_crop(images[target_name], prepared.crop, size, TARGET_BACKGROUND[target_name])}
     cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
     _, target, mask = targets_from_views(task, cut)
     return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds

@@ -1,6 +1,7 @@
 """The points a camera is framed by: the few vertices of a tree mesh that decide every fitted camera.
 
-In: a TreeMesh; out: (K, 3) float32 metres, Z up, for `camera.perspective_camera`, `impostor.switch_camera`, ...
+In: a TreeMesh; out: (K, 3) float32 metres, Z up, for `camera.perspective_camera`,
+`silhouette_metric.switch_camera`, ...
 """
 from __future__ import annotations
 

@@ -1,16 +1,15 @@
-"""Far-distance impostors and LOD silhouettes: a crossed-plane billboard whose albedo/normal/alpha atlas is rendered
-with the farm's depth renderer, and silhouette coverage (depth-only GL passes for meshes, ray casting for the
-alpha-tested impostor). Leaf cards are measured by the rule of `renderers.alpha_coverage` (cards shrunk to the
-opaque share of their alpha tile).
+"""Far-distance impostors: a crossed-plane billboard whose albedo/normal/alpha atlas is rendered with the farm's
+depth passes (`renderers.gl_coverage.CoverageRenderer`, the tree sliced among the planes), and the silhouette the
+alpha-tested billboard shows (per pixel: by rasterising its triangles, or by casting rays at its planes). Leaf
+cards are measured by the rule of `renderers.alpha_coverage` (cards shrunk to the opaque share of their alpha
+tile); `renderers.silhouette_metric` compares the silhouettes.
 
 In: TreeMesh (LOD0) and a tile size; out: `ImpostorAtlas` (atlas images, plane geometry, a MeshPart of <= 16
-triangles), and (H, W) bool coverage masks and IoU figures at a given screen size.
+triangles), and (H, W) bool coverage masks of it through a camera.
 """
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-import functools
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -21,28 +20,17 @@ from species.geometry import plane_sectors
 from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .alpha_coverage import pixel_mask, triangle_pixels
-from .camera import TSN_FILL, Camera, look_at, perspective_camera, view_direction
-from .maps import (DUMMY_PLANES, LEAVES, DepthRenderer, PartDepths, closed_mask, combine_parts, mask_albedo,
-                   single_sample_renderer_class, tangent_space_normals, tree_parts)
+from .camera import Camera, look_at, view_direction
+from .gl_coverage import CoverageRenderer
+from .maps import LEAVES, PartDepths, combine_parts, mask_albedo, tangent_space_normals
 
-__all__ = ["ImpostorAtlas", "CoverageRenderer", "ImpostorError", "render_impostor", "render_impostors",
-           "impostor_coverage",
-           "switch_camera", "silhouette_iou", "closed_silhouette", "SILHOUETTE_CLOSING_PX",
-           "REFERENCE_SCREEN_PX", "REFERENCE_FOV_DEG", "IMPOSTOR_PLANES", "QUALITY_AZIMUTHS", "AXIS_SHARE",
-           "SECTOR_OVERLAP", "sector_groups", "atlas_tile", "pixel_rays", "plane_coordinates"]
+__all__ = ["ImpostorAtlas", "ImpostorError", "render_impostor", "render_impostors", "impostor_coverage",
+           "IMPOSTOR_PLANES", "AXIS_SHARE", "SECTOR_OVERLAP", "sector_groups", "atlas_tile", "pixel_rays",
+           "plane_coordinates"]
 
-# Switch sizes are pixels of tree height on a reference screen this tall with this vertical field of view.
-REFERENCE_SCREEN_PX = 1080
-REFERENCE_FOV_DEG = 60.0
-# Silhouettes are compared after closing gaps of about this radius (pixels at the switch size): leaves smaller
-# than a pixel make a speckle whose exact pixels no simplification can (or should) reproduce.
-SILHOUETTE_CLOSING_PX = 2
 # Vertical planes crossed at 180 / IMPOSTOR_PLANES degrees, two triangles each (16 triangles for 8): with 8, a
 # view is never more than 11.25 deg off a plane, so no plane's silhouette shows narrower than cos 11.25 = 0.98.
 IMPOSTOR_PLANES = 8
-# Silhouettes are compared from these azimuths (degrees): 8 views 45 deg apart, each exactly between two of the
-# impostor's planes (its worst case) and off every LOD card's axis.
-QUALITY_AZIMUTHS = tuple(float(a) for a in np.arange(8) * 45.0 + 11.25)
 # Atlas tiles per row (planes fill rows of this many tiles).
 _ATLAS_COLUMNS = 4
 # The planes' square spans the tree's horizontal radius about the trunk and half height about the box centre, plus
@@ -167,239 +155,6 @@ class ImpostorAtlas:
             uvs.append([[u0, v0], [u1, v0], [u1, v1], [u0, v1]])
         return MeshPart(vertices.reshape(-1, 3), quad_faces(len(self.azimuths)), np.repeat(normal, 4, axis=0),
                         np.asarray(uvs, np.float64).reshape(-1, 2))
-
-
-class CoverageRenderer(DepthRenderer):
-    """The farm's depth renderer for coverage: a tree's silhouette in one draw, its parts' depths, and named
-    groups of faces uploaded once and drawn in any combination (the impostor's azimuth sectors).
-
-    A tree is drawn as its files' materials draw it: the bark single-sided (back faces culled, as an engine culls
-    the bark material, which is not double-sided), the leaves double-sided without culling, so leaf cards go in
-    once, not once per winding (pyrender culls every depth-only draw; for leafy trees that halves the triangles
-    drawn). Culling the bark's far walls halves its cost (sassafras's LOD0 at 512 px: 11.3 -> 5.5 ms). Whatever
-    is not closed bark (twig cards, faces pressed onto them) goes in `leaves`. Named groups (`load_groups`:
-    slices of the tree, faces pressed into an atlas) are drawn without culling. The nearest surface wins per
-    pixel; only `back_depth`, which relies on culling, is not available here.
-
-    Every pass draws primitives uploaded apart from pyrender's scene, with its program, framebuffer and
-    read-back but not its scene walk (`_direct_pass_renderer_class`): the same pixels and depths, and `coverage`
-    draws into a one-byte target without depth (144 passes of six presets at 64-512 px: 1.20 -> 0.95 s).
-    """
-
-    def __init__(self, size: int = 256):
-        super().__init__(size)
-        self._renderer._renderer = _direct_pass_renderer_class()(size, size)
-        self._cover_tree, self._cover_primitives = None, []  # `coverage`'s tree and its uploaded primitives
-        self._groups: dict[str, object] = {}  # `load_groups`' uploaded primitives by name
-        self._parts: dict[str, object] = {}  # `load`'s, by part name (`maps.tree_parts`)
-
-    @property
-    def part_names(self) -> list[str]:
-        return list(self._parts)
-
-    def load(self, tree: TreeMesh) -> None:
-        """Upload a tree's parts (`maps.tree_parts`: bark per branch order, culled; leaves drawn from both sides)
-        for `part_depths`."""
-        if tree is self._tree:
-            return
-        with self._current():
-            self._free(self._parts.values())
-            self._parts = {name: self._upload(vertices, faces, not double_sided)
-                           for name, (vertices, faces, double_sided) in tree_parts(tree).items()}
-        self._tree = tree
-
-    def _pass(self, camera: Camera, visible: set[str], reverse_depth: bool = False) -> np.ndarray:
-        """(H, W) float32 metres of the nearest surface of the visible loaded parts (a direct depth pass; the
-        farthest-surface pass is `back_depth`'s alone, refused below)."""
-        return self._depth_of([self._parts[name] for name in sorted(visible & set(self._parts))], camera)
-
-    def back_depth(self, camera: Camera, front: np.ndarray) -> np.ndarray:
-        raise ImpostorError("back_depth needs back-face culling: use renderers.maps.DepthRenderer for it")
-
-    def coverage(self, tree: TreeMesh, camera: Camera) -> np.ndarray:
-        """(H, W) bool, pixels whose centre a triangle of `tree` covers (leaf cards as opaque quads)."""
-        with self._current():
-            if tree is not self._cover_tree:
-                self._free(self._cover_primitives)
-                self._cover_primitives = [self._upload(part.vertices, part.faces, culled)
-                                          for part, culled in ((tree.bark, True), (tree.leaves, False))
-                                          if part.n_faces]
-                self._cover_tree = tree
-            return self._renderer._renderer.coverage_pass(self._cover_primitives, *self._view_projection(camera))
-
-    def load_groups(self, groups: dict[str, tuple[np.ndarray, np.ndarray, bool]]) -> None:
-        """Upload named face groups for `group_depth`, replacing those loaded before: name -> (vertices (V, 3)
-        float metres, faces (F, 3) int, double_sided); empty groups are left out."""
-        with self._current():
-            self._free(self._groups.values())
-            # Slices and pressed faces are not closed: drawn from both sides.
-            self._groups = {name: self._upload(vertices, faces, False)
-                            for name, (vertices, faces, _) in groups.items() if len(faces)}
-
-    def group_depth(self, camera: Camera, names) -> np.ndarray:
-        """(H, W) float32 metres, the nearest surface of the named groups (those loaded), 0 where none."""
-        primitives = [self._groups[name] for name in sorted(set(names) & set(self._groups))]
-        if not primitives:
-            return np.zeros((camera.height, camera.width), np.float32)
-        return self._depth_of(primitives, camera)
-
-    def _depth_of(self, primitives, camera: Camera) -> np.ndarray:
-        with self._current():
-            linear = self._renderer._renderer.depth_pass(primitives, *self._view_projection(camera))
-        return self._metric_depth(linear, camera)
-
-    def close(self) -> None:
-        self._cover_tree, self._cover_primitives, self._groups, self._parts = None, [], {}, {}  # freed with it
-        super().close()
-
-    @contextlib.contextmanager
-    def _current(self):
-        """This renderer's GL context made current for the block (as pyrender's own passes do)."""
-        platform = self._renderer._platform
-        platform.make_current()
-        try:
-            yield
-        finally:
-            platform.make_uncurrent()
-
-    def _upload(self, vertices: np.ndarray, faces: np.ndarray, culled: bool):
-        """A primitive in GL buffers (the context current), drawn by the direct passes; `culled`: back faces
-        culled (a tree's bark) or drawn too."""
-        primitive = self._pyrender.Primitive(positions=vertices, indices=faces)
-        primitive._add_to_context()
-        primitive.culled = culled
-        return primitive
-
-    @staticmethod
-    def _free(primitives) -> None:
-        for primitive in primitives:
-            primitive._remove_from_context()
-
-    def _view_projection(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
-        """The view and projection matrices pyrender's own pass would give the shaders for `camera` (its scene
-        camera posed as `_draw` poses it), so a direct pass draws the same pixels as a scene pass."""
-        self._set_camera(camera, False)
-        gl = self._renderer._renderer
-        gl.viewport_width, gl.viewport_height = camera.width, camera.height
-        return gl._get_camera_matrices(self._scene)
-
-
-@functools.cache
-def _direct_pass_renderer_class():
-    """The single-sample pyrender Renderer of `renderers.maps` with passes that draw uploaded primitives directly.
-
-    pyrender 0.1.45 (pinned) walks its scene on every pass and culls every depth-only primitive. These passes use
-    its depth-only program, framebuffer and read-back, draw a list of primitives (each marked `culled`: a tree's
-    bark, back faces culled; otherwise both windings, in one draw), and skip the walk.
-    """
-    import ctypes
-    from collections import OrderedDict
-
-    from OpenGL import GL
-    from pyrender.constants import ProgramFlags, RenderFlags
-
-    _DEPTH_ONLY = RenderFlags.DEPTH_ONLY | RenderFlags.SKIP_CULL_FACES
-    _COVER_TARGETS = 8
-    _IDENTITY = np.eye(4)  # the model matrix: trees are uploaded in world coordinates
-
-    class DirectPassRenderer(single_sample_renderer_class()):
-        def __init__(self, *args, **kwargs):
-            super().__init__(*args, **kwargs)
-            # (width, height) -> (framebuffer, renderbuffer), least recently used first
-            self._cover_targets: OrderedDict[tuple[int, int], tuple[int, int]] = OrderedDict()
-
-        def coverage_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
-            """(H, W) bool (the viewport's size), the pixels the primitives cover: into a one-byte colour target
-            with no depth buffer (a mask needs no nearest surface: llvmpipe draws maple's LOD0 at 512 px in
-            8.0 ms so, 9.4 ms with depth), the same vertex transform, so the same pixels."""
-            width, height = self.viewport_width, self.viewport_height
-            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._cover_target(width, height))
-            GL.glViewport(0, 0, width, height)
-            GL.glDisable(GL.GL_DEPTH_TEST)
-            GL.glClearColor(0.0, 0.0, 0.0, 0.0)
-            GL.glClear(GL.GL_COLOR_BUFFER_BIT)
-            self._draw_primitives(primitives, view, projection)
-            GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)  # rows of one byte a pixel, unpadded
-            red = GL.glReadPixels(0, 0, width, height, GL.GL_RED, GL.GL_UNSIGNED_BYTE)
-            GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 4)  # GL's default, which pyrender's own read-backs assume
-            GL.glEnable(GL.GL_DEPTH_TEST)
-            return np.frombuffer(red, np.uint8).reshape(height, width)[::-1] > 0  # GL rows run up
-
-        def depth_pass(self, primitives, view: np.ndarray, projection: np.ndarray) -> np.ndarray:
-            """(H, W) float32, what pyrender's depth-only pass of the primitives returns (its framebuffer, state
-            and read-back: linear depth between `maps.DUMMY_PLANES`, 0 where nothing was drawn)."""
-            self._configure_forward_pass_viewport(_DEPTH_ONLY | RenderFlags.OFFSCREEN)
-            GL.glClearColor(1.0, 1.0, 1.0, 1.0)
-            GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
-            self._draw_primitives(primitives, view, projection)
-            return self.linear_depth(self.window_depth(), *DUMMY_PLANES)
-
-        def _draw_primitives(self, primitives, view: np.ndarray, projection: np.ndarray) -> None:
-            if not primitives:
-                return
-            program = self._get_primitive_program(primitives[0], _DEPTH_ONLY, ProgramFlags.USE_MATERIAL)
-            program._bind()
-            program.set_uniform("V", view)
-            program.set_uniform("P", projection)
-            program.set_uniform("M", _IDENTITY)
-            GL.glPolygonMode(GL.GL_FRONT_AND_BACK, GL.GL_FILL)
-            for primitive in primitives:
-                primitive._bind()
-                if primitive.culled:
-                    GL.glEnable(GL.GL_CULL_FACE)
-                    GL.glCullFace(GL.GL_BACK)
-                else:
-                    GL.glDisable(GL.GL_CULL_FACE)
-                GL.glDrawElements(primitive.mode, primitive.indices.size, GL.GL_UNSIGNED_INT, ctypes.c_void_p(0))
-                primitive._unbind()
-            program._unbind()
-
-        def _cover_target(self, width: int, height: int):
-            """The framebuffer of one R8 colour renderbuffer of this size, made on first use and kept among the
-            _COVER_TARGETS most recently used (a library asset's passes come in four sizes)."""
-            targets = self._cover_targets
-            if (width, height) in targets:
-                targets.move_to_end((width, height))
-            else:
-                if len(targets) >= _COVER_TARGETS:
-                    framebuffer, renderbuffer = targets.popitem(last=False)[1]
-                    GL.glDeleteFramebuffers(1, [framebuffer])
-                    GL.glDeleteRenderbuffers(1, [renderbuffer])
-                renderbuffer = GL.glGenRenderbuffers(1)
-                GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, renderbuffer)
-                GL.glRenderbufferStorage(GL.GL_RENDERBUFFER, GL.GL_R8, width, height)
-                framebuffer = GL.glGenFramebuffers(1)
-                GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, framebuffer)
-                GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0, GL.GL_RENDERBUFFER,
-                                             renderbuffer)
-                targets[width, height] = (framebuffer, renderbuffer)
-            return targets[width, height][0]
-
-    return DirectPassRenderer
-
-
-def switch_camera(points: np.ndarray, azimuth_deg: float, screen_px: int) -> Camera:
-    """The camera through which the tree (points (N, 3) metres) appears `screen_px` pixels tall (or wide, if
-    wider) on the reference screen (REFERENCE_SCREEN_PX tall, REFERENCE_FOV_DEG vertical field of view): the
-    crop of that screen around the tree, screen_px / 0.9 pixels square, perspective, elevation 0. Small trees
-    on screen are far away, so their views come out nearly orthographic, as in a game."""
-    size = int(np.ceil(screen_px / TSN_FILL))
-    half_tan = np.tan(np.radians(REFERENCE_FOV_DEG) / 2) * size / REFERENCE_SCREEN_PX
-    fov = float(np.degrees(2 * np.arctan(half_tan)))
-    return perspective_camera(points, azimuth_deg, 0.0, size, fov_deg=fov,
-                              name=f"az{azimuth_deg:05.1f}_{screen_px}px")
-
-
-def closed_silhouette(coverage: np.ndarray, radius_px: int = SILHOUETTE_CLOSING_PX) -> np.ndarray:
-    """(H, W) bool: a coverage mask with gaps narrower than about 2 radius_px pixels closed (`maps.closed_mask`):
-    the outline a viewer sees of a crown of sub-pixel leaves."""
-    return closed_mask(coverage, radius_px)
-
-
-def silhouette_iou(a: np.ndarray, b: np.ndarray) -> float:
-    """Intersection over union of two (H, W) bool masks (1.0 when both are empty)."""
-    union = np.logical_or(a, b).sum()
-    return 1.0 if union == 0 else float(np.logical_and(a, b).sum() / union)
 
 
 def _plane_frame(tree: TreeMesh) -> tuple[np.ndarray, float, float]:

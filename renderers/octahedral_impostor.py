@@ -27,7 +27,8 @@ import numpy as np
 from species.tree_mesh import MeshPart, TreeMesh, quad_faces
 
 from .camera import Camera
-from .impostor import CoverageRenderer, ImpostorError, atlas_tile, pixel_rays, plane_coordinates
+from .gl_coverage import CoverageRenderer
+from .impostor import ImpostorError, atlas_tile, pixel_rays, plane_coordinates
 
 __all__ = ["OctahedralAtlas", "render_octahedral_impostor", "octahedral_encode", "octahedral_decode",
            "frame_directions", "frame_axes", "frame_extents", "frame_weights", "between_frame_azimuths",

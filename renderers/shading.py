@@ -30,7 +30,7 @@ def lambert_srgb(normals: np.ndarray, albedo: np.ndarray) -> np.ndarray:
 
 def shaded_view(renderer, tree, azimuth_deg: float, size: int, points: np.ndarray | None = None) -> np.ndarray:
     """(size, size, 3) uint8 sRGB: the tree from `azimuth_deg` (ELEVATION_DEG up), bark and leaves in their base
-    colours under `lambert_srgb`'s light, on white. `renderer` is a `maps.DepthRenderer`; `points` (K, 3) metres
+    colours under `lambert_srgb`'s light, on white. `renderer` is a `gl_depth.DepthRenderer`; `points` (K, 3) metres
     frame the view (default: every vertex; `framing.framing_points(tree)` gives the same camera)."""
     if points is None:
         points = np.concatenate([tree.bark.vertices, tree.leaves.vertices])

@@ -17,7 +17,8 @@ from species.tree_mesh import TreeMesh
 
 from . import sketch
 from .camera import Camera, CameraError, make_rig, rig_parts
-from .maps import DepthRenderer, combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
+from .gl_depth import DepthRenderer
+from .maps import combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
 __all__ = ["ViewRenderer", "RenderedView", "Output", "OUTPUTS", "FLOAT_OUTPUTS", "METRIC_MAPS", "DEFAULT_OUTPUTS",

@@ -64,7 +64,6 @@ _VERDICTS_SQL = "SELECT tree_id, reviewer, verdict, time_ms FROM verdicts"
 # Background value per channel of each target map (what a view shows where there is no tree), filled in where a
 # crop or a jitter reaches past the rendered image.
 TARGET_BACKGROUND = {"silhouette_envelope": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
-_PIX2PIX_TASK = {"pix2pix-silhouette": "silhouette", "pix2pix-trunk": "trunk"}
 
 # Augmentation ranges (module docstring).
 JITTER_ROTATION_DEG = 3.0
@@ -491,7 +490,7 @@ class TaskDataset(torch.utils.data.Dataset):
                 cut[output] = apply_crop(_hwc(self._item(s, output, row)[output]), prepared.crop,
                                          task.input_size, TARGET_BACKGROUND[output])
             cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
-            _, target, mask = targets_from_views(_PIX2PIX_TASK[task.name], cut)
+            _, target, mask = targets_from_views(task, cut)
             out["target"], out["mask"] = target.numpy(), mask.numpy()
         else:
             species, params_json = source.trees[tree_id]

@@ -14,23 +14,26 @@
 """
 from __future__ import annotations
 
+import hashlib
 import json
+import os
+import shutil
 import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Sequence
 
 import numpy as np
 
 from species.errors import TreefarmError
 
-from .data import Split
+from .data import Split, TaskDataset
 from .onnx_runtime import OnnxModel
-from .preprocess import prepare, preprocess
-from .registry import BASELINE_SUFFIX, CHAMPION, Registry, RegistryError
+from .preprocess import KINDS, prepare, preprocess
+from .registry import BASELINE_SUFFIX, Registry, RegistryError, open_registry
 from .sketchnet_codec import CODEC_VERSION, ParameterCodec
-from .tasks import TASKS, get_task
+from .tasks import Task, get_task
 
 __all__ = ["register_result", "load", "Predictor", "retrain", "RetrainOutcome", "DEFAULT_MODELS",
            "ModelFilesError", "model_files"]
@@ -72,7 +75,7 @@ def register_result(registry: Registry, result, *, code_version: str = "unknown"
                     datasets: list[dict] | None = None, extra_blobs: dict | None = None):
     """Register `result` as a new version of its task's model (see the module docstring); `promote` None promotes
     it when the model has no champion yet. Returns the ModelVersion."""
-    from .training import dataset_digests
+    from .training import dataset_digests  # torch's training loop: the predictor (ONNX Runtime) loads without it
 
     task = result.network.task
     with tempfile.TemporaryDirectory() as folder:
@@ -133,13 +136,11 @@ class Predictor:
         return f"Predictor({self.task}, {self.source})"
 
 
-def _expected_signature(task: str, size: int, codec: ParameterCodec | None) -> tuple[dict, dict]:
-    from .pix2pix import get_task as pix2pix_task
-
+def _expected_signature(task: Task, size: int, codec: ParameterCodec | None) -> tuple[dict, dict]:
+    inputs = {"sketch": (None, KINDS[task.input_kind], size, size)}
     if codec is not None:
-        return {"sketch": (None, 1, size, size)}, {name: (None, n) for name, n in codec.output_sizes.items()}
-    spec = pix2pix_task(task.removeprefix("pix2pix-"))
-    return {"sketch": (None, spec.in_channels, size, size)}, {"depth": (None, spec.out_channels, size, size)}
+        return inputs, {name: (None, n) for name, n in codec.output_sizes.items()}
+    return inputs, {"depth": (None, task.out_channels, size, size)}
 
 
 def predictor_from_folder(folder: str | Path, task: str | None = None, source: str | None = None) -> Predictor:
@@ -151,8 +152,9 @@ def predictor_from_folder(folder: str | Path, task: str | None = None, source: s
     manifest = json.loads(manifest_path.read_text())
     if task is not None and manifest["task"] != task:
         raise ModelFilesError(f"{folder} holds a {manifest['task']} model, not {task}")
+    spec = get_task(manifest["task"])
     codec = None
-    if manifest["task"] == "sketchnet":
+    if spec.network == "sketchnet":
         if manifest.get("codec_version") != CODEC_VERSION:
             raise ModelFilesError(f"{folder}: the model's codec is {manifest.get('codec_version')!r}, this code "
                                   f"reads {CODEC_VERSION!r}; retrain it (farm train sketchnet)")
@@ -161,7 +163,7 @@ def predictor_from_folder(folder: str | Path, task: str | None = None, source: s
             raise ModelFilesError(f"{folder}: codec.json is missing beside the TreeSketchNet model")
         codec = ParameterCodec.from_dict(json.loads(codec_path.read_text()))
     size = int(manifest["input_size"])
-    inputs, outputs = _expected_signature(manifest["task"], size, codec)
+    inputs, outputs = _expected_signature(spec, size, codec)
     model = OnnxModel(folder / manifest["onnx"], inputs, outputs)
     return Predictor(manifest["task"], folder, model, size, manifest["input_kind"], codec, source or str(folder))
 
@@ -176,8 +178,6 @@ def load(name: str, models: str | Path | Registry | None = None, version: int | 
             raise ModelFilesError(f"no default {task.name} model is shipped in {DEFAULT_MODELS}; train one "
                                   f"(farm train {task.name}) and pass --models")
         return predictor_from_folder(folder, task.name, source=f"shipped default {folder}")
-    from .registry import open_registry
-
     registry = models if isinstance(models, Registry) else open_registry(models)
     if version is None:
         chosen = registry.champion(task.model_name) or registry.latest(task.model_name)
@@ -192,17 +192,12 @@ def load(name: str, models: str | Path | Registry | None = None, version: int | 
 def _cached_download(registry: Registry, found) -> Path:
     """The version's files in the local cache (a run's files never change, so one download serves every later
     load): $XDG_CACHE_HOME/treefarm/models/<registry digest>/NAME-vN-<run>, default under ~/.cache."""
-    import hashlib
-    import os
-
     root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "treefarm" / "models"
     name, version = found.name, found.version
     registry_key = hashlib.sha256(registry.uri.encode()).hexdigest()[:12]
     folder = root / registry_key / f"{name}-v{version}-{found.run_id[:12]}"
     if not (folder / _MANIFEST).exists():
         if folder.exists():  # an older, partial copy: downloads land whole, so this one predates that
-            import shutil
-
             shutil.rmtree(folder)
         registry.download(name, version, folder)
     return folder
@@ -225,12 +220,13 @@ class RetrainOutcome:
 
 def _score_folder(folder: Path, task: str, batches: Sequence[dict]) -> dict[str, float]:
     """Held-out metrics of the model files in `folder` on evaluation batches, through its torch weights."""
-    import torch
+    import torch  # the torch networks: the predictor (ONNX Runtime) loads without them
 
     from .networks import TrainSettings, network_for
 
     manifest = json.loads((folder / _MANIFEST).read_text())
-    codec = ParameterCodec.from_dict(json.loads((folder / "codec.json").read_text())) if task == "sketchnet" else None
+    codec = ParameterCodec.from_dict(json.loads((folder / "codec.json").read_text())) \
+        if get_task(task).network == "sketchnet" else None
     network = network_for(task, TrainSettings.from_dict(manifest["settings"]), codec).build()
     network.load_state_dict(torch.load(folder / "weights.pt", map_location="cpu", weights_only=True))
     return network.metrics(batches)
@@ -241,6 +237,7 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
             progress: bool = False, report_dir: str | Path | None = None) -> RetrainOutcome:
     """Train a challenger and promote it only if it beats the champion on the champion's held-out split (see the
     module docstring). The report goes to `report_dir` (default: the run folder) as retrain-report.md/.json."""
+    # torch's networks and training loop on Ray Train: the predictor (ONNX Runtime) loads without them
     from .networks import TrainSettings
     from .training import evaluation_batches, train
 
@@ -251,7 +248,7 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
     if champion is not None:
         champion_folder = registry.download(name, champion.version)
         frozen = Split.from_json(json.dumps(registry.load_json(name, champion.version, "split")))
-        if spec.name == "sketchnet":
+        if spec.network == "sketchnet":
             codec = ParameterCodec.from_dict(json.loads((champion_folder / "codec.json").read_text()))
         warm = champion_folder / "weights.pt"
         champion_settings = json.loads((champion_folder / _MANIFEST).read_text())["settings"]
@@ -259,7 +256,7 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
         default = DEFAULT_MODELS / spec.name
         warm = default / "weights.pt"
         champion_settings = json.loads((default / _MANIFEST).read_text())["settings"]
-        if spec.name == "sketchnet":
+        if spec.network == "sketchnet":
             codec = ParameterCodec.from_dict(json.loads((default / "codec.json").read_text()))
     if settings is None:
         settings = TrainSettings.from_dict(champion_settings) if champion_settings else TrainSettings()
@@ -272,8 +269,6 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
                    frozen_split=frozen, warm_start=warm, codec=codec, progress=progress)
     champion_metrics = None
     if champion_folder is not None:
-        from .data import TaskDataset
-
         test = TaskDataset(result.data, result.split, "test")
         champion_metrics = _score_folder(champion_folder, spec.name, evaluation_batches(test, codec))
     network = result.network

@@ -7,6 +7,7 @@ numpy arrays as the loaders give them (`input` (B, C, S, S) float32, then the ta
 """
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -44,8 +45,8 @@ class SettingsError(TreefarmError):
 class TrainSettings:
     """One training run's settings (JSON-able; stored with the run and the model).
 
-    width : TreeSketchNet's width multiplier (1.0 = B0) or the U-Net's base channels (16 by default: both
-    networks together run in about 40 ms per sketch on one core, bench_inference.py). depth : TreeSketchNet's
+    width : TreeSketchNet's width multiplier (1.0 = B0) or the U-Net's base channels (16 by default: small
+    enough for both networks to run per sketch on one core, benchmarks/bench_inference.py). depth : TreeSketchNet's
     depth multiplier. learning_rate : None = the network's default (TreeSketchNet 1e-3: the paper's 1e-5 over
     2,000 epochs does not fit a CPU budget; pix2pix 2e-4, beta1 0.5). time_budget_s : stop after this much
     training time, at the end of the batch that crosses it (the benchmark's fixed budget). schedule : the
@@ -122,7 +123,8 @@ class TaskNetwork:
 
     @property
     def family(self) -> str:
-        return "sketchnet" if self.task.name == "sketchnet" else "pix2pix"
+        """The network family (`trainers.tasks.NETWORKS`) the task names."""
+        return self.task.network
 
     def better(self, challenger: Mapping[str, float], champion: Mapping[str, float]) -> bool:
         """Whether `challenger`'s primary metric beats `champion`'s (strictly)."""
@@ -196,8 +198,6 @@ class SketchNetwork(TaskNetwork):
 
     def export(self, folder: Path) -> dict[str, Path]:
         """ONNX (`sketchnet.onnx`), torch weights (`weights.pt`) and the codec (`codec.json`)."""
-        import json
-
         folder = Path(folder)
         onnx = sketchnet.export_onnx(self.modules["model"], folder / "sketchnet.onnx",
                                      image_size=self.task.input_size)
@@ -219,15 +219,14 @@ class Pix2PixNetwork(TaskNetwork):
     def __init__(self, task: Task, settings: TrainSettings):
         super().__init__(task, settings, primary="depth_error", higher_is_better=False,
                          curve_metrics=("depth_error",))
-        self.spec = pix2pix.get_task(task.name.removeprefix("pix2pix-"))
 
     def build(self) -> "Pix2PixNetwork":
         generator = torch.Generator().manual_seed(self.settings.seed)
         width = int(round(self.width()))
         # One generator initialises both networks, then draws the U-Net's dropout masks.
-        self.modules = {"generator": self.spec.generator(width, generator=generator),
-                        "discriminator": self.spec.discriminator(self.settings.discriminator, width,
-                                                                 self.task.input_size, generator)}
+        self.modules = {"generator": pix2pix.task_generator(self.task, width, generator=generator),
+                        "discriminator": pix2pix.task_discriminator(self.task, self.settings.discriminator, width,
+                                                                    self.task.input_size, generator)}
         self.noise = generator
         return self
 
@@ -241,7 +240,7 @@ class Pix2PixNetwork(TaskNetwork):
         losses = pix2pix.pix2pix_step(self.modules["generator"], self.modules["discriminator"],
                                       optimizers["generator"], optimizers["discriminator"],
                                       tuple(torch.as_tensor(batch[k]) for k in ("input", "target", "mask")),
-                                      dense_channels=self.spec.dense_channels)
+                                      dense_channels=self.task.dense_channels)
         return {"loss": losses["loss_g"], **losses}
 
     @torch.no_grad()
@@ -253,7 +252,7 @@ class Pix2PixNetwork(TaskNetwork):
     def metrics(self, batches: Sequence[Mapping[str, np.ndarray]]) -> dict[str, float]:
         predicted = torch.cat([self.predict(b["input"]) for b in batches])
         target, mask = _joined(batches, "target"), _joined(batches, "mask")
-        return {"depth_error": pix2pix.masked_depth_error(predicted, target, mask, self.spec.depth_channels)}
+        return {"depth_error": pix2pix.masked_depth_error(predicted, target, mask, self.task.depth_channels)}
 
     def baseline_metrics(self, batches: Sequence[Mapping[str, np.ndarray]],
                          mean_depth: np.ndarray | None = None) -> dict[str, float]:
@@ -263,7 +262,7 @@ class Pix2PixNetwork(TaskNetwork):
         if mean_depth is None:
             mean_depth = self.mean_depth(batches)
         predicted = torch.as_tensor(mean_depth, dtype=torch.float32)[None, :, None, None].expand_as(target)
-        return {"depth_error": pix2pix.masked_depth_error(predicted, target, mask, self.spec.depth_channels)}
+        return {"depth_error": pix2pix.masked_depth_error(predicted, target, mask, self.task.depth_channels)}
 
     @staticmethod
     def mean_depth(batches: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
@@ -275,7 +274,8 @@ class Pix2PixNetwork(TaskNetwork):
     def export(self, folder: Path) -> dict[str, Path]:
         """ONNX of the generator (`TASK.onnx`) and the torch weights of both networks (`weights.pt`)."""
         folder = Path(folder)
-        example = torch.zeros(1, self.spec.in_channels, self.task.input_size, self.task.input_size)
+        in_channels, _ = pix2pix.task_channels(self.task)
+        example = torch.zeros(1, in_channels, self.task.input_size, self.task.input_size)
         name = f"{self.task.name}.onnx"
         onnx = export_onnx(self.modules["generator"], example, folder / name, ["sketch"], ["depth"])
         weights = folder / "weights.pt"
@@ -288,9 +288,9 @@ def _joined(batches, key: str) -> torch.Tensor:
 
 
 def network_for(task: str | Task, settings: TrainSettings, codec: ParameterCodec | None = None) -> TaskNetwork:
-    """The (unbuilt) network of `task`; TreeSketchNet needs the parameter codec."""
+    """The (unbuilt) network of `task` (its family, `Task.network`); TreeSketchNet needs the parameter codec."""
     task = get_task(task)
-    if task.name == "sketchnet":
+    if task.network == "sketchnet":
         if codec is None:
             raise SettingsError("TreeSketchNet needs its parameter codec (ParameterCodec.fit on the training "
                                 "dictionaries)")

@@ -1,6 +1,8 @@
 """pix2pix for seed 000's two sketch-to-depth cGANs: U-Net generator, input-conditioned discriminators, losses.
 
 In: sketch tensors (B, C, H, W) float32 in [0, 1]; out: depth maps (B, C, H, W) in [0, 1], losses, one train step.
+The tasks (which outputs, how many channels, which are depth, dense or the mask) are `trainers.tasks.TASKS`
+entries with network "pix2pix"; `task_generator`, `task_discriminator` and `targets_from_views` read them.
 
 Choices (digest 1.9, where the thesis is vague): the U-Net-256 of pix2pix (8 levels of 4x4 stride-2 convolutions,
 batch norm, LeakyReLU 0.2 down, ReLU up, dropout 0.5 in the 3 innermost decoder blocks, N(0, 0.02) weights); the
@@ -12,7 +14,6 @@ must be right on the background too (the silhouette's mask, which `DepthMapCrown
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -22,11 +23,14 @@ from torch.nn import functional as F
 
 from species.errors import TreefarmError
 
+from .preprocess import KINDS
+from .tasks import TASKS, Task, get_task
+
 __all__ = ["Pix2PixError", "UNetGenerator", "PatchDiscriminator", "GlobalDiscriminator", "DISCRIMINATORS",
            "make_discriminator", "init_weights", "GeneratorLoss", "masked_l1", "generator_loss",
-           "discriminator_loss", "make_optimizer", "pix2pix_step", "masked_depth_error", "Pix2PixTask",
-           "PIX2PIX_TASKS", "get_task", "targets_from_views", "sketch_to_input", "L1_WEIGHT", "LEARNING_RATE",
-           "BETAS", "NORMS"]
+           "discriminator_loss", "make_optimizer", "pix2pix_step", "masked_depth_error", "pix2pix_task",
+           "task_channels", "task_generator", "task_discriminator", "targets_from_views", "sketch_to_input",
+           "L1_WEIGHT", "LEARNING_RATE", "BETAS", "NORMS"]
 
 L1_WEIGHT = 100.0
 LEARNING_RATE = 2e-4
@@ -348,62 +352,35 @@ def masked_depth_error(prediction, target, mask, channels: Sequence[int] | None 
     return float((weights * (p[:, chosen] - t[:, chosen]).abs()).sum() / total)
 
 
-@dataclass(frozen=True)
-class Pix2PixTask:
-    """One of seed 000's two cGAN tasks, as data: which dataset outputs it reads and how its channels are used.
-
-    input_output, target_output : views-table output names (`farm.dataset.torch_dataset.ViewsDataset` items).
-    channel_names : target channels in order. depth_channels : those `masked_depth_error` scores.
-    dense_channels : those supervised on every pixel (others on the foreground only).
-    mask_channel : the target channel that is the foreground mask (>= 0.5), or None: foreground where the
-                   first channel is below 1 (the far plane, the background of a depth01 map).
-    data_spec : the shipped job spec that makes this task's data (`trainers/specs/<data_spec>.yaml`).
-    """
-
-    name: str
-    input_output: str
-    target_output: str
-    in_channels: int
-    out_channels: int
-    channel_names: tuple[str, ...]
-    depth_channels: tuple[int, ...]
-    dense_channels: tuple[int, ...]
-    mask_channel: int | None
-    data_spec: str
-
-    def generator(self, width: int = 64, **kwargs) -> UNetGenerator:
-        """This task's U-Net (channels fixed by the task; width and the other settings passed on)."""
-        return UNetGenerator(self.in_channels, self.out_channels, width, **kwargs)
-
-    def discriminator(self, kind: str = "patch", width: int = 64, image_size: int = 256,
-                      generator: torch.Generator | None = None) -> nn.Module:
-        return make_discriminator(kind, self.in_channels, self.out_channels, width, image_size, generator)
+def pix2pix_task(task: str | Task) -> Task:
+    """A pix2pix task of `trainers.tasks.TASKS` by name, or the task itself; a task another network learns raises
+    Pix2PixError (an unknown name, `get_task`'s TrainingDataError)."""
+    task = get_task(task)
+    if task.network != "pix2pix":
+        raise Pix2PixError(f"task {task.name!r} is learnt by {task.network}, not pix2pix: allowed "
+                           f"{', '.join(name for name, t in TASKS.items() if t.network == 'pix2pix')}")
+    return task
 
 
-PIX2PIX_TASKS: dict[str, Pix2PixTask] = {
-    # Edge sketch -> the renderers' "silhouette_envelope": the closed crown's smooth front depth01 (1 background),
-    # gap and mask (what DepthMapCrown.from_silhouette reads; thresholded at 0.5, so learnt everywhere). The per-leaf
-    # "silhouette" is not in an edge sketch: trained on it, the network got 9 % below the mean-depth baseline, and
-    # a blur oracle of the true depth at 4 px only 33 % (docs/training.md).
-    "silhouette": Pix2PixTask("silhouette", "sketch_edges", "silhouette_envelope", 1, 3, ("front", "gap", "mask"),
-                              depth_channels=(0, 1), dense_channels=(2,), mask_channel=2,
-                              data_spec="pix2pix-silhouette"),
-    # Colour strokes -> trunk depth01 (1 = no stroke); foreground = under a stroke.
-    "trunk": Pix2PixTask("trunk", "trunk_strokes", "trunk_depth", 3, 1, ("depth",),
-                         depth_channels=(0,), dense_channels=(), mask_channel=None, data_spec="pix2pix-trunk"),
-}
+def task_channels(task: str | Task) -> tuple[int, int]:
+    """(input channels, target channels) of a pix2pix task's networks."""
+    task = pix2pix_task(task)
+    return KINDS[task.input_kind], task.out_channels
+
+
+def task_generator(task: str | Task, width: int = 64, **kwargs) -> UNetGenerator:
+    """The task's U-Net (channels fixed by the task; width and the other settings passed on)."""
+    return UNetGenerator(*task_channels(task), width, **kwargs)
+
+
+def task_discriminator(task: str | Task, kind: str = "patch", width: int = 64, image_size: int = 256,
+                       generator: torch.Generator | None = None) -> nn.Module:
+    """The task's discriminator by kind ("patch" or "global"), for its input and target channels."""
+    return make_discriminator(kind, *task_channels(task), width, image_size, generator)
+
 
 # depth01 maps are stored as 16-bit PNG on [0, 1]: background is exactly 65535; anything below is a surface.
 _FAR_PLANE = 1.0 - 0.5 / 65535
-
-
-def get_task(task: str | Pix2PixTask) -> Pix2PixTask:
-    """A task by name ("silhouette", "trunk") or the task itself."""
-    if isinstance(task, Pix2PixTask):
-        return task
-    if task not in PIX2PIX_TASKS:
-        raise Pix2PixError(f"pix2pix task {task!r} is unknown: allowed {', '.join(PIX2PIX_TASKS)}")
-    return PIX2PIX_TASKS[task]
 
 
 def _as_chw(name: str, image, channels: int) -> torch.Tensor:
@@ -425,25 +402,28 @@ def sketch_to_input(image, channels: int) -> torch.Tensor:
     return 1.0 - image.to(torch.float32) / 255.0
 
 
-def targets_from_views(task: str | Pix2PixTask, item: Mapping) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def targets_from_views(task: str | Task, item: Mapping) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(input (C_in, H, W) float32 in [0, 1], target (C_out, H, W) float32 in [0, 1], mask (1, H, W) float32 0/1)
-    from one decoded view: a `ViewsDataset` item (or any mapping of output name -> (C, H, W) tensor or array).
+    from one decoded view of a pix2pix task (a `trainers.tasks.Task` or its name): a `ViewsDataset` item (or any
+    mapping of output name -> (C, H, W) tensor or array).
 
-    silhouette: sketch_edges (uint8, black on white) -> silhouette_envelope (front, gap, mask); mask = its mask.
-    trunk: trunk_strokes (uint8 RGB on white) -> trunk_depth; mask = trunk_depth < 1.
+    pix2pix-silhouette: sketch_edges (uint8, black on white) -> silhouette_envelope (front, gap, mask); mask = its
+    mask. pix2pix-trunk: trunk_strokes (uint8 RGB on white) -> trunk_depth; mask = trunk_depth < 1.
     """
-    task = get_task(task)
-    missing = [n for n in (task.input_output, task.target_output) if n not in item]
+    task = pix2pix_task(task)
+    in_channels, out_channels = task_channels(task)
+    source, target_name = task.inputs[0], task.targets[0]
+    missing = [n for n in (source, target_name) if n not in item]
     if missing:
         raise Pix2PixError(f"the {task.name} task needs output {missing[0]!r}, which this view lacks: make the "
-                           f"data with trainers/specs/{task.data_spec}.yaml")
-    x = sketch_to_input(item[task.input_output], task.in_channels)
-    target = _as_chw(task.target_output, item[task.target_output], task.out_channels)
+                           f"data with trainers/specs/{task.spec_name}.yaml")
+    x = sketch_to_input(item[source], in_channels)
+    target = _as_chw(target_name, item[target_name], out_channels)
     if not torch.is_floating_point(target):
-        raise Pix2PixError(f"output {task.target_output!r} has dtype {target.dtype}: allowed float in [0, 1]")
+        raise Pix2PixError(f"output {target_name!r} has dtype {target.dtype}: allowed float in [0, 1]")
     target = target.to(torch.float32)
     if x.shape[1:] != target.shape[1:]:
-        raise Pix2PixError(f"{task.input_output} is {tuple(x.shape[1:])} px but {task.target_output} is "
+        raise Pix2PixError(f"{source} is {tuple(x.shape[1:])} px but {target_name} is "
                            f"{tuple(target.shape[1:])} px: they must match")
     if task.mask_channel is None:
         mask = target[:1] < _FAR_PLANE

@@ -1,20 +1,28 @@
-"""The three training tasks as data: which dataset outputs each reads, which job spec makes them, which model it trains.
+"""The training tasks, one registry (`TASKS`): what each network reads and learns, which job spec makes its data.
 
-In: a task name (`TASKS`) and dataset folders; out: `Task` records, dataset checks that name the missing output and
-the spec that makes it (`TrainingDataError`), and the shipped job specs as YAML text (`print_data_spec`).
+In: a task name and dataset folders; out: `Task` records (inputs, targets, the network family that learns them and,
+for pix2pix, how the target's channels are used), dataset checks that name the missing output and the spec that
+makes it (`TrainingDataError`), and the shipped job specs as YAML text (`print_data_spec`). Everything that lists
+or looks up tasks (`farm train`, the training loop, the model registry, `benchmarks/bench_train.py`) reads
+`TASKS`, so a new task is one entry here.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Mapping
 
 from farm.dataset import DatasetError, read_manifest
 from farm.dataset.storage import Location
 from species.errors import TreefarmError
 
-__all__ = ["Task", "TASKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task", "print_data_spec"]
+__all__ = ["Task", "TASKS", "NETWORKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task",
+           "print_data_spec"]
 
 SPECS_DIR = Path(__file__).resolve().parent / "specs"
+# The network families `trainers.networks.network_for` builds: TreeSketchNet (a sketch to a parameter dictionary
+# and its species) and pix2pix (a sketch to depth maps).
+NETWORKS = ("sketchnet", "pix2pix")
 
 
 class TrainingDataError(TreefarmError):
@@ -27,7 +35,7 @@ class MissingOutputError(TrainingDataError):
 
 @dataclass(frozen=True)
 class Task:
-    """One network's training data.
+    """One network's training data, and which network learns it.
 
     name         : the task name (`farm train NAME`).
     inputs       : views-table outputs the network reads, first = its main input style.
@@ -38,7 +46,16 @@ class Task:
     input_size   : the network's input width and height, pixels.
     spec_name    : the shipped job spec `trainers/specs/<spec_name>.yaml` that makes this task's data.
     model_name   : the model's name in the registry.
+    network      : the network family that learns it, one of `NETWORKS`.
     rigs         : view rigs (`render.rig` without ":jitter") the data must come from; empty: any rig.
+    recipe       : the training settings (`trainers.networks.TrainSettings` keys) of the shipped default model in
+                   `models/NAME/`: `make models` and bench_train's budgeted run train with them.
+    pix2pix only, about the target (`targets[0]`):
+    channel_names  : its channels in order.
+    depth_channels : those `trainers.pix2pix.masked_depth_error` scores.
+    dense_channels : those supervised on every pixel (the others on the foreground only).
+    mask_channel   : the channel that is the foreground mask (>= 0.5), or None: foreground where the first
+                     channel is below 1 (the far plane, the background of a depth01 map).
     """
 
     name: str
@@ -49,7 +66,26 @@ class Task:
     input_size: int
     spec_name: str
     model_name: str
+    network: str
     rigs: tuple[str, ...] = ()
+    recipe: Mapping[str, Any] = field(default_factory=dict, hash=False)
+    channel_names: tuple[str, ...] = ()
+    depth_channels: tuple[int, ...] = ()
+    dense_channels: tuple[int, ...] = ()
+    mask_channel: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.network not in NETWORKS:
+            raise TrainingDataError(f"task {self.name!r}: network {self.network!r} is unknown: allowed "
+                                    f"{', '.join(NETWORKS)}")
+        if self.network == "pix2pix" and not (self.targets and self.channel_names):
+            raise TrainingDataError(f"task {self.name!r}: a pix2pix task names its target output and the "
+                                    f"target's channels")
+
+    @property
+    def out_channels(self) -> int:
+        """Channels of a pix2pix task's target (0 for sketchnet, whose targets are the trees table's)."""
+        return len(self.channel_names)
 
     @property
     def spec_path(self) -> Path:
@@ -100,17 +136,31 @@ class Task:
         return manifest
 
 
+# `recipe`: fixed epochs and seed 0 with no time limit, so `make models` takes the same steps on any machine; why
+# these widths and schedules fit a CPU budget is in docs/training.md ("Default models").
 TASKS: dict[str, Task] = {
     # TreeSketchNet (digest 4.2-4.3): a sketch to a Weber-Penn dictionary and its species, 224 px.
     "sketchnet": Task("sketchnet", inputs=("sketch_tsn",), styles=("sketch_hand",), targets=(),
-                      input_kind="sketch", input_size=224, spec_name="sketchnet", model_name="sketchnet"),
+                      input_kind="sketch", input_size=224, spec_name="sketchnet", model_name="sketchnet",
+                      network="sketchnet",
+                      recipe={"width": 0.5, "depth": 0.5, "epochs": 4, "schedule": "cosine"}),
     # Seed 000's cGANs (digest 1.8-1.9): orthographic pairs at 256 px.
+    # Edge sketch -> the renderers' "silhouette_envelope": the closed crown's smooth front depth01 (1 background),
+    # gap and mask (what DepthMapCrown.from_silhouette reads; thresholded at 0.5, so learnt everywhere). The
+    # per-leaf "silhouette" is not in an edge sketch (docs/training.md).
     "pix2pix-silhouette": Task("pix2pix-silhouette", inputs=("sketch_edges",), styles=(),
-                               targets=("silhouette_envelope",), input_kind="sketch", input_size=256, spec_name="pix2pix-silhouette",
-                               model_name="pix2pix-silhouette", rigs=("two-view",)),
+                               targets=("silhouette_envelope",), input_kind="sketch", input_size=256,
+                               spec_name="pix2pix-silhouette", model_name="pix2pix-silhouette", network="pix2pix",
+                               rigs=("two-view",),
+                               recipe={"width": 8, "batch_size": 4, "epochs": 5, "schedule": "cosine"},
+                               channel_names=("front", "gap", "mask"), depth_channels=(0, 1), dense_channels=(2,),
+                               mask_channel=2),
+    # Colour strokes -> trunk depth01 (1 = no stroke); foreground = under a stroke.
     "pix2pix-trunk": Task("pix2pix-trunk", inputs=("trunk_strokes",), styles=(), targets=("trunk_depth",),
                           input_kind="strokes", input_size=256, spec_name="pix2pix-trunk",
-                          model_name="pix2pix-trunk", rigs=("two-view",)),
+                          model_name="pix2pix-trunk", network="pix2pix", rigs=("two-view",),
+                          recipe={"width": 16, "batch_size": 16, "epochs": 1, "schedule": "cosine"},
+                          channel_names=("depth",), depth_channels=(0,)),
 }
 
 

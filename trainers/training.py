@@ -32,13 +32,14 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
+from farm.dataset import read_manifest
 from species.errors import TreefarmError
 
 from .curves import curves_png, read_metrics_csv, write_metrics_csv
 from .data import Split, TaskDataset, TrainingData, open_data
 from .networks import SettingsError, TaskNetwork, TrainSettings, network_for, schedule_factor
 from .sketchnet_codec import ParameterCodec
-from .tasks import get_task
+from .tasks import Task, get_task
 
 __all__ = ["train", "TrainResult", "TrainingError", "dataset_digests", "evaluation_batches", "RUN_FILES"]
 
@@ -130,7 +131,7 @@ def evaluation_batches(dataset: TaskDataset, codec: ParameterCodec | None,
 # ---------------------------------------------------------------------------------------------- worker loop
 def _worker_loop(config: dict) -> None:
     """Ray Train's per-worker loop (see the module docstring)."""
-    import ray.train
+    import ray.train  # Ray Train: imported where training runs, so the rest of trainers loads without Ray
     import ray.train.torch
 
     torch.set_num_threads(max(1, int(config["threads_per_worker"])))
@@ -192,7 +193,8 @@ def _worker_loop(config: dict) -> None:
                             "optimizers": {n: o.state_dict() for n, o in optimizers.items()},
                             "noise": network.noise.get_state(), "epoch": epoch, "step": step,
                             "seconds": row["seconds"],
-                            "settings": settings.to_dict(), "task": config["task"]}, Path(folder) / _CHECKPOINT_FILE)
+                            "settings": settings.to_dict(), "task": config["task"].name},
+                           Path(folder) / _CHECKPOINT_FILE)
                 saved = ray.train.Checkpoint.from_directory(folder)
             ray.train.report({k: v for k, v in row.items()}, checkpoint=saved)
         if progress is not None and rank == 0:
@@ -235,8 +237,6 @@ def _append_metrics(run_dir: Path, row: dict, baseline: dict, shown: Sequence[st
 # ---------------------------------------------------------------------------------------------- driver
 def dataset_digests(data: TrainingData) -> list[dict]:
     """Per dataset folder: its path, spec digest, code version and part checksums (from its manifest)."""
-    from farm.dataset import read_manifest
-
     out = []
     for source in data.sources:
         manifest = read_manifest(source.path)
@@ -264,7 +264,7 @@ def _check_run_folder(run_dir: Path, task: str, settings: TrainSettings, split: 
     return rows[-1]["epoch"] if rows else None
 
 
-def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | None = None,
+def train(task: str | Task, data: str | Sequence[str], *, settings: TrainSettings | None = None,
           run_dir: str | Path, workers: int = 1, gpus: int = 0, frozen_split: Split | None = None,
           warm_start: str | Path | None = None, codec: ParameterCodec | None = None, progress: bool = False,
           threads_per_worker: int | None = None, crash_after_epoch: int | None = None) -> TrainResult:
@@ -274,7 +274,7 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
     warm_start : torch weights (`weights.pt` of a model) to start from. codec : TreeSketchNet's codec to keep
     (a retrain keeps the champion's normalisation); fitted on the training dictionaries otherwise.
     threads_per_worker : torch threads in each worker (default: the cluster's CPUs shared among the workers)."""
-    import ray
+    import ray  # Ray: imported where training runs, so the rest of trainers loads without it
     import ray.data
     import ray.train
     from ray.train.torch import TorchTrainer
@@ -296,7 +296,7 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
     if len(val_set) == 0 or len(test_set) == 0:
         raise TrainingError(f"the split leaves {len(val_set)} validation and {len(test_set)} test views: give "
                             f"more trees (at least about 20) so every part has some")
-    if task_spec.name == "sketchnet" and codec is None:
+    if task_spec.network == "sketchnet" and codec is None:
         trees = {key: training_data.params_of(key) for key in split.parts["train"]}
         codec = ParameterCodec.fit(list(trees.values()))
     run_dir = Path(run_dir).resolve()
@@ -331,7 +331,8 @@ def train(task: str, data: str | Sequence[str], *, settings: TrainSettings | Non
         .map_batches(lambda batch: _plain_rows(train_set, batch["data"], codec), batch_size=32,
                      batch_format="numpy", num_cpus=_DATA_CPUS / 2)
     queue = _progress_queue() if progress else None
-    config = {"task": task_spec.name, "settings": settings.to_dict(),
+    # The task itself, not its name: a worker builds its network from this record, whatever its own TASKS holds.
+    config = {"task": task_spec, "settings": settings.to_dict(),
               "codec": None if codec is None else codec.to_dict(), "train_dataset": train_set,
               "val_batches": val_batches, "baseline": baseline_val, "run_dir": str(run_dir),
               "n_train": len(train_set), "shuffle_buffer": max(64, min(len(train_set), 4096)),

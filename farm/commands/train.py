@@ -5,7 +5,7 @@
   farm retrain TASK --data DIR [DIR...] [--models URI] [--report DIR]
   farm models list|show NAME [--models URI]
 
-TASK is sketchnet, pix2pix-silhouette or pix2pix-trunk. --data takes dataset folders, or folders whose
+TASK is a task of trainers.tasks.TASKS. --data takes dataset folders, or folders whose
 subfolders are datasets (so a retrain picks up the folders added since). --models is the model registry: a folder
 (default `registry/`, an embedded MLflow SQLite store) or an MLflow tracking URI. A training run lives in
 --run-dir (default `runs/TASK-<digest of data and settings>`): the same command after a crash resumes from its
@@ -23,29 +23,36 @@ from pathlib import Path
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
 from farm.table import format_table
+from trainers.tasks import TASKS, get_task, print_data_spec
 
-# What a command runs is imported inside its functions: `farm --help` loads every command module, and trainers
-# imports torch and MLflow (start-up time).
+# What a command runs is imported inside its functions: `farm --help` loads every command module, and training,
+# the models and the registry import torch and MLflow (start-up time). The task registry is cheap.
 
-TASK_NAMES = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
+
+def _description() -> str:
+    """The module docstring with the registry's task names where it says where they come from."""
+    names = list(TASKS)
+    listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+    return __doc__.replace("a task of trainers.tasks.TASKS", listed)
 
 
 def register(subparsers) -> None:
+    description = _description()
     train = subparsers.add_parser("train", help="train a network on datasets, register it (MLflow)",
-                                  description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                  description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     _task_arguments(train)
     train.add_argument("--print-data-spec", action="store_true",
                        help="print the job spec that makes this task's training data and exit")
     train.set_defaults(run=run_train)
 
     retrain = subparsers.add_parser("retrain", help="train a challenger; promote it only if it beats the champion",
-                                    description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                    description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     _task_arguments(retrain)
     retrain.add_argument("--report", help="folder for retrain-report.md/.json (default: the run folder)")
     retrain.set_defaults(run=run_retrain)
 
     models = subparsers.add_parser("models", help="list the model registry, or show one model's versions",
-                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     models.add_argument("action", choices=("list", "show"))
     models.add_argument("name", nargs="?", help="model name (show)")
     models.add_argument("--models", help="model registry folder or MLflow URI (default registry/)")
@@ -53,7 +60,7 @@ def register(subparsers) -> None:
 
 
 def _task_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("task", choices=TASK_NAMES)
+    parser.add_argument("task", choices=tuple(TASKS))
     parser.add_argument("--data", nargs="+", metavar="DIR", help="dataset folders (or folders of datasets)")
     parser.add_argument("--models", help="model registry folder or MLflow URI (default registry/)")
     parser.add_argument("--epochs", type=int, help="epochs (default 20, or the champion's for a retrain)")
@@ -99,7 +106,7 @@ def _settings(args: argparse.Namespace, base: dict | None = None):
         if getattr(args, key) is not None:
             values[name] = getattr(args, key)
     values["seed"] = args.seed
-    if values.get("width") is not None and args.task != "sketchnet":
+    if values.get("width") is not None and get_task(args.task).network != "sketchnet":
         values["width"] = int(values["width"]) if float(values["width"]).is_integer() else values["width"]
     return TrainSettings.from_dict(values)
 
@@ -121,8 +128,6 @@ def _need_data(args: argparse.Namespace) -> list[str]:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from trainers.tasks import print_data_spec
-
     if args.print_data_spec:
         sys.stdout.write(print_data_spec(args.task))
         return 0

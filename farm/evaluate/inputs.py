@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from renderers.impostor import closed_silhouette
+from renderers.silhouette_metric import closed_silhouette
 from species.errors import user_path
 
 from .methods import MethodContext, MethodResult, joined_share

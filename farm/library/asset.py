@@ -13,7 +13,8 @@ import numpy as np
 import species
 from renderers.alpha_coverage import coverage_tree, opaque_fraction
 from renderers.framing import framing_points
-from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, render_impostors, silhouette_iou, switch_camera
+from renderers.impostor import render_impostors
+from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import render_octahedral_impostor
 from species.studio.collision import collision_capsules
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour

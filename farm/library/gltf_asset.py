@@ -24,7 +24,7 @@ from .png_cache import PngCache
 
 __all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
 
-# MSFT_screencoverage values are switch sizes over this screen height (renderers.impostor's reference screen).
+# MSFT_screencoverage values are switch sizes over this screen height (renderers.silhouette_metric's reference screen).
 SCREEN_HEIGHT_PX = 1080
 EXTENSIONS = ["EXT_mesh_gpu_instancing", "KHR_materials_variants", "MSFT_lod"]
 # Instanced card meshes, `<level>_<kind>_card`, named as the USD's PointInstancer prototypes (`leaf`, `clump`).

@@ -14,7 +14,7 @@ import numpy as np
 
 from renderers.blender import BlenderError, blender_available
 from renderers.blender_assets import export_fbx_batch
-from renderers.impostor import CoverageRenderer
+from renderers.gl_coverage import CoverageRenderer
 from species.meshing.gltf import z_up_to_y_up
 from species.studio.collision import capsule_mesh
 

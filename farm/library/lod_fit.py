@@ -15,7 +15,8 @@ import numpy as np
 
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
-from renderers.impostor import AXIS_SHARE, closed_silhouette, silhouette_iou, switch_camera
+from renderers.impostor import AXIS_SHARE
+from renderers.silhouette_metric import closed_silhouette, silhouette_iou, switch_camera
 from renderers.twig_atlas import render_twig_atlas, twig_atlas_texels
 from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
 from species.studio.lod import LodBudgetError, TreeLods, metres_per_pixel
@@ -42,8 +43,8 @@ CARD_AREA_GAINS = (0.75, 1.0, 1.5, 2.25, 3.5)
 # fitting it there gains little for its cost (docs/library.md has the figures).
 _FIRST_GAIN_LEVEL = 2
 # Azimuths (degrees) the split is judged from: 22.5 deg off both the quality azimuths
-# (renderers.impostor.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test. One view
-# chooses the shares two perpendicular ones would, for less (docs/library.md).
+# (renderers.silhouette_metric.QUALITY_AZIMUTHS) and the impostor's planes, so the reported IoU stays a fair test.
+# One view chooses the shares two perpendicular ones would, for less (docs/library.md).
 CALIBRATION_AZIMUTHS = (33.75,)
 # A twig card shows its branches as they lie from its front and pressed flat from the side, so a level with twig
 # cards is judged from two perpendicular azimuths (the first as above, then 90 deg on; both 22.5 deg off the

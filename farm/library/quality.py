@@ -3,7 +3,7 @@
 An engine's temporal anti-aliasing jitters the camera by sub-pixel offsets every frame, so a level whose silhouette
 differs from LOD0's by no more than LOD0's own half-pixel shift pops no more than LOD0 already shimmers. The floor
 of a level: LOD0's coverage silhouette at the level's switch size against the same camera with its principal point
-moved SHIFT_PX across, then up; the least IoU over renderers.impostor.QUALITY_AZIMUTHS (both silhouettes closed
+moved SHIFT_PX across, then up; the least IoU over renderers.silhouette_metric.QUALITY_AZIMUTHS (both silhouettes closed
 as the library measures them). A level meets the restated target when its least IoU is at least its floor minus
 FLOOR_MARGIN. `level_floors` also gives the floors of LOD0 turned by given angles (what a view-sampled impostor
 shows between its views), for `benchmarks/bench_silhouette_floor.py`.
@@ -23,8 +23,8 @@ import numpy as np
 
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
-from renderers.impostor import (QUALITY_AZIMUTHS, CoverageRenderer, closed_silhouette, silhouette_iou,
-                                switch_camera)
+from renderers.gl_coverage import CoverageRenderer
+from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 
 from ..dataset.storage import Location
 from ..tree_chain import StageTimer

@@ -11,7 +11,7 @@ from mathutils import Vector
 
 __all__ = ["JobError", "require", "reset_scene", "import_glb", "mesh_objects", "mesh_stats", "part_of", "PART_INDEX"]
 
-# Mask values of the farm's renderers (renderers/maps.py): 0 background, 1 bark, 2 leaves.
+# Mask values of the farm's renderers (renderers/maps.py, combine_parts): 0 background, 1 bark, 2 leaves.
 PART_INDEX = {"bark": 1, "leaves": 2}
 
 

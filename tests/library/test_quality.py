@@ -16,7 +16,7 @@ from farm.tree_chain import StageTimer, tree_seed
 from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
 from renderers.camera import orthographic_camera, perspective_camera
 from renderers.framing import framing_points
-from renderers.impostor import switch_camera
+from renderers.silhouette_metric import switch_camera
 from species.meshing.gltf import read_glb_json
 from species.meshing.tubes_and_cards import leaf_part
 from species.studio.pbr_textures import leaf_atlas
@@ -27,7 +27,7 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 @pytest.fixture(scope="module")
 def renderer():
-    from renderers.impostor import CoverageRenderer
+    from renderers.gl_coverage import CoverageRenderer
 
     r = CoverageRenderer(64)
     yield r
@@ -70,7 +70,7 @@ def test_opaque_fraction_rejects_a_tile_without_opaque_texels():
 
 
 def test_coverage_renderer_without_culling_covers_the_pixels_of_double_sided_cards(renderer):
-    from renderers.maps import DepthRenderer
+    from renderers.gl_depth import DepthRenderer
 
     cards = _cards(np.random.default_rng(7), 40)
     tree = TreeMesh(bark=MeshPart.empty(), leaves=cards, name="cards")
@@ -254,7 +254,7 @@ def test_lod2_climbs_to_a_bark_share_and_card_gain_no_neighbour_of_which_matches
     from farm.library.asset import leaf_fractions
     from farm.library.lod_fit import BARK_SHARE_SCALES, CALIBRATION_AZIMUTHS, CARD_AREA_GAINS, fit_lods
     from renderers.alpha_coverage import coverage_tree
-    from renderers.impostor import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou
+    from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou
     from species.studio.leaf_clusters import CLUSTER_AREA_GAIN
     from species.studio.lod import TreeLods
 
@@ -341,7 +341,8 @@ def test_the_impostor_keeps_the_axis_share_and_alpha_growth_that_match_lod0_best
     from farm.library.lod_fit import (IMPOSTOR_AXIS_SHARES, IMPOSTOR_CALIBRATION_AZIMUTHS, IMPOSTOR_GROWTHS,
                                       fit_impostor)
     from renderers.alpha_coverage import coverage_tree
-    from renderers.impostor import AXIS_SHARE, closed_silhouette, render_impostor, silhouette_iou
+    from renderers.impostor import AXIS_SHARE, render_impostor
+    from renderers.silhouette_metric import closed_silhouette, silhouette_iou
 
     assert IMPOSTOR_AXIS_SHARES[0] == AXIS_SHARE and len(set(IMPOSTOR_AXIS_SHARES)) > 1
     # A sparse plant whose twigs fall between the texels a pixel samples at 64 px: growing its alpha wins there.

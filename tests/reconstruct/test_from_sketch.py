@@ -262,7 +262,7 @@ def test_through_the_shipped_networks_the_grown_crown_covers_the_drawn_one(rende
     """End to end as a user runs it: the edge sketch and trunk strokes of a tree the networks never saw, the
     shipped silhouette and trunk networks, growth; the grown crown seen in the drawing's view against the drawn."""
     from reconstruct import from_sketch
-    from renderers.impostor import closed_silhouette
+    from renderers.silhouette_metric import closed_silhouette
 
     skeleton, mesh = _tree("sc_round_maple", 17)
     renderer.size = 256  # the networks' size; the module's renderer follows

@@ -171,18 +171,3 @@ def test_a_real_meshed_tree_renders_its_projection_with_outward_bark(view_render
     on_bark = view.images["mask"] == 1
     gap = view.images["depth_back"][on_bark] - view.images["depth"][on_bark]
     assert np.mean(gap > 1e-4) > 0.95
-
-
-def test_importing_the_renderers_sets_no_gl_platform_and_a_users_choice_is_kept():
-    import os
-    import subprocess
-    import sys
-
-    code = ("import os, renderers.maps as maps; print(os.environ.get('PYOPENGL_PLATFORM')); "
-            "maps.use_headless_gl(); print(os.environ['PYOPENGL_PLATFORM'])")
-    env = {k: v for k, v in os.environ.items() if k != "PYOPENGL_PLATFORM"}
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
-    assert out.split() == ["None", "egl"]
-    chosen = subprocess.run([sys.executable, "-c", code], env={**env, "PYOPENGL_PLATFORM": "osmesa"},
-                            capture_output=True, text=True, check=True).stdout
-    assert chosen.split() == ["osmesa", "osmesa"]

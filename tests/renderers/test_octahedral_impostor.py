@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from renderers.camera import view_direction
-from renderers.impostor import CoverageRenderer, ImpostorError, closed_silhouette, silhouette_iou, switch_camera
+from renderers.gl_coverage import CoverageRenderer
+from renderers.impostor import ImpostorError
+from renderers.silhouette_metric import closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import (MAX_ATLAS_PX, between_frame_azimuths, frame_axes, frame_directions,
                                            frame_extents, frame_weights, octahedral_decode, octahedral_encode,
                                            render_octahedral_impostor)

@@ -5,7 +5,8 @@ import pytest
 import species
 from renderers.alpha_coverage import triangle_coverage
 from renderers.framing import framing_points
-from renderers.impostor import CoverageRenderer, switch_camera
+from renderers.gl_coverage import CoverageRenderer
+from renderers.silhouette_metric import switch_camera
 from renderers.twig_atlas import render_twig_atlas
 from species.studio.lod import TreeLods
 from species.studio.twig_cards import TwigAtlas

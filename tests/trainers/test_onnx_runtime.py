@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from trainers.onnx_runtime import OnnxModel, OnnxModelError, export_onnx
-from trainers.pix2pix import PIX2PIX_TASKS
+from trainers.pix2pix import task_generator
 
 torch.set_num_threads(1)
 
@@ -17,7 +17,7 @@ SILHOUETTE = {"silhouette": (None, 3, 256, 256)}
 
 @pytest.fixture(scope="module")
 def unet_file(tmp_path_factory):
-    net = PIX2PIX_TASKS["silhouette"].generator(width=4, generator=torch.Generator().manual_seed(0))
+    net = task_generator("pix2pix-silhouette", width=4, generator=torch.Generator().manual_seed(0))
     # A few training steps' worth of batch-norm statistics, so eval mode differs from the initial identity.
     with torch.no_grad():
         net.train()(torch.rand(4, 1, 256, 256, generator=torch.Generator().manual_seed(1)))
@@ -126,7 +126,7 @@ def test_export_refuses_output_names_that_differ_from_the_heads(tmp_path):
 
 
 def test_an_instance_norm_trunk_unet_exports_too(tmp_path):
-    net = PIX2PIX_TASKS["trunk"].generator(width=4, n_down=6, norm="instance").eval()
+    net = task_generator("pix2pix-trunk", width=4, n_down=6, norm="instance").eval()
     path = export_onnx(net, torch.rand(1, 3, 64, 64), tmp_path / "trunk.onnx", ["strokes"], ["trunk_depth"])
     x = torch.rand(2, 3, 64, 64, generator=torch.Generator().manual_seed(3))
     got = OnnxModel(path, {"strokes": (None, 3, 64, 64)}, {"trunk_depth": (None, 1, 64, 64)}).run(x.numpy())

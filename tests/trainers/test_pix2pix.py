@@ -7,9 +7,11 @@ import pytest
 import torch
 
 from farm.dataset.image_codec import decode_map, encode_map
-from trainers.pix2pix import (PIX2PIX_TASKS, GlobalDiscriminator, PatchDiscriminator, Pix2PixError, UNetGenerator,
-                              discriminator_loss, generator_loss, get_task, make_discriminator, make_optimizer,
-                              masked_depth_error, masked_l1, pix2pix_step, targets_from_views)
+from trainers.pix2pix import (GlobalDiscriminator, PatchDiscriminator, Pix2PixError, UNetGenerator,
+                              discriminator_loss, generator_loss, make_discriminator, make_optimizer,
+                              masked_depth_error, masked_l1, pix2pix_step, targets_from_views, task_channels,
+                              task_discriminator, task_generator)
+from trainers.tasks import TASKS, TrainingDataError
 
 torch.set_num_threads(1)
 
@@ -18,14 +20,14 @@ def _seeded(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(seed)
 
 
-@pytest.mark.parametrize("task", ["silhouette", "trunk"])
-def test_unet_maps_a_256_px_sketch_to_the_task_channels_in_0_1(task):
-    spec = PIX2PIX_TASKS[task]
-    net = spec.generator(width=4).eval()
-    x = torch.rand(2, spec.in_channels, 256, 256, generator=_seeded(0))
+@pytest.mark.parametrize("task, channels", [("pix2pix-silhouette", (1, 3)), ("pix2pix-trunk", (3, 1))])
+def test_unet_maps_a_256_px_sketch_to_the_task_channels_in_0_1(task, channels):
+    assert task_channels(task) == channels
+    net = task_generator(task, width=4).eval()
+    x = torch.rand(2, channels[0], 256, 256, generator=_seeded(0))
     with torch.no_grad():
         y = net(x)
-    assert y.shape == (2, spec.out_channels, 256, 256)
+    assert y.shape == (2, channels[1], 256, 256)
     assert y.dtype == torch.float32 and float(y.min()) >= 0.0 and float(y.max()) <= 1.0
 
 
@@ -159,9 +161,9 @@ def test_a_tiny_unet_overfits_a_few_samples():
     ramp = torch.linspace(0, 1, size)[None, None, :, None]
     target = torch.where(blobs > 0, 0.3 + 0.4 * ramp * torch.rand(n, 1, 1, 1, generator=g), torch.ones(1))
     strokes = blobs * torch.rand(n, 3, 1, 1, generator=g)
-    task = PIX2PIX_TASKS["trunk"]
-    net = task.generator(width=8, n_down=5, generator=_seeded(0))
-    disc = task.discriminator(width=8, generator=_seeded(1))
+    task = TASKS["pix2pix-trunk"]
+    net = task_generator(task, width=8, n_down=5, generator=_seeded(0))
+    disc = task_discriminator(task, width=8, generator=_seeded(1))
     opt_g, opt_d = make_optimizer(net), make_optimizer(disc)
     losses = [pix2pix_step(net, disc, opt_g, opt_d, {"input": strokes, "target": target, "mask": blobs})
               for _ in range(300)]
@@ -171,8 +173,8 @@ def test_a_tiny_unet_overfits_a_few_samples():
 
 
 def test_pix2pix_step_rejects_a_batch_without_a_mask():
-    task = PIX2PIX_TASKS["trunk"]
-    net, disc = task.generator(width=2, n_down=5), task.discriminator(width=2)
+    task = TASKS["pix2pix-trunk"]
+    net, disc = task_generator(task, width=2, n_down=5), task_discriminator(task, width=2)
     with pytest.raises(Pix2PixError, match="mask"):
         pix2pix_step(net, disc, make_optimizer(net), make_optimizer(disc),
                      {"input": torch.rand(1, 3, 32, 32), "target": torch.rand(1, 1, 32, 32)})
@@ -193,7 +195,7 @@ def test_silhouette_views_become_ink_input_and_the_silhouette_with_its_mask():
     silhouette = np.stack([np.where(fg, 0.4, 1.0), np.where(fg, 0.1, 0.0), fg], -1).astype(np.float32)
     views = {"sketch_edges": _stored("sketch_edges", edges),
              "silhouette_envelope": _stored("silhouette_envelope", silhouette)}
-    x, target, mask = targets_from_views("silhouette", views)
+    x, target, mask = targets_from_views("pix2pix-silhouette", views)
     assert x.shape == (1, 8, 8) and target.shape == (3, 8, 8) and mask.shape == (1, 8, 8)
     assert torch.equal(x[0] == 1.0, torch.from_numpy(edges == 0)) and float(x.min()) == 0.0
     assert torch.equal(mask[0].bool(), torch.from_numpy(fg))
@@ -205,8 +207,8 @@ def test_trunk_views_give_a_mask_exactly_where_trunk_depth_is_below_1():
     depth[3, 2:6] = [0.2, 0.5, 0.9999, 0.7]
     strokes = np.full((8, 8, 3), 255, np.uint8)
     strokes[3, 2:6] = (255, 0, 0)
-    x, target, mask = targets_from_views(get_task("trunk"), {"trunk_strokes": _stored("trunk_strokes", strokes),
-                                                             "trunk_depth": _stored("trunk_depth", depth)})
+    x, target, mask = targets_from_views(TASKS["pix2pix-trunk"], {"trunk_strokes": _stored("trunk_strokes", strokes),
+                                                                   "trunk_depth": _stored("trunk_depth", depth)})
     assert x.shape == (3, 8, 8) and target.shape == (1, 8, 8)
     assert torch.equal(mask[0].bool(), torch.from_numpy(depth < 1))
     assert torch.allclose(x[:, 3, 2], torch.tensor([0.0, 1.0, 1.0]))
@@ -214,14 +216,16 @@ def test_trunk_views_give_a_mask_exactly_where_trunk_depth_is_below_1():
 
 def test_targets_from_views_names_the_missing_output_and_the_spec_that_makes_it():
     with pytest.raises(Pix2PixError, match="'trunk_depth'.*pix2pix-trunk.yaml"):
-        targets_from_views("trunk", {"trunk_strokes": torch.zeros(3, 8, 8, dtype=torch.uint8)})
-    with pytest.raises(Pix2PixError, match="'depth' is unknown"):
-        get_task("depth")
+        targets_from_views("pix2pix-trunk", {"trunk_strokes": torch.zeros(3, 8, 8, dtype=torch.uint8)})
+    with pytest.raises(TrainingDataError, match="'depth' is unknown"):
+        targets_from_views("depth", {})
+    with pytest.raises(Pix2PixError, match="'sketchnet' is learnt by sketchnet, not pix2pix"):
+        targets_from_views("sketchnet", {})
 
 
 def test_targets_from_views_rejects_a_float_sketch_and_mismatched_sizes():
     with pytest.raises(Pix2PixError, match="uint8"):
-        targets_from_views("trunk", {"trunk_strokes": torch.zeros(3, 8, 8), "trunk_depth": torch.ones(1, 8, 8)})
+        targets_from_views("pix2pix-trunk", {"trunk_strokes": torch.zeros(3, 8, 8), "trunk_depth": torch.ones(1, 8, 8)})
     with pytest.raises(Pix2PixError, match="must match"):
-        targets_from_views("trunk", {"trunk_strokes": torch.zeros(3, 8, 8, dtype=torch.uint8),
+        targets_from_views("pix2pix-trunk", {"trunk_strokes": torch.zeros(3, 8, 8, dtype=torch.uint8),
                                      "trunk_depth": torch.ones(1, 4, 4)})

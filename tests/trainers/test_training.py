@@ -15,8 +15,6 @@ import pytest
 import torch
 
 from farm.cli import main as farm_main
-from farm.jobs import load_spec
-from farm.pipeline import run_job
 from trainers import models as trained_models
 from trainers.curves import read_metrics_csv
 from trainers.networks import SettingsError, TrainSettings, schedule_factor
@@ -32,34 +30,17 @@ TINY = {"pix2pix-trunk": dict(width=4, batch_size=8), "sketchnet": dict(width=0.
 pytestmark = pytest.mark.slow
 
 
-def _tiny_spec(name: str, trees: int):
-    spec = load_spec(TASKS[name].spec_path).with_trees(trees)
-    return dataclasses.replace(spec, render=dataclasses.replace(spec.render, size=64), shard_size=4)
-
-
-@pytest.fixture(scope="module")
-def datasets(tmp_path_factory, ray_session) -> dict[str, Path]:
-    """A 24-tree pix2pix-trunk dataset at 64 px (enough for a tree in each split part), and a 4-tree sketchnet one
-    (it only has to lack the trunk strokes)."""
-    root = tmp_path_factory.mktemp("training-data")
-    out = {}
-    for name, trees in (("pix2pix-trunk", 24), ("sketchnet", 4)):
-        out[name] = root / name
-        run_job(_tiny_spec(name, trees), str(out[name]), workers=2, progress=False)
-    return out
-
-
 def _env(tmp_path: Path) -> dict:
     return {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT)}
 
 
 # ------------------------------------------------------------------------------------------ the CLI
-def test_farm_train_trains_registers_and_lists(datasets, tmp_path, capsys, monkeypatch):
+def test_farm_train_trains_registers_and_lists(training_datasets, tmp_path, capsys, monkeypatch):
     # In this process, on the tests' Ray: a subprocess would start a Ray of its own for each command.
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.chdir(tmp_path)
     registry = tmp_path / "registry"
-    code = farm_main(["train", "pix2pix-trunk", "--data", str(datasets["pix2pix-trunk"]), "--epochs", "1",
+    code = farm_main(["train", "pix2pix-trunk", "--data", str(training_datasets["pix2pix-trunk"]), "--epochs", "1",
                       "--width", "4", "--batch-size", "8", "--models", str(registry), "--quiet",
                       "--run-dir", str(tmp_path / "run")])
     run = capsys.readouterr()
@@ -89,7 +70,7 @@ def test_farm_train_trains_registers_and_lists(datasets, tmp_path, capsys, monke
     assert fresh.returncode == 0 and fresh.stdout.strip() == "ok", fresh.stderr[-2000:]
 
     # farm retrain as a scheduled job runs it: a challenger from the champion, the report, the registry updated.
-    code = farm_main(["retrain", "pix2pix-trunk", "--data", str(datasets["pix2pix-trunk"]), "--epochs", "1",
+    code = farm_main(["retrain", "pix2pix-trunk", "--data", str(training_datasets["pix2pix-trunk"]), "--epochs", "1",
                       "--models", str(registry), "--quiet", "--report", str(tmp_path / "report")])
     retrained = capsys.readouterr()
     assert code == 0, retrained.err[-3000:]
@@ -115,11 +96,12 @@ def test_print_data_spec_is_the_shipped_spec():
     (["train", "pix2pix-trunk", "--data", "{trunk}", "--epochs", "0"], "epochs"),
     (["models", "show", "nope", "--models", "{registry}"], "nope"),
 ])
-def test_bad_input_is_one_line_and_exit_2(datasets, tmp_path, args, fragment, capsys, monkeypatch):
+def test_bad_input_is_one_line_and_exit_2(training_datasets, tmp_path, args, fragment, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "empty").mkdir()
     (tmp_path / "file").write_text("not a folder")
-    names = {"empty": tmp_path / "empty", "sketchnet": datasets["sketchnet"], "trunk": datasets["pix2pix-trunk"],
+    names = {"empty": tmp_path / "empty", "sketchnet": training_datasets["sketchnet"],
+             "trunk": training_datasets["pix2pix-trunk"],
              "file": tmp_path / "file", "registry": tmp_path / "registry"}
     argv = [a.format(**{k: str(v) for k, v in names.items()}) for a in args]
     try:
@@ -135,17 +117,17 @@ def test_bad_input_is_one_line_and_exit_2(datasets, tmp_path, args, fragment, ca
 
 # ------------------------------------------------------------------------------------------ resume
 @pytest.fixture(scope="module")
-def trunk_run(datasets, tmp_path_factory):
+def trunk_run(training_datasets, tmp_path_factory):
     """An uninterrupted two-epoch pix2pix-trunk run, its learning rate on the cosine schedule (set from the step
     count, so a resumed run must continue the same curve)."""
     settings = TrainSettings(epochs=2, schedule="cosine", **TINY["pix2pix-trunk"])
-    return train("pix2pix-trunk", [str(datasets["pix2pix-trunk"])], settings=settings,
+    return train("pix2pix-trunk", [str(training_datasets["pix2pix-trunk"])], settings=settings,
                  run_dir=tmp_path_factory.mktemp("trunk-run") / "run")
 
 
-def test_a_crashed_run_resumes_at_its_step_with_the_same_losses(datasets, trunk_run, tmp_path):
+def test_a_crashed_run_resumes_at_its_step_with_the_same_losses(training_datasets, trunk_run, tmp_path):
     settings = trunk_run.network.settings
-    data = [str(datasets["pix2pix-trunk"])]
+    data = [str(training_datasets["pix2pix-trunk"])]
     with pytest.raises(Exception, match="injected crash after epoch 0"):
         train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "crashed", crash_after_epoch=0)
     assert [r["epoch"] for r in read_metrics_csv(tmp_path / "crashed" / "metrics.csv")] == [0]
@@ -167,12 +149,12 @@ def test_a_crashed_run_resumes_at_its_step_with_the_same_losses(datasets, trunk_
         train("pix2pix-trunk", data, settings=settings, run_dir=tmp_path / "corrupt")
 
 
-def test_two_workers_train_data_parallel(datasets, tmp_path):
+def test_two_workers_train_data_parallel(training_datasets, tmp_path):
     """Two DDP workers on two CPUs finish (they used to wait forever: Ray Data had no CPU left, and rank 0 took
     DDP off its own modules) and each steps half the views."""
     settings = TrainSettings(epochs=1, **TINY["pix2pix-trunk"])
-    result = train("pix2pix-trunk", [str(datasets["pix2pix-trunk"])], settings=settings, run_dir=tmp_path / "run",
-                   workers=2)
+    result = train("pix2pix-trunk", [str(training_datasets["pix2pix-trunk"])], settings=settings,
+                   run_dir=tmp_path / "run", workers=2)
     views = result.summary["views"]["train"]
     assert result.epochs == 1
     assert result.steps == -(-(views // 2) // settings.batch_size)
@@ -180,10 +162,10 @@ def test_two_workers_train_data_parallel(datasets, tmp_path):
 
 
 # ------------------------------------------------------------------------------------------ retraining
-def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_worse(datasets, trunk_run, tmp_path,
-                                                                                    monkeypatch):
+def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_worse(training_datasets, trunk_run,
+                                                                                    tmp_path, monkeypatch):
     registry = open_registry(tmp_path / "registry")
-    data = [str(datasets["pix2pix-trunk"])]
+    data = [str(training_datasets["pix2pix-trunk"])]
     settings = TrainSettings(epochs=1, **TINY["pix2pix-trunk"])
     champion = trained_models.register_result(registry, trunk_run, code_version="test")
     assert champion.is_champion and champion.version == 1
