@@ -12,7 +12,7 @@ from __future__ import annotations
 import importlib
 
 from .errors import ParameterError, TreefarmError, TreeTooLargeError
-from .growth import GENERATORS, generator_of, grow, rebuild, rng_for
+from .growth import GENERATORS, Generator, generator_of, grow, rebuild, rng_for
 from .meshing import build_mesh
 from .presets import Preset, PresetError, get_preset, list_presets, register_presets, sample
 from .skeleton import Skeleton, SkeletonError
@@ -23,6 +23,7 @@ __all__ = [
     "generator_of",
     "Skeleton", "TreeMesh", "MeshPart", "Preset",
     "TreefarmError", "ParameterError", "PresetError", "SkeletonError", "TreeTooLargeError", "GENERATORS",
+    "Generator",
 ]
 
 
@@ -37,5 +38,5 @@ def sapling_preset(path) -> dict:
 
 
 # Each generator's presets live in its own module and load on first use.
-for _module in ("species.weber_penn.presets", "species.lsystem.presets", "species.colonization.presets"):
-    register_presets(lambda _m=_module: importlib.import_module(_m).PRESETS)
+for _generator in GENERATORS.values():
+    register_presets(lambda _m=_generator.presets: importlib.import_module(_m).PRESETS)

@@ -5,6 +5,7 @@ A dictionary without a generator key is Weber-Penn, so Sapling dictionaries load
 from __future__ import annotations
 
 import importlib
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -14,13 +15,26 @@ from .meshing import build_mesh
 from .skeleton import Skeleton
 from .tree_mesh import TreeMesh
 
-__all__ = ["grow", "rebuild", "GENERATORS", "generator_of", "rng_for"]
+__all__ = ["grow", "rebuild", "Generator", "GENERATORS", "generator_of", "rng_for"]
 
-# generator name -> "module:function" taking (params, rng) and returning a Skeleton.
-GENERATORS: dict[str, str] = {
-    "weber_penn": "species.weber_penn.generator:grow",
-    "colonization": "species.colonization.generator:grow",
-    "lsystem": "species.lsystem.generator:grow",
+
+@dataclass(frozen=True)
+class Generator:
+    """A growth model, named by modules so that `import species` loads none of them.
+
+    grow    : "module:function" taking (params, rng) and returning a Skeleton.
+    presets : module whose `PRESETS` (a list of `species.Preset`) are the generator's species, loaded on first use.
+    """
+
+    grow: str
+    presets: str
+
+
+# The generator registry: a parameter dictionary's `generator` key names one; adding a generator is one entry.
+GENERATORS: dict[str, Generator] = {
+    "weber_penn": Generator("species.weber_penn.generator:grow", "species.weber_penn.presets"),
+    "colonization": Generator("species.colonization.generator:grow", "species.colonization.presets"),
+    "lsystem": Generator("species.lsystem.generator:grow", "species.lsystem.presets"),
 }
 
 
@@ -34,7 +48,7 @@ def generator_of(params: dict) -> str:
 
 
 def _grower(name: str) -> Callable[[dict, np.random.Generator], Skeleton]:
-    module, function = GENERATORS[name].split(":")
+    module, function = GENERATORS[name].grow.split(":")
     return getattr(importlib.import_module(module), function)
 
 
