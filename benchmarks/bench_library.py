@@ -135,8 +135,8 @@ def main() -> None:
     stages, records, floors = [], [], {}
     with tempfile.TemporaryDirectory() as tmp:
         location = Location.resolve(tmp)
-        # A worker pays its imports (pxr alone about 0.3 s) and GL set-up once, on its first asset: time that
-        # asset apart.
+        # A worker pays its imports (pxr's above all) and GL set-up once, on its first asset: time that asset
+        # apart.
         timer = StageTimer()
         write_asset_files(build_asset(WARM_UP, tree_seed(1, 0), spec, renderer, timer), location, spec, renderer,
                           timer)

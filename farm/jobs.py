@@ -174,7 +174,8 @@ def species_of_trees(spec: PipelineSpec) -> list[str]:
 # Each raises JobSpecError naming the field, its value and what is allowed; the library spec re-raises them as
 # its own error class.
 _RESOURCE_KEYS = {"num_cpus", "num_gpus", "memory_gb"}
-# A worker with its renderer and one small tree needs about this much (measured: VmData 0.6 GiB after a maple).
+# A worker with its renderer and one small tree needs about this much, with room to spare (its data segment after
+# a maple, read from /proc).
 MIN_WORKER_MEMORY_GB = 1.0
 
 

@@ -46,9 +46,9 @@ class SfmSettings:
     max_image_size : pixels, the longer side SIFT sees. max_features : per photo. peak_threshold : SIFT's contrast
                      floor (COLMAP's default 0.0067). max_ratio : the nearest/second-nearest descriptor distance
                      ratio a match may have (COLMAP's 0.8). guided : guided matching (more matches along the
-                     verified epipolar lines). The three defaults are loosened for trees: on ten 640 px renders
-                     10 degrees apart at known poses they raise the points more than 10 cm above the ground
-                     from 14 of 399 to 459 of 2,263 (0.9 px reprojection error), at 3.5x the time.
+                     verified epipolar lines). The three defaults are loosened for trees: leaves give weak,
+                     repetitive features, and COLMAP's defaults leave few points above the ground; the loosened
+                     ones cost more time (docs/performance.md has what they gave on renders at known poses).
     matcher        : "exhaustive" (every pair), "sequential" (each photo with the next `overlap`, for orbits and
                      walks) or "auto" (exhaustive up to `exhaustive_max` photos).
     poses          : "known" (cameras.json, triangulation only), "estimate" (incremental mapping) or "auto"

@@ -4,8 +4,9 @@ For the k nearest neighbours of a point, the covariance's eigenvalues l1 >= l2 >
 looks like: a thin branch is a line (l2, l3 small), a trunk or limb a gently curved sheet (l3 small), a clump of
 leaves a volume (l3 comparable with l1). The scattering l3 / l1 is the feature (Demantke et al.'s dimensionality
 features); points above SCATTER_LEAF are taken for leaves. A cloud looks leaf-on when more than LEAF_ON_SHARE of its
-crown (the points above CROWN_SHARE of its height) are leaves by this test. The thresholds were set on tree1.xyz
-(leaf-off: 26 % of its crown scatters, from scanner noise) and on it with leaf-like clutter (49 %).
+crown (the points above CROWN_SHARE of its height) are leaves by this test. The thresholds were set between a
+leaf-off scan, whose crown scatters only from scanner noise, and the same scan with leaf-like clutter
+(docs/performance.md gives the shares).
 """
 from __future__ import annotations
 

@@ -22,9 +22,8 @@ __all__ = ["TwigAtlasImage", "render_twig_atlas", "twig_atlas_texels", "TWIG_ATL
 
 # The atlas holds at most TWIG_TEXELS_PER_TRIANGLE texels per LOD0 triangle, at least 128 x 128 and at most
 # TWIG_ATLAS_MAX_TEXELS; beyond it the levels' texels grow (`TwigAtlas.pack`). Its images then stay in proportion to the
-# asset's geometry (the 37 presets with twig cards: at most 22.0 % of the GLB without them; README, "Performance"),
-# while the crossed cards of a dense crown keep about a texel per screen pixel (sc_round_maple's LOD1 and LOD2: .816/.836 at a fixed 512 x 512,
-# .874/.895 with 1024 x 1024).
+# asset's geometry (docs/performance.md: their share of the GLB), while the crossed cards of a dense crown keep about
+# a texel per screen pixel (a fixed 512 x 512 atlas coarsens them; docs/library.md).
 TWIG_ATLAS_MAX_TEXELS = 1024 * 1024
 TWIG_TEXELS_PER_TRIANGLE = 40
 _MIN_TEXELS = 128 * 128

@@ -259,7 +259,7 @@ class Skeleton:
 
     def leaf_corners(self) -> np.ndarray:
         """(M, 4, 3) float32, world positions of each leaf card's four corners."""
-        # (M, 3, 4) by one (3M, 3) @ (3, 4) product: the same values, 2.5x faster than a stack of M products.
+        # (M, 3, 4) by one (3M, 3) @ (3, 4) product: the same values, faster than a stack of M small products.
         linear = (self.leaves[:, :3, :3].reshape(-1, 3) @ LEAF_CARD_CORNERS.T).reshape(-1, 3, 4)
         return (linear.transpose(0, 2, 1) + self.leaves[:, None, :3, 3]).astype(np.float32)
 

@@ -12,7 +12,7 @@ def ray_session():
     import ray
 
     # Ray Train's controller polls its workers every 2 s by default, and each state change of a run waits for a
-    # poll: a tenth of that takes about 6 s off each tiny training run in the tests.
+    # poll: a tenth of that takes seconds off each tiny training run in the tests.
     os.environ.setdefault("RAY_TRAIN_HEALTH_CHECK_INTERVAL_S", "0.2")
     if not ray.is_initialized():
         ray.init(address="local", num_cpus=2, include_dashboard=False, object_store_memory=100 * 2**20,

@@ -48,14 +48,14 @@ _FIRST_GAIN_LEVEL = 2
 CALIBRATION_AZIMUTHS = (33.75,)
 # A twig card shows its branches as they lie from its front and pressed flat from the side, so a level with twig
 # cards is judged from two perpendicular azimuths (the first as above, then 90 deg on; both 22.5 deg off the
-# quality ones): from one, a level whose cards face that view wins and loses elsewhere (lsystem_fractal_plant's
-# LOD3: .765 from 33.75 deg, .383 from the worst quality azimuth).
+# quality ones): from one, a level whose cards face that view wins and loses elsewhere (a flat spray seen edge-on
+# from the worst quality azimuth).
 TWIG_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 90.0 * k for k in range(2))
 # The farthest level's twig cards may have up to this many planes per cluster (its few clusters are whole
 # subtrees, seen from between two planes), and two rules are tried there: the crossed pairs at the finest depth
 # with more planes where the room allows, and as many planes as fit on coarser clusters; the calibration keeps the
-# better (45 presets, mean least LOD3 IoU .769 -> .778, sc_multistem_shrub .69 -> .80, sc_spruce .70 -> .77; with
-# planes first alone, sc_cypress_column fell .60 -> .50; docs/library.md).
+# better: each rule wins on presets where the other loses (shrubs and spruces take the planes, tilted sprays the
+# pairs; docs/library.md).
 FAR_TWIG_PLANES = 8
 
 
@@ -72,33 +72,26 @@ class TwigRule(NamedTuple):
 # The levels between the nearest and the farthest (LOD2 by default) may draw up to this many planes per cluster
 # where the room holds them (crossed upright from twig_cards.UPRIGHT_PLANES), their tiles in the atlas budget
 # (twig_cards.BUDGETED_MAX_PLANES): at 256 px a crossed pair shows a cluster's twigs pressed from between its
-# planes (45 presets: LOD2 mean least IoU .837 -> .840, within floor - 0.02 25 -> 26, palm .881 -> .912,
-# lsystem_bush .778 -> .863, sc_shadow_oak .851 -> .875, maple .910 -> .924; sc_self_pruning_forest_tree
-# .780 -> .768; tree_seed(7, 0): .830 -> .834, 26 -> 27; docs/library.md).
+# planes, and a few more planes keep bushy clusters' width from every side (docs/library.md).
 MIDDLE_TWIG_PLANES = 4
 # Twig rules a level is fitted with, for the nearest level, the middle ones and the farthest. Bark cards (every
 # dropped branch a crossed pair of its own bark, its leaves left as leaf cards, one per leaf where the budget
 # holds them) suit the near levels of shrubs and saplings, whose tubes would take the budget and whose leaves
-# lose their shape pressed onto cards: 45 presets, LOD1 mean least IoU .889 -> .920, presets within floor - 0.02
-# 31 -> 44 (sc_multistem_shrub .823 -> .928, sc_young_sapling .772 -> .889, sc_dome_shrub .819 -> .932; on
-# tree_seed(7, 0) 24 -> 41). At the far level, bark cards won nowhere: its leaves would all be clumps.
+# lose their shape pressed onto cards (docs/library.md has what they gain). At the far level, bark cards won
+# nowhere: its leaves would all be clumps.
 _NEAR_TWIG_RULES = (TwigRule(TWIG_CARD_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
 _MIDDLE_TWIG_RULES = (TwigRule(MIDDLE_TWIG_PLANES), TwigRule(TWIG_CARD_PLANES, leaves=False))
 _FAR_TWIG_RULES = (TwigRule(FAR_TWIG_PLANES), TwigRule(FAR_TWIG_PLANES, planes_first=True))
 # The crossed impostor's alpha as rendered, or grown by a texel: whichever matches LOD0 better from
 # IMPOSTOR_CALIBRATION_AZIMUTHS at the impostor's switch size (ties: as rendered). Grown suits sparse,
 # thin-branched plants whose twigs fall between the texels a pixel samples and fattens dense crowns, so it is chosen
-# per asset (least IoU at 64 px over the quality azimuths: lsystem_dichotomous .336 -> .431, sc_sympodial_lilac
-# .855 -> .884 grown; grown everywhere, bonsai .809 -> .762, balsam_fir .440 -> .254; docs/library.md). Four views,
-# 45 deg apart and 22.5 deg off the quality ones: from the two twig views, lsystem_abop_tree (.799 -> .783) and
-# sc_excurrent_leader (.399 -> .364) were grown for a calibration gain of .015 and .012.
+# per asset (docs/library.md). Four views, 45 deg apart and 22.5 deg off the quality ones: the two twig views alone
+# let a small calibration gain grow crowns that then lose from the quality azimuths.
 IMPOSTOR_GROWTHS = (0, 1)
 # And the share of the planes' half side about the axis drawn on every plane (renderers.impostor.AXIS_SHARE, or
-# less): a narrow crown lies within 0.2 of it whole, so every plane drew all of it and a view between planes saw
-# it several times over (lombardy_poplar .662 at 0.2, .699 at 0.1). Chosen by the least plus the mean IoU over the
-# calibration views: by the least alone, the choice followed one view's noise (45 presets, mean least IoU at 64
-# px .750 -> .749, sc_dome_shrub .853 -> .818); by both, .750 -> .752, within floor - 0.02 37 -> 39
-# (tree_seed(7, 0): .753 -> .760, 35 -> 37).
+# less): a narrow crown lies within 0.2 of it whole, so every plane would draw all of it and a view between planes
+# would see it several times over. Chosen by the least plus the mean IoU over the calibration views: by the least
+# alone, the choice follows one view's noise (docs/library.md).
 IMPOSTOR_AXIS_SHARES = (AXIS_SHARE, 0.1)
 IMPOSTOR_CALIBRATION_AZIMUTHS = tuple(CALIBRATION_AZIMUTHS[0] + 45.0 * k for k in range(4))
 
@@ -236,14 +229,14 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
         plain, plain_judgement = tried[share, gain, 0]
         # Twig cards look different from every side: both candidates are compared from all the twig azimuths. The
         # twig climb runs only when cards at the plain level's share already beat it (on most Weber-Penn crowns they
-        # do not, and each candidate of a large tree costs more than the plain climb: with a climb from every
-        # level the median asset took about 1.3 s instead of 0.7).
+        # do not, and each candidate of a large tree costs more than the plain climb: a climb from every level
+        # would cost far more time than it gains).
         # Where the plain level's bark takes the whole budget, the cards start from the largest share that leaves
-        # them room (weeping_willow's LOD3: plain .50 at 1.0, cards .84 at 0.125); bark cards start from the
+        # them room (a weeping willow's LOD3 needs a small bark share); bark cards start from the
         # least share. Each twig rule climbs on its own; the best-scoring is the level's twig candidate. A later
         # rule is tried only where the first one's cards beat the plain level (on a dense Weber-Penn crown they do
-        # not, and a large tree's candidate costs about a second: cherry's lods 2.6 -> 3.8 s when every rule ran;
-        # bark cards tried there too gained .004 on LOD1's mean, on presets already within their floors).
+        # not, and a large tree's candidate costs far more than its gain: bark cards tried there too gain little,
+        # on presets already within their floors).
         plain_score, twig_score, twig_lod = -1.0, -1.0, None
         for rule in range(1, len(rules) + 1):
             if rule > 1 and twig_score <= plain_score:
@@ -253,8 +246,8 @@ def fit_lods(skeleton, lod0, lod0_cover, budgets, switch_px, renderer, leaf_frac
                 while twig_share > 0 and built(twig_share, default_gain, rule) is None:
                     twig_share -= 1
             else:
-                # Bark cards leave the bark little (sc_young_sapling's LOD1: .63 at the plain level's share, .90
-                # at the least share but one).
+                # Bark cards leave the bark little (a sapling's LOD1 scores far better near the least share than at
+                # the plain level's).
                 twig_share = 0
                 while twig_share < share and built(twig_share, default_gain, rule) is None:
                     twig_share += 1

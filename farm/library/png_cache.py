@@ -17,7 +17,7 @@ from species.meshing.png import png_bytes
 
 __all__ = ["PngCache", "PNG_COMPRESS_LEVEL", "CACHE_ENTRIES"]
 
-# zlib level 2: far faster than level 9 for slightly larger files (`benchmarks/bench_png.py` measures both).
+# zlib level 2: far faster than level 9 for slightly larger files (`python -m benchmarks.bench_png` measures both).
 PNG_COMPRESS_LEVEL = 2
 # Distinct images kept (a species' bark maps and leaf atlases, one asset's impostor and previews).
 CACHE_ENTRIES = 64
@@ -30,8 +30,8 @@ class PngCache:
         self.entries, self.compress_level = entries, compress_level
         self._encoded: OrderedDict[bytes, bytes] = OrderedDict()
         # Read-only arrays seen before -> (a weak reference to it, its key): an asset's atlases go into its GLB
-        # twice (the file, the size without instancing) and its USD textures; hashing a 1024 x 800 RGBA atlas
-        # takes about 2.5 ms each time. Only read-only arrays that own their pixels: nothing can change them.
+        # twice (the file, the size without instancing) and its USD textures, and hashing a large RGBA atlas each
+        # time adds up. Only read-only arrays that own their pixels: nothing can change them.
         self._keys: dict[int, tuple[weakref.ref, dict[bool, bytes]]] = {}
 
     def __len__(self) -> int:
@@ -57,8 +57,8 @@ class PngCache:
         seen = self._keys.get(id(image)) if read_only else None
         if seen is not None and seen[0]() is image and palette in seen[1]:
             return seen[1][palette]
-        # SHA-256 runs on the CPU's SHA instructions through OpenSSL: twice blake2b's speed here (19 MB, an
-        # asset's four twig atlas albedos: 10 against 18 ms).
+        # SHA-256 runs on the CPU's SHA instructions through OpenSSL: faster than blake2b on the machines it was
+        # compared on (an asset's four twig atlas albedos).
         digest = hashlib.sha256(f"{image.dtype.str}{image.shape}{'P' if palette else ''}".encode())
         digest.update(image.data)
         key = digest.digest()

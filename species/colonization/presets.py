@@ -11,7 +11,8 @@ from ..presets import Choice, IntRange, Jitter, Preset
 
 __all__ = ["PRESETS"]
 
-# Shared by every template; sized for about 0.2-1 s of growth per tree on one core.
+# Shared by every template; sized so a tree grows well within the thesis's growth time per tree, on one core
+# (`python -m benchmarks.bench_colonization` times the presets).
 _BASE: dict[str, Any] = {"marker_density": 2.0, "max_markers": 20000, "iterations": 40}
 
 

@@ -14,7 +14,7 @@ FIXED6_MAX_MAGNITUDE = 1e9  # |v| * 1e6 then stays below 2**53, where float64 ho
 INT_MAX_MAGNITUDE = 10**18 - 1  # |n| must fit int64 after abs()
 
 # Text is built as little-endian 4-byte words, NUL-padded, and the NULs deleted at the end with one
-# bytes.translate (about 1 ns a byte). A word holds a group of three digits, looked up by the group's value;
+# bytes.translate (one C pass). A word holds a group of three digits, looked up by the group's value;
 # the first group of a number may carry its '-', and a number's last word keeps its fourth byte free for
 # the separator (or newline) after it.
 _WORD = np.dtype("<u4")

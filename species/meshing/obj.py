@@ -47,8 +47,8 @@ def tree_mesh_to_obj(tree: TreeMesh, compress_level: int = 9) -> dict[str, bytes
     and "leaves" (left out when empty), each with `usemtl` of its material. The MTL gives bark
     `map_Kd <name>_bark.png` and leaves `map_Kd`/`map_d <name>_leaf.png` (the leaf PNG's alpha is the
     cut-out). Texture names carry the tree's name so many trees can share a folder. Same tree, same bytes.
-    `compress_level`: the textures' zlib level (9, the smallest files, takes about 50 ms for the two; the asset
-    library writes them at its own fast level).
+    `compress_level`: the textures' zlib level (9, the smallest files and the slowest; the asset library writes
+    them at its own fast level).
     """
     if not isinstance(tree, TreeMesh):
         raise ObjError(f"tree_mesh_to_obj needs a TreeMesh; got {type(tree).__name__}")

@@ -357,9 +357,9 @@ class TreeLods:
         per cluster, clusters split as finely as TWIG_DEPTHS allows, and more planes, up to `max_planes`, where
         the room holds them; where not even one crossed pair per dropped subtree fits, one card per cluster;
         LodBudgetError when not even that fits. `planes_first`: as many planes as fit (`max_planes`, then half
-        as many, ...), clusters as fine as those planes allow (a far level's few clusters seen from between their
-        planes: sc_multistem_shrub's LOD3 .74 with 4 or 8 planes at the finest depth, .80 with 8 on coarser
-        clusters; docs/library.md). Without `leaves`, bark cards (`twig_cards`)."""
+        as many, ...), clusters as fine as those planes allow (a far level's few clusters are seen from between
+        their planes, where more planes on coarser clusters beat fewer on finer ones; docs/library.md). Without
+        `leaves`, bark cards (`twig_cards`)."""
         if planes_first:
             ladder = [max_planes >> k for k in range(max_planes.bit_length()) if max_planes >> k >= 1]
         else:

@@ -33,23 +33,19 @@ TWIG_DEPTH_OFFSET = 1.0e4
 _CARD_MARGIN = 0.02
 # Cards per twig cluster, crossed on the cluster's principal axis. A single card shows its twigs exactly from the
 # front and pressed to a line from the side; two crossed cards keep a bushy cluster's width from every side, for
-# twice the triangles per cluster (45 presets, mean least IoU LOD1/LOD2/LOD3 .866/.798/.752 with one card,
-# .873/.817/.768 with two; docs/library.md, "Twig cards").
+# twice the triangles per cluster (docs/library.md, "Twig cluster cards", compares one and two).
 TWIG_CARD_PLANES = 2
 # At most this many planes per cluster (as many as the impostor has).
 _MAX_PLANES = 8
 # Clusters of this many planes or more (the far level's whole subtrees, seen from about level) cross on the
 # vertical, as the impostor's planes do, not on their principal axis: a flat spray's planes lie along its own
-# axes, so seen from the side one of them is edge-on and the other shows it pressed thin (45 presets: LOD3 mean
-# least IoU .779 -> .790, presets within its floor 23 -> 25: sc_dome_shrub .720 -> .806, lsystem_fractal_plant
-# .569 -> .678, sc_dense_beech .876 -> .910). Upright from 3 planes: .788 (sc_young_sapling's 3-plane LOD3 .477
-# -> .426); upright at every level: LOD2 .829 -> .820 (sc_cypress_column's tilted sprays .721 -> .613).
+# axes, so seen from the side one of them is edge-on and the other shows it pressed thin. From 3 planes, or at
+# every level, upright loses more than it gains (tilted sprays, a sapling's 3-plane clusters; docs/library.md).
 UPRIGHT_PLANES = 4
 # A cluster of fewer planes crosses upright too when it lies about level (the z of its least-spread axis above
 # this, its own plane within about 25 deg of level): crossed on its principal axis, its first plane would be all
-# but edge-on from every side (45 presets, over UPRIGHT_PLANES alone: mean least IoU LOD1/LOD2/LOD3 .887/.829/.790
-# -> .889/.830/.792, within 29/23/25 -> 31/25/27, sc_fir's LOD3 .686 -> .772, sc_dense_beech's .910 -> .876; with
-# tree_seed(7, 0) .888/.825/.779 -> .888/.826/.783). From 0.8 or 0.707 it lost LOD2 or LOD3 on average.
+# but edge-on from every side. A lower threshold (0.8 or 0.707) turns sprays that are not level and loses LOD2 or
+# LOD3 on average over the presets.
 LEVEL_SPRAY_NORMAL_Z = 0.9
 # Crossed cards share faces as the impostor's planes do (renderers.impostor.AXIS_SHARE, SECTOR_OVERLAP): those
 # within this share of the cluster's reach from its axis go on every plane (seen between the planes, the axis
@@ -59,18 +55,17 @@ TWIG_AXIS_SHARE = 0.2
 TWIG_SECTOR_OVERLAP = 0.15
 # A card every level draws (a branch all of them drop, split alike) samples the nearest level's tile, unless that
 # tile was asked more than this many times finer than its own level's texel: sampled four times finer, a far
-# level's thin twigs fall between its pixel centres (45 presets, sharing every copy: LOD2 mean least IoU .824 ->
-# .829, presets within 19 -> 23; sc_shadow_conifer's LOD3 sharing LOD1's tiles .648 -> .625).
+# level's thin twigs fall between its pixel centres (a conifer's far level sampling its near level's tiles loses
+# its twigs; sharing the rest frees budget for LOD2's own cards).
 SHARED_TEXEL_RATIO = 2.0
 # Cards of at most this many planes per cluster that carry their leaves (the nearer levels': LOD2 may take up to
 # 4, `farm.library.lod_fit.MIDDLE_TWIG_PLANES`) share the atlas budget at BUDGETED_TEXELS_PER_PIXEL; the far
-# level's up to 8 come on top at one texel a pixel. LOD2's 3-4 plane cards on top at one texel a pixel lost
-# sassafras's LOD2 .774 -> .745 (held by the budget: .785) for LOD3 means within .001 (45 presets).
+# level's up to 8 come on top at one texel a pixel. LOD2's 3-4 plane cards on top of the budget at one texel a
+# pixel are too coarse, for no gain at LOD3 (docs/library.md).
 BUDGETED_MAX_PLANES = 4
 # Texels per screen pixel (at the level's switch size) asked of the cards the atlas budget holds: sampled twice,
-# into texels and then into pixels, a twig thinner than a pixel breaks up; at two texels a pixel less of it does
-# (45 presets: LOD2 mean least IoU .833 -> .838, presets within its floor 23 -> 25, sassafras .738 -> .774). The
-# cards outside the budget (bark cards, the far level's many planes) keep one.
+# into texels and then into pixels, a twig thinner than a pixel breaks up; at two texels a pixel less of it does.
+# The cards outside the budget (bark cards, the far level's many planes) keep one.
 BUDGETED_TEXELS_PER_PIXEL = 2.0
 
 
@@ -448,8 +443,7 @@ def _texels_within(extent: np.ndarray, texel: np.ndarray, level: np.ndarray, max
     max(asked_k, s (asked_k area_k)^(1/3)), area_k its cards' area, with the least s (bisection) that fits.
     That split least raises the sum over levels of texels per screen pixel (t_k / asked_k, under
     sum area_k / t_k^2 fixed): a near level gives way less than one common size would make it, a far one more
-    (45 presets: LOD1 mean least IoU +.003, presets within its floor 26 -> 29; LOD2 -.003, 20 -> 19;
-    docs/library.md)."""
+    (docs/library.md)."""
     area = np.bincount(level, weights=extent[:, 0] * extent[:, 1])
     shape = np.cbrt(texel * area[level])
 

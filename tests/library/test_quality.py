@@ -206,9 +206,9 @@ def test_dense_crowns_reach_the_target_at_every_switch(name, renderer):
     assert min(worst.values()) >= IOU_TARGET, worst
 
 
-# Issue 26's target, per preset, as benchmarks/bench_silhouette_floor.py measured it (tree_seed(0, 0), default
-# spec). The presets whose worst level misses its half-pixel floor by more than 0.04 are listed and not run here
-# (about 3 s each, 19 of them: the bench measures them, and a preset that comes to meet the target moves out of
+# The half-pixel floor target, per preset, as benchmarks/bench_silhouette_floor.py measures it (tree_seed(0, 0),
+# default spec). The presets whose worst level misses its half-pixel floor by more than 0.04 are listed and not run
+# here (slow to build, and the bench measures them; a preset that comes to meet the target moves out of
 # this list into the strict test); those within 0.02 of the line either way may fall on either side on another
 # CPU's rasteriser. Every other preset must meet the target.
 FLOOR_MISSES = {"bonsai", "maple", "sc_birch_oval", "sc_dense_beech", "sc_dome_shrub", "sc_multistem_shrub",

@@ -29,8 +29,8 @@ def photo_tree():
 @pytest.fixture(scope="session")
 def photos(photo_tree, tmp_path_factory):
     """Ten 320 px Cycles renders (4 samples) of the tree in winter (no leaves) on a textured ground, 10 degrees
-    apart, with cameras.json. In leaf, 14 % of the points SfM places above the ground land on the tree at this size;
-    leafless, about 70 % of those near the tree (docs/reconstruct.md)."""
+    apart, with cameras.json. Leafless, because in leaf few of the points SfM places above the ground land on the
+    tree at this size (docs/reconstruct.md gives the shares)."""
     return _orbit(photo_tree, PHOTO_SIZE, tmp_path_factory.mktemp("photos"))
 
 

@@ -277,5 +277,5 @@ def test_through_the_shipped_networks_the_grown_crown_covers_the_drawn_one(rende
         renderer.size = SIZE
     drawn = closed_silhouette(view.images["mask"] > 0, 3)
     iou, other_iou = (_iou(closed_silhouette(m, 3), drawn) for m in (grown, other))
-    assert iou > 0.7 and iou > other_iou + 0.3, (iou, other_iou)  # measured 0.86 and 0.31
+    assert iou > 0.7 and iou > other_iou + 0.3, (iou, other_iou)  # thresholds well clear of what this tree gives
     assert abs(result.skeleton.height - skeleton.height) < 0.1 * skeleton.height
