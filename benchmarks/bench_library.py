@@ -61,7 +61,8 @@ def main(names: list[str], scaling: bool = True, twig_cards: bool = True) -> Non
     from farm.library.quality import FLOOR_MARGIN, asset_floors
     from farm.library.spec import parse_library_spec
     from farm.dataset.storage import Location
-    from farm.tree_chain import StageTimer, tree_seed
+    from farm.tree_chain import tree_seed
+    from species.timing import StageTimer
     from renderers.impostor import CoverageRenderer
     from species.meshing.png import png_bytes
 

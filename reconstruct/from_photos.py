@@ -27,11 +27,12 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from species.timing import StageTimer
+
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, CloudReconstruction, from_cloud, stem_groups
 from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
-from .timing import StageTimer
 
 __all__ = ["from_photos", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
            "in_footprint", "IsolatedTree"]
@@ -288,7 +289,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
               "scale_factor": tree.scale, "points": tree.counts}
     if residual is not None:
         record["alignment_residual_m"] = round(residual, 4)
-    timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.timings["isolate"],
+    timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.seconds["isolate"],
                **result.timings}
     return dataclasses.replace(result, method="photos", provenance={"sfm": record},
                                warnings=warnings + result.warnings, timings=timings)

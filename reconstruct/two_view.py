@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 
 from species import Skeleton, TreeMesh, build_mesh
+from species.timing import StageTimer
 from trainers.preprocess import SPECK_SHARE, PreprocessError, paper_image
 
 from ._two_view_brush import skeleton_2d_from_brush, stroke_centres
@@ -19,7 +20,6 @@ from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_he
 from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
-from .timing import StageTimer
 
 __all__ = ["two_view", "TwoViewResult", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
            "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
@@ -188,7 +188,7 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     strokes in several pieces, bad outlines, heights or options.
     """
     timer = StageTimer()
-    lap, timings = timer.lap, timer.timings
+    lap, timings = timer.lap, timer.seconds
 
     if not isinstance(rng, np.random.Generator):
         raise TwoViewError(f"rng is a {type(rng).__name__}: allowed a numpy.random.Generator "

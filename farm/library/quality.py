@@ -89,7 +89,7 @@ def library_floors(path: str, progress: bool = False) -> list[LevelFloor]:
     from tqdm import tqdm
 
     from farm.dataset.storage import Location
-    from farm.tree_chain import StageTimer
+    from species.timing import StageTimer
     from renderers.impostor import CoverageRenderer
 
     from .asset import build_asset
