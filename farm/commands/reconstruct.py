@@ -57,21 +57,6 @@ def register(subparsers) -> None:
     parser.set_defaults(run=run)
 
 
-def read_image(path: str) -> np.ndarray:
-    """An image file as an array: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA; 16-bit greys stay uint16."""
-    from PIL import Image, UnidentifiedImageError
-
-    with user_path(path, "read"):
-        try:
-            with Image.open(path) as image:
-                image.load()
-                if image.mode in ("P", "PA", "CMYK", "YCbCr", "LAB", "HSV", "1", "LA"):
-                    image = image.convert("RGBA" if "A" in image.mode or "transparency" in image.info else "RGB")
-                return np.asarray(image)
-        except UnidentifiedImageError:
-            raise CommandLineError(f"{path} is not an image file: allowed PNG, JPEG, TIFF, BMP or WebP") from None
-
-
 def _method(args: argparse.Namespace) -> str:
     two_view = args.front is not None or args.side is not None
     method = args.method or ("two-view" if two_view else "sketch-depth" if args.strokes or args.photo else "params")
@@ -124,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
     import reconstruct
     from farm.commands.tree import write_tree
+    from farm.dataset import read_image
 
     clouds = reconstruct_cloud.cloud_inputs(args)
     if clouds is not None:

@@ -3,11 +3,13 @@
 Layout: manifest.json, trees/part-NNNNN.parquet, views/part-NNNNN.parquet (docs/dataset.md). Modules: `schema`
 (the tables and their part files' bytes), `readers` (the manifest, part files, pyarrow, pandas, DuckDB, Ray Data,
 Hugging Face), `manifest` (shard records, the manifest, validation), `storage` (a local folder or object-store
-prefix), `image_codec` (maps as PNG) and `torch_dataset` (a torch `Dataset` over the views). It imports only
-`species`, numpy, pyarrow and the image libraries.
+prefix), `image_codec` (maps as PNG), `image_files` (image files a user gives, read as arrays) and
+`torch_dataset` (a torch `Dataset` over the views). It imports only `species`, numpy, pyarrow and the image
+libraries.
 """
 from __future__ import annotations
 
+from .image_files import read_image
 from .readers import duckdb_connect, open, part_files, read_manifest, to_huggingface, to_pandas, to_ray
 from .schema import (FLOAT_OUTPUTS, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, part_name, reading_part,
                      serialize_table, skeleton_from_row, trees_schema, views_schema)
@@ -16,7 +18,7 @@ from .storage import Location
 __all__ = ["SCHEMA_VERSION", "FLOAT_OUTPUTS", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
            "trees_schema", "views_schema", "skeleton_from_row", "part_name", "serialize_table", "read_manifest",
            "part_files", "open", "to_pandas", "duckdb_connect", "to_ray", "to_huggingface", "Location",
-           "ViewsDataset"]
+           "read_image", "ViewsDataset"]
 
 
 def __getattr__(name: str):

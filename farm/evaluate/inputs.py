@@ -20,6 +20,8 @@ from typing import Sequence
 
 import numpy as np
 
+from farm.dataset import read_image
+
 from .methods import MethodContext, MethodResult, joined_share
 from .units import EvaluationError, Unit
 
@@ -98,7 +100,6 @@ def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
 
 def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | None]:
     import reconstruct
-    from farm.commands.reconstruct import read_image
     from reconstruct import metrics
     from reconstruct.scoring import depth_picture
     from scipy.ndimage import binary_fill_holes
