@@ -86,7 +86,7 @@ def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
 
     result = reconstruct.from_cloud(path, seed=ctx.settings.seed)
     start = time.perf_counter()
-    points = result.base_points  # the skeleton's frame
+    points = result.scan.base_points  # the skeleton's frame
     fit = metrics.cloud_fit(result.skeleton, points)
     cloud_height = float(np.ptp(points[:, 2]))
     row = {"cloud_fit_10cm": fit["within"], "cloud_fit_median_m": fit["median_m"],
