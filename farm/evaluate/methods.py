@@ -8,8 +8,7 @@ gallery panel's cells (input, reconstruction and ground truth in the input view)
 scale, so the sketch methods grow at the true height (two-view: the top of the true main branches, what the strokes
 span).
 
-A method runs by the kind of what it reads (`KIND_RUNNERS`), and three add what the evaluation knows of them
-(`RUNNERS`):
+A method runs by the kind of what it reads, and three add what the evaluation knows of them (`RUNNERS`):
 - drawings (`run_drawn`): its inputs from the views the registry names (`Input.rendered`), its networks loaded once
   per worker, the tree's seed, the true height, and the geometry metrics in its input views.
   - params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`, with the dictionary's seed 0;
@@ -303,12 +302,11 @@ def run_orbit(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
 
 # ------------------------------------------------------------------------------------------------ the registry
 # What the evaluation knows of a method beyond its registry entry: how it feeds and scores it. Every other method
-# runs by the kind of its inputs (KIND_RUNNERS).
+# runs as `run_drawn` when every input is a rendered drawing, or by the kind of its one input (KIND_RUNNERS).
 RUNNERS: dict[str, Callable[[HeldOutTree, MethodContext], MethodResult]] = {
     "params": run_params, "sketch-depth": run_sketch_depth, "two-view": run_two_view}
-# A method reading one input of a kind (drawn images: every input rendered) -> how the evaluation runs it.
 KIND_RUNNERS: dict[str, Callable[[str, HeldOutTree, MethodContext], MethodResult]] = {
-    "image": run_drawn, "cloud": run_scan, "photos": run_orbit}
+    "cloud": run_scan, "photos": run_orbit}
 # Outputs a method is scored on when a dataset stores them (beside the inputs the registry names).
 SCORED_OUTPUTS = {"sketch-depth": ("silhouette_envelope", "trunk_depth")}
 
@@ -327,15 +325,16 @@ def _runner(name: str) -> Callable[[HeldOutTree, MethodContext], MethodResult]:
     if name in RUNNERS:
         return RUNNERS[name]
     reads = get_method(name).reads
-    kinds = {item.kind for item in reads}
-    drawn = kinds == {"image"} and all(item.rendered is not None for item in reads)
-    if len(kinds) != 1 or (kinds == {"image"}) != drawn or (not drawn and len(reads) != 1):
-        def unsupported(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-            raise TreefarmError(f"method {name!r} reads {', '.join(sorted(kinds))}: the evaluation makes drawings "
-                                "the registry names a rendered output for, one scan or one set of photos")
+    if all(item.kind == "image" and item.rendered is not None for item in reads):
+        return functools.partial(run_drawn, name)
+    if len(reads) == 1 and reads[0].kind in KIND_RUNNERS:
+        return functools.partial(KIND_RUNNERS[reads[0].kind], name)
 
-        return unsupported
-    return functools.partial(KIND_RUNNERS[kinds.pop()], name)
+    def unsupported(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
+        raise TreefarmError(f"method {name!r}: the evaluation makes drawings the registry names a rendered output "
+                            "for, one scan or one set of photos, not its inputs")
+
+    return unsupported
 
 
 class _EvaluatedMethods(Mapping):
