@@ -16,7 +16,7 @@ from farm.library.asset import build_asset
 from farm.library.blender_catalog import write_blender_library
 from farm.library.gltf_asset import asset_to_glb
 from farm.library.spec import parse_library_spec
-from farm.tree_chain import StageTimer
+from species.timing import StageTimer
 from renderers.blender import BlenderError
 from renderers.blender_assets import export_fbx_batch
 from renderers.gl_coverage import CoverageRenderer

@@ -55,7 +55,8 @@ def main() -> None:
     from farm.library.asset import build_asset, leaf_fractions
     from farm.library.catalog import IOU_TARGET
     from farm.library.spec import parse_library_spec
-    from farm.tree_chain import StageTimer, tree_seed
+    from farm.tree_chain import tree_seed
+    from species.timing import StageTimer
     from renderers.alpha_coverage import coverage_tree
     from renderers.gl_coverage import CoverageRenderer
 

@@ -33,9 +33,10 @@ from farm.library.gltf_asset import glb_size  # noqa: E402
 from farm.library.job import run_library, write_asset_files  # noqa: E402
 from farm.library.quality import FLOOR_MARGIN, asset_floors  # noqa: E402
 from farm.library.spec import parse_library_spec  # noqa: E402
-from farm.tree_chain import StageTimer, tree_seed  # noqa: E402
+from farm.tree_chain import tree_seed  # noqa: E402
 from renderers.gl_coverage import CoverageRenderer  # noqa: E402
 from species.meshing.png import png_bytes  # noqa: E402
+from species.timing import StageTimer  # noqa: E402
 
 DEFAULT_SPECIES = ("maple", "pine", "cherry", "palm", "sc_young_sapling", "lsystem_monopodial", "sassafras",
                    "douglas_fir", "balsam_fir")

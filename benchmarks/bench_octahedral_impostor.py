@@ -20,13 +20,14 @@ from farm.library.asset import build_asset, leaf_fractions
 from farm.library.catalog import IOU_TARGET
 from farm.library.png_cache import PngCache
 from farm.library.spec import DEFAULT_IMPOSTOR_TILE, parse_library_spec
-from farm.tree_chain import StageTimer, tree_seed
+from farm.tree_chain import tree_seed
 from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
 from renderers.gl_coverage import CoverageRenderer
 from renderers.impostor import render_impostor
 from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import OCTAHEDRAL_FRAMES, between_frame_azimuths, render_octahedral_impostor
+from species.timing import StageTimer
 
 DEFAULT_PRESETS = ("maple", "pine", "palm", "balsam_fir", "sc_young_sapling")
 KINDS = ("crossed", "octahedral")

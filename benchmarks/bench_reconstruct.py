@@ -1,7 +1,10 @@
-"""Quality and speed of the three sketch reconstructions on held-out trees, beside the papers' figures.
+"""Quality and speed of the drawing reconstructions on held-out trees, beside the papers' figures.
 
-Trees: grown here from each method's dataset spec (its species; the tree seeds of a bench-own job seed, never a
-training spec's, so the shipped models never saw them), rendered as the spec renders them:
+Methods: the registry's (`reconstruct.methods.METHODS`) whose inputs are rendered drawings; the three below have
+runners of their own, any other runs as `run_drawn` (its inputs rendered in the rig the registry names, grown at
+the true height, scored like the others). Trees: grown here from each method's dataset spec (its species; the tree
+seeds of a bench-own job seed, never a training spec's, so the shipped models never saw them), rendered as the spec
+renders them:
 - params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`, the Weber-Penn generator grows the
   dictionary. Parameter head scores (1 - RMSE) x 100 with the model's codec, species accuracy, height and crown
   errors, and the rotation sweep: the network on each view of rig `orbit:N:10` (paper: 72 views, HDD ~0.03).
@@ -55,22 +58,24 @@ from farm.table import format_table  # noqa: E402
 from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
 from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
+from reconstruct.methods import METHODS, Method, RunOptions  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
 from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
 from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes, network_depth_error  # noqa: E402
+from renderers.camera import parse_rig  # noqa: E402
 from species.errors import TreefarmError  # noqa: E402
 
-METHODS = ("params", "sketch-depth", "two-view")
-# Each method's dataset spec: its species and its render.
+# Each method's dataset spec: its species and its render (any other method: the two-view spec's species, broadleaf
+# habits of both generators, rendered in the rig its inputs name).
 SPECS = {"params": ROOT / "trainers/specs/sketchnet.yaml",
          "sketch-depth": ROOT / "trainers/specs/pix2pix-silhouette.yaml",
          "two-view": ROOT / "reconstruct/specs/two-view.yaml"}
 TRAINING_SPECS = ("sketchnet", "pix2pix-silhouette", "pix2pix-trunk")
 # Bench-own job seeds: tree i of a method grows from tree_seed(seed, i); checked against the training specs'.
 BENCH_SEEDS = {"params": 2304, "sketch-depth": 2300, "two-view": 2301}
+OTHER_SEED = 2309  # any other method's
 TARGET_S = 2.0
 BASELINE = "baseline: same preset"
-SEEN_AZIMUTHS = {"params": (0, 180), "sketch-depth": (0, 180), "two-view": (0, 90, 180, 270)}
 
 # The papers' figures beside each metric (seeds-digest section 5); "" where none is published.
 PAPER = {
@@ -125,10 +130,25 @@ def spread(names: list[str], n: int) -> list[str]:
     return [names[i % len(names)] for i in range(n)]
 
 
+def drawn_methods() -> list[str]:
+    """The registry's methods whose every input is a rendered drawing (`Input.rendered`), in its order."""
+    return [name for name, m in METHODS.items() if all(item.rendered is not None for item in m.reads)]
+
+
+def bench_seed(method: str) -> int:
+    return BENCH_SEEDS.get(method, OTHER_SEED)
+
+
+def seen_azimuths(method: Method) -> list[float]:
+    """The azimuths of the views a method's inputs are drawn in (their rig's, `renderers.camera.parse_rig`)."""
+    views = {item.rendered.view for item in method.reads}
+    return [azimuth for name, azimuth, _ in parse_rig(method.reads[0].rendered.rig).views if name in views]
+
+
 def check_seeds() -> None:
     taken = {load_spec(ROOT / f"trainers/specs/{name}.yaml").seed: name for name in TRAINING_SPECS}
     taken[load_spec(SPECS["two-view"]).seed] = "two-view"
-    for method, seed in BENCH_SEEDS.items():
+    for method, seed in {**BENCH_SEEDS, "any other": OTHER_SEED}.items():
         if seed in taken:
             raise SystemExit(f"bench seed {seed} of {method} is the {taken[seed]} spec's: pick another")
 
@@ -138,7 +158,8 @@ class Scorer(TreeScorer):
     """`reconstruct.scoring.TreeScorer` of one GT tree, its rows keyed by the metrics' labels (the tables' rows)."""
 
     def __init__(self, renderer: ViewRenderer, truth: Truth, input_cameras, method: str, surface_samples: int):
-        super().__init__(renderer, truth.skeleton, truth.mesh, input_cameras, SEEN_AZIMUTHS[method], surface_samples)
+        super().__init__(renderer, truth.skeleton, truth.mesh, input_cameras, seen_azimuths(METHODS[method]),
+                         surface_samples)
         self.truth = truth
 
     def __call__(self, skeleton, mesh, main_nodes=None) -> dict[str, float]:
@@ -303,10 +324,10 @@ def run_two_view(renderer, args, run: Run) -> None:
                 continue
             total = time.perf_counter() - start
             if variant == "1-px lines":
-                run.time({**result.report["timings"], "total": total})
+                run.time({**result.timings, "total": total})
             else:
                 run.time({"total, brush": total})
-            run.add(variant, scorer(result.skeleton, result.mesh, result.report["main"].positions))
+            run.add(variant, scorer(result.skeleton, result.mesh, result.maps["main_skeleton"]))
             if i < args.sheet_trees and variant == "1-px lines":
                 inputs = {"front": front.images[output], "side": side.images[output]}
                 run.sheet.append((f"two-view {preset}", sheet_cells(renderer, scorer, inputs, result.skeleton,
@@ -314,6 +335,37 @@ def run_two_view(renderer, args, run: Run) -> None:
         _, b_skeleton, b_mesh, b_main = baseline_tree(truth, BENCH_SEEDS["two-view"], i, args.trees)
         run.add(BASELINE, scorer(b_skeleton, b_mesh, b_main))
         print(f"  two-view {i + 1}/{len(presets)} {preset}", flush=True)
+
+
+def run_drawn(renderer, args, run: Run) -> None:
+    """Any other drawing method of the registry: trees of the two-view spec's species rendered in the rig its
+    inputs name, grown at the true height with its networks, beside the same-preset baseline."""
+    method = METHODS[run.method]
+    rig = method.reads[0].rendered.rig
+    views = list(dict.fromkeys(item.rendered.view for item in method.reads))
+    outputs = list(dict.fromkeys(item.rendered.output for item in method.reads))
+    nets = {task: predictor(task, args.models) for task in method.models}
+    spec = load_spec(SPECS["two-view"])
+    presets = spread(list(spec.species), args.trees)
+    for i, preset in enumerate(presets):
+        seed = tree_seed(OTHER_SEED, i)
+        truth = grow_truth(renderer, preset, seed, rig, spec.render.size, outputs)
+        by_name = {view.name: view for view in truth.views}
+        inputs = {item.name: by_name[item.rendered.view].images[item.rendered.output] for item in method.reads}
+        scorer = Scorer(renderer, truth, [by_name[v].camera for v in views], run.method, args.surface_samples)
+        try:
+            result = method.run(inputs, RunOptions(seed=seed, height=truth.skeleton.height, nets=nets))
+        except TreefarmError as error:
+            run.fail(run.method, truth, error)
+        else:
+            run.time(result.timings)
+            run.add(run.method, scorer(result.skeleton, result.mesh, result.maps.get("main_skeleton")))
+            if i < args.sheet_trees:
+                run.sheet.append((f"{run.method} {preset}", sheet_cells(renderer, scorer, inputs, result.skeleton,
+                                                                        result.mesh)))
+        _, b_skeleton, b_mesh, b_main = baseline_tree(truth, OTHER_SEED, i, args.trees)
+        run.add(BASELINE, scorer(b_skeleton, b_mesh, b_main))
+        print(f"  {run.method} {i + 1}/{len(presets)} {preset}", flush=True)
 
 
 RUNNERS = {"params": run_params, "sketch-depth": run_sketch_depth, "two-view": run_two_view}
@@ -370,7 +422,8 @@ def machine() -> str:
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--trees", type=int, default=12, help="held-out trees per method")
-    parser.add_argument("--methods", default=",".join(METHODS), help="comma separated: " + ", ".join(METHODS))
+    drawn = drawn_methods()
+    parser.add_argument("--methods", default=",".join(drawn), help="comma separated: " + ", ".join(drawn))
     parser.add_argument("--sweep-trees", type=int, default=3, help="trees of the params rotation sweep")
     parser.add_argument("--sweep-views", type=int, default=72, help="views of the sweep (rig orbit:N:10)")
     parser.add_argument("--surface-samples", type=int, default=metrics.SURFACE_SAMPLES,
@@ -381,9 +434,9 @@ def main(argv=None) -> None:
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "bench_reconstruct")
     args = parser.parse_args(argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    unknown = [m for m in methods if m not in METHODS]
+    unknown = [m for m in methods if m not in drawn]
     if unknown or args.trees < 1 or not 1 <= args.sweep_views <= 360:
-        parser.error(f"methods {unknown} unknown (allowed {', '.join(METHODS)}), or --trees < 1, or --sweep-views "
+        parser.error(f"methods {unknown} unknown (allowed {', '.join(drawn)}), or --trees < 1, or --sweep-views "
                      f"outside [1, 360]")
     check_seeds()
     print(f"machine: {machine()}", flush=True)
@@ -392,13 +445,13 @@ def main(argv=None) -> None:
     try:
         for method in methods:
             run = Run(method)
-            RUNNERS[method](renderer, args, run)
+            RUNNERS.get(method, run_drawn)(renderer, args, run)
             runs.append(run)
     finally:
         renderer.close()
     sheet = []
     for run in runs:
-        print(f"\n{run.method}: quality on held-out trees (job seed {BENCH_SEEDS[run.method]})")
+        print(f"\n{run.method}: quality on held-out trees (job seed {bench_seed(run.method)})")
         print(metric_table(run))
         for variant, messages in run.failed.items():
             print(f"  {variant}: {len(messages)} failed, first: {messages[0]}")

@@ -112,7 +112,7 @@ def main() -> None:
             print(f"| {label} | failed: {error} |" + " |" * 13)
             continue
         total = time.perf_counter() - started
-        record, t = result.provenance["sfm"], result.timings
+        record, t = result.scan.provenance["sfm"], result.timings
         counts = record["points"]
         tree_s = sum(v for k, v in t.items() if not k.startswith("sfm."))
         mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
@@ -130,11 +130,11 @@ def main() -> None:
     true_here = species.Skeleton(true.positions - base, true.parent, true.radius, true.order)
     for label, result, total in results:
         # Both trees in the base frame: ours has its root at the origin; the isolated cloud is shifted the same.
-        shift = (result.transform[:3, 3] - result.cloud.offset).astype(np.float32)
-        cloud = result.cloud.points - shift
+        scan = result.scan
+        shift = (scan.transform[:3, 3] - scan.cloud.offset).astype(np.float32)
+        cloud = scan.cloud.points - shift
         print(_quality_row(f"{label}, ours", f"{true.height:.1f}",
-                           _scores(result.measured, result.measures["trunk_radius_fit_m"], true, true_here, cloud,
-                                   total)))
+                           _scores(scan.measured, scan.measures["trunk_radius_fit_m"], true, true_here, cloud, total)))
         if missing is not None:
             print(f"| {label}, PyTLidar | | {missing} | | | | | |")
             continue
@@ -145,7 +145,7 @@ def main() -> None:
                                        run.seconds)))
         except (PyTLidarFailed, MetricError) as error:
             print(f"| {label}, PyTLidar | | failed: {error} | | | | | |")
-    print("\n" + json.dumps({label: r.provenance["sfm"] for label, r, _ in results}, indent=None))
+    print("\n" + json.dumps({label: r.scan.provenance["sfm"] for label, r, _ in results}, indent=None))
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from typing import Callable
 
 from renderers import FLOAT_OUTPUTS
 from species.errors import TreefarmError
+from species.timing import StageTimer
 
 from .dataset import part_name, serialize_table, trees_schema, views_schema
 from .jobs import PipelineSpec, species_of_trees
@@ -26,7 +27,7 @@ from .dataset.manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_v
                        write_job_record, write_manifest, write_shard_record)
 from .ray_reaper import start_reaper
 from .dataset.storage import Location, TransientWriteError
-from .tree_chain import (BuilderFactory, SpeciesChain, StageTimer, failed_tree_row, tree_row, tree_seed,
+from .tree_chain import (BuilderFactory, SpeciesChain, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 
 __all__ = ["ShardPlan", "plan_shards", "run_shard", "run_job", "ray_connection", "JobError", "WORKER_ENV",

@@ -7,19 +7,18 @@ from __future__ import annotations
 
 import functools
 import json
-import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable, Protocol
 
 import numpy as np
 
 import renderers
+from species.timing import StageTimer
 
 from .dataset import trees_schema
 from .dataset.image_codec import encode_map
 
-__all__ = ["BuiltTree", "StageTimer", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
+__all__ = ["BuiltTree", "SpeciesChain", "TreeBuilder", "tree_seed", "tree_id", "stage_rngs",
            "tree_row", "view_rows", "failed_tree_row", "to_json"]
 
 
@@ -49,23 +48,6 @@ def to_json(value: Any) -> str:
         raise TypeError(f"{type(item).__name__} is not JSON-able")
 
     return json.dumps(value, sort_keys=True, separators=(",", ":"), default=plain)
-
-
-class StageTimer:
-    """Wall-clock seconds per pipeline stage; `current` names the stage an exception came from."""
-
-    def __init__(self) -> None:
-        self.seconds: dict[str, float] = {}
-        self.current = "start"
-
-    @contextmanager
-    def stage(self, name: str):
-        self.current = name
-        start = time.perf_counter()
-        try:
-            yield
-        finally:
-            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
 
 
 @dataclass

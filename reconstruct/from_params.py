@@ -8,31 +8,16 @@ bytes; the species read back chooses the bark and leaf textures as any preset's 
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
-
-import numpy as np
-
 import species
 from species.skeleton import Skeleton
+from species.timing import StageTimer
 from species.tree_mesh import TreeMesh
 
 from ._sketch_arrays import check_height
 from .networks import as_image, predictor
+from .result import Reconstruction
 
-__all__ = ["ParamsReconstruction", "from_params", "scaled_to_height"]
-
-
-@dataclass(frozen=True, eq=False)
-class ParamsReconstruction:
-    """A Weber-Penn tree from one sketch: the dictionary the network read, the grown skeleton and mesh, and the
-    report (`timings` in seconds: "network", "grow_mesh", "total"; `maps`: "input", the network's input)."""
-
-    params: dict
-    skeleton: Skeleton
-    mesh: TreeMesh
-    timings: dict[str, float] = field(default_factory=dict)
-    maps: dict[str, np.ndarray] = field(default_factory=dict)
+__all__ = ["from_params", "scaled_to_height"]
 
 
 _HEIGHT_TOLERANCE = 0.01  # relative: a second rescale when the first leaves the tree further off (leaves, tips)
@@ -52,8 +37,10 @@ def scaled_to_height(params: dict, height: float) -> tuple[dict, Skeleton, TreeM
     return params, skeleton, mesh
 
 
-def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None) -> ParamsReconstruction:
-    """Read a Sapling dictionary from `sketch` and grow it.
+def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None) -> Reconstruction:
+    """Read a Sapling dictionary from `sketch` and grow it: the `Reconstruction` (method "params") of the dictionary
+    the network read, its skeleton and mesh; timings "network", "grow_mesh", "total"; maps "input" (the network's
+    input).
 
     sketch : (H, W) grey, (H, W, 3) or (H, W, 4) image, dark strokes on light paper, any size.
     models : a registry URI or folder (its champion), or None for the shipped default; net : a loaded predictor.
@@ -62,15 +49,15 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
              drawn at no scale, so without it the size is the network's guess from the tree's species and shape.
     """
     check_height(height, "the network's guess")
-    start = time.perf_counter()
+    timer = StageTimer()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)
     params, prepared = net.predict_view(image, seed=int(seed))
-    network = time.perf_counter() - start
+    timer.lap("network")
     if height is None:
         skeleton, mesh = species.rebuild(params)
     else:
         params, skeleton, mesh = scaled_to_height(params, float(height))
-    total = time.perf_counter() - start
-    return ParamsReconstruction(params, skeleton, mesh, {"network": network, "grow_mesh": total - network,
-                                                         "total": total}, {"input": prepared.image[0]})
+    timer.lap("grow_mesh")
+    timings = {**timer.seconds, "total": sum(timer.seconds.values())}
+    return Reconstruction("params", skeleton, mesh, params, timings, {"input": prepared.image[0]})

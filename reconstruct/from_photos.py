@@ -27,11 +27,13 @@ import numpy as np
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from species.timing import StageTimer
+
 from .clouds import MIN_POINTS, read_cloud
-from .from_cloud import FRAMES, CloudReconstruction, from_cloud, stem_groups
+from .from_cloud import FRAMES, from_cloud, stem_groups
+from .result import Reconstruction
 from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
-from .timing import StageTimer
 
 __all__ = ["from_photos", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
            "in_footprint", "IsolatedTree"]
@@ -244,8 +246,9 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
 
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
-                workdir: str | Path | None = None) -> CloudReconstruction:
-    """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`.
+                workdir: str | Path | None = None) -> Reconstruction:
+    """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
+    (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
     height   : the tree's height in metres; needed when the folder has no cameras.json (the scale is unknown).
     settings : pycolmap's (`SfmSettings`); poses "estimate" with a cameras.json aligns the estimated model onto it.
@@ -288,7 +291,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
               "scale_factor": tree.scale, "points": tree.counts}
     if residual is not None:
         record["alignment_residual_m"] = round(residual, 4)
-    timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.timings["isolate"],
+    timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.seconds["isolate"],
                **result.timings}
-    return dataclasses.replace(result, method="photos", provenance={"sfm": record},
-                               warnings=warnings + result.warnings, timings=timings)
+    return dataclasses.replace(result, method="photos", warnings=(*warnings, *result.warnings), timings=timings,
+                               scan=dataclasses.replace(result.scan, provenance={"sfm": record}))

@@ -1,7 +1,8 @@
 """Depth-guided growth from one sketch (seed 000, chapter 3; digest 1.10-1.12), the geometry half.
 
 In: silhouette maps (front depth01, gap, mask), trunk depth, colour trunk strokes and the input view's `Camera`
-(network outputs, or ground-truth renders standing in for them). Out: a grown `Skeleton`, its `TreeMesh`, a report.
+(network outputs, or ground-truth renders standing in for them). Out: a `Reconstruction` (method "sketch-depth"):
+the grown `Skeleton`, its `TreeMesh`, the growth dictionary, stage timings and the intermediate maps.
 
 Steps, each a plain function over arrays: `denoise_depth` (eq. 3.4-3.5), `backproject` (depth01 to world
 points), `trace_trunk` (in `reconstruct.trunk_tracing`: breadth-first stroke tracing into a 3D main skeleton),
@@ -12,7 +13,7 @@ skeleton and meshes.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import replace
 
 import numpy as np
 from scipy import ndimage
@@ -25,12 +26,13 @@ from species.geometry.vectors import unit_vectors
 from species.meshing import build_mesh
 from species.presets import get_preset
 from species.skeleton import Skeleton
-from species.tree_mesh import TreeMesh
+from species.timing import StageTimer
 
 from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
+from .result import Reconstruction
 from .trunk_tracing import stroke_labels, trace_trunk
 
-__all__ = ["SketchError", "SketchReconstruction", "CameraCrown", "from_sketch", "from_maps", "backproject", "denoise_depth",
+__all__ = ["SketchError", "CameraCrown", "from_sketch", "from_maps", "backproject", "denoise_depth",
            "geodesic_field", "crown_maps", "DEFAULT_SPECIES", "DENOISE_EPSILON"]
 
 DEFAULT_SPECIES = "sc_round_maple"  # a round crown with balanced allocation: the general-purpose default
@@ -38,24 +40,6 @@ DENOISE_EPSILON = 0.019             # thesis eq. 3.5
 _REFERENCE_PX = 256                 # the thesis's image size; pixel constants below scale from it
 _BIN_PX = 8.0                       # digest 1.12: geodesic bin width at 256 px
 _CLOSE_PX = 3.0                     # crown closing radius at 256 px (joins the leaves of a sparse silhouette)
-
-
-@dataclass(frozen=True, eq=False)
-class SketchReconstruction:
-    """A tree grown from one sketch.
-
-    skeleton : the grown tree (metres, Z up, base at the origin); its first nodes are the traced main skeleton.
-    mesh     : its bark and leaves (species.build_mesh with the growth dictionary).
-    params   : the colonization dictionary it grew with (the preset's draw, `height` set).
-    timings  : seconds per stage ("denoise", "trunk", "crown", "field", "growth", "mesh", "total").
-    maps     : intermediate arrays by name (see `from_sketch`).
-    """
-
-    skeleton: Skeleton
-    mesh: TreeMesh
-    params: dict
-    timings: dict[str, float] = field(default_factory=dict)
-    maps: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 # ------------------------------------------------------------------------------------------------ depth
@@ -306,7 +290,7 @@ def _colonization_params(species: str, rng: np.random.Generator) -> dict:
 
 def from_sketch(sketch, strokes, *, models=None, species: str | None = None, height: float | None = None,
                 rng: np.random.Generator, photo: bool = False, silhouette_net=None, trunk_net=None,
-                sketchnet=None) -> SketchReconstruction:
+                sketchnet=None) -> Reconstruction:
     """A tree from a drawing: the silhouette network reads `sketch` (black edges on white, any size; with
     `photo`, a photo whose blurred Canny edges are the sketch), the trunk network `strokes` (colour trunk strokes
     on the same page), and `from_maps` grows the tree in the drawing's view (`reconstruct.networks`).
@@ -314,8 +298,8 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     models : a registry (its champions) or None for the shipped defaults; the *_net arguments: loaded predictors.
     species : a colonization preset, "auto" (TreeSketchNet reads the species from the sketch, mapped by
               `networks.SPECIES_TO_COLONIZATION`) or None (DEFAULT_SPECIES). height, rng : as `from_maps`.
-    Report maps add "sketch" (the silhouette network's input) and "trunk_depth", "strokes" (in its window);
-    timings add "networks".
+    Maps add "sketch" (the silhouette network's input) and "trunk_depth", "strokes", "silhouette" (in its
+    window); timings add "networks".
     """
     from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 
@@ -332,16 +316,16 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     networks = time.perf_counter() - start
     result = from_maps(found.silhouette, found.trunk_depth, found.strokes, found.camera, species=chosen,
                        height=height, rng=rng)
-    result.timings["networks"] = networks
-    result.timings["total"] += networks
-    result.maps.update(sketch=found.sketch_input[0], trunk_depth=found.trunk_depth,
-                       strokes=found.strokes, silhouette=found.silhouette)
-    return result
+    timings = {**result.timings, "networks": networks}
+    timings["total"] += networks
+    return replace(result, timings=timings, maps={**result.maps, "sketch": found.sketch_input[0],
+                                                  "trunk_depth": found.trunk_depth, "strokes": found.strokes,
+                                                  "silhouette": found.silhouette})
 
 
 def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.ndarray, camera: Camera, *,
               species: str = DEFAULT_SPECIES, height: float | None = None,
-              rng: np.random.Generator) -> SketchReconstruction:
+              rng: np.random.Generator) -> Reconstruction:
     """Grow a tree that fills a sketch's crown from its traced main branches (seed 000 chapter 3), given the depth
     networks' maps (or ground-truth renders standing in for them).
 
@@ -356,19 +340,12 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     rng             : draws the preset's parameters, then growth; the same state gives the same bytes.
     The tree's base is the lowest stroke point, moved to the origin; the sketch is scaled to `height`. The
     preset's internode length is height / (crown_base + crown_height), so its IL-sized settings keep their sense.
-    Report maps: "front", "back", "crown_mask" (H, W) (the growth space's), "geodesic" (H, W) px,
+    Maps: "front", "back", "crown_mask" (H, W) (the growth space's), "geodesic" (H, W) px,
     "directions" (H, W, 2), "trunk_px" (K, 2) (u, v) of the traced main skeleton's nodes, "main_skeleton"
     (G, 3) float32 metres, the guide grown from (the traced nodes about one internode apart: the tree's first G).
     """
-    times: dict[str, float] = {}
-    clock = start = time.perf_counter()
-
-    def lap(name):
-        nonlocal clock
-        now = time.perf_counter()
-        times[name] = now - clock
-        clock = now
-
+    timer = StageTimer()
+    lap = timer.lap
     if not isinstance(rng, np.random.Generator):
         raise SketchError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
     silhouette = image_array(silhouette_maps, "silhouette_maps", (3,)).astype(np.float64)
@@ -420,9 +397,9 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     lap("growth")
     mesh = build_mesh(skeleton, params)
     lap("mesh")
-    times["total"] = time.perf_counter() - start
+    timings = {**timer.seconds, "total": sum(timer.seconds.values())}
     trunk_px, _ = camera.project(main.positions)
     maps = {"front": front_c.astype(np.float32), "back": back_c.astype(np.float32), "crown_mask": crown_mask,
             "geodesic": geodesic.astype(np.float32), "directions": directions.astype(np.float32),
             "trunk_px": trunk_px.astype(np.float32), "main_skeleton": guide.positions.copy()}
-    return SketchReconstruction(skeleton, mesh, params, times, maps)
+    return Reconstruction("sketch-depth", skeleton, mesh, params, timings, maps)

@@ -22,9 +22,9 @@ import numpy as np
 import pycolmap
 
 from renderers.camera import Camera, CameraError
+from species.timing import StageTimer
 
 from .clouds import CloudError
-from .timing import StageTimer
 
 __all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras",
            "align_to_cameras", "IMAGE_SUFFIXES", "MIN_PHOTOS"]
@@ -298,7 +298,7 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                      half_widths=np.array([0.5 * model.camera(image.camera_id).width
                                            / model.camera(image.camera_id).mean_focal_length() for image in images],
                                           np.float64),
-                     timings=timer.timings)
+                     timings=timer.seconds)
 
 
 def _set_known_intrinsics(database: Path, cameras: dict[str, Camera]) -> None:

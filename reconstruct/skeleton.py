@@ -48,9 +48,9 @@ from species.geometry.vectors import row_norms
 from species.lsystem.lstring_io import branch_orders
 from species.skeleton import Skeleton
 from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_maximum
+from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
-from .timing import StageTimer
 
 __all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT"]
 
@@ -609,7 +609,7 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     if not isinstance(settings, SkeletonSettings):
         raise CloudError(f"settings is a {type(settings).__name__}: allowed a SkeletonSettings")
     timer = StageTimer()
-    lap, timings = timer.lap, timer.timings
+    lap, timings = timer.lap, timer.seconds
 
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)

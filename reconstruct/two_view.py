@@ -2,7 +2,8 @@
 skeleton point cloud by equal-height matching, the lifted 3D main skeleton, twigs clipped by both crowns, mesh.
 
 In: a front and a side drawing (dark strokes on white; the front looks along +Y, the side along -X, as the
-renderers' "two-view" rig). Out: `TwoViewResult` (Skeleton in metres, Z up, base at the origin; TreeMesh; report).
+renderers' "two-view" rig). Out: a `Reconstruction` (method "two-view": Skeleton in metres, Z up, base at the
+origin; TreeMesh; stage timings and the intermediate maps).
 """
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from species import Skeleton, TreeMesh, build_mesh
+from species import Skeleton, build_mesh
+from species.timing import StageTimer
 from trainers.preprocess import SPECK_SHARE, PreprocessError, paper_image
 
 from ._two_view_brush import skeleton_2d_from_brush, stroke_centres
@@ -19,9 +21,9 @@ from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_he
 from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
-from .timing import StageTimer
+from .result import Reconstruction
 
-__all__ = ["two_view", "TwoViewResult", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
+__all__ = ["two_view", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
            "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
            "lift_main_skeleton", "grow_twigs", "add_leaves", "resample_skeleton", "ink_mask", "crown_outline",
            "is_brush_drawing", "DEFAULT_HEIGHT", "MESH_PARAMS", "TWIG_DEFAULTS", "LEAF_DEFAULTS",
@@ -39,29 +41,6 @@ BRUSH_SHARE = 0.05
 # The mesh's dictionary: bark and leaf colours of the colonization templates; default tube sides.
 MESH_PARAMS = {"name": "two-view", "bark_color": [0.33, 0.25, 0.18], "leaf_color": [0.25, 0.45, 0.15]}
 _MIN_SIDE = 8
-
-
-@dataclass(frozen=True, eq=False)
-class TwoViewResult:
-    """What `two_view` returns.
-
-    skeleton : Skeleton, metres, Z up, base at the origin, with leaves.
-    mesh     : TreeMesh of that skeleton (bark tubes and leaf cards).
-    report   : dict: "timings" {stage: seconds}, "brush" (bool, the stroke kind used), "metres_per_pixel" and
-               "side_scale" (front pixels per side pixel), "front_2d" and "side_2d" (Skeleton2D; the side mapped
-               into the front's pixels), "cloud" (M, 3) and "lifted" (N, 3) pixels (front column, row, side
-               column), "main" (the main Skeleton, metres), "twig_level" (N,) uint8, "outlines" (front, side)
-               CrownOutline.
-    """
-
-    skeleton: Skeleton
-    mesh: TreeMesh
-    report: dict
-
-    @property
-    def timings(self) -> dict[str, float]:
-        """Seconds per stage (`report["timings"]`), as the other methods' results give them."""
-        return self.report["timings"]
 
 
 @dataclass(frozen=True)
@@ -168,7 +147,7 @@ def _check_height(height) -> float:
 
 def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None, rng: np.random.Generator,
              brush: bool | None = None, front_outline=None, side_outline=None, twig_options: dict | None = None,
-             leaf_options: dict | None = None) -> TwoViewResult:
+             leaf_options: dict | None = None) -> Reconstruction:
     """A tree from two orthogonal drawings (seed 001, digest 2).
 
     front, side : (H, W) grey or (H, W, 3) colour uint8 images of one size, dark strokes on light paper: the trunk
@@ -182,13 +161,18 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     front_outline, side_outline : optional (H, W) bool crown masks in each image's pixels; default
                   `crown_outline` of the ink (convex hull + OUTLINE_MARGIN of the tree height).
     twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS.
+    Timings: "ink", "skeleton_2d", "match", "lift", "main_skeleton", "twigs", "mesh". Maps: "brush" (bool, the
+    stroke kind used), "metres_per_pixel" and "side_scale" (front pixels per side pixel), "front_2d" and "side_2d"
+    (Skeleton2D; the side mapped into the front's pixels), "cloud" (M, 3) and "lifted" (N, 3) pixels (front column,
+    row, side column), "main" (the main Skeleton, metres) and "main_skeleton" (its nodes), "twig_level" (N,)
+    uint8, "outlines" (front, side) CrownOutline.
     Radii: the pipe model with exponent 2.5 (TWIG_DEFAULTS) and tips 0.002 x height; with brush strokes the main skeleton keeps
     its drawn radii and no twig is thicker than the main branch it grows from.
     Raises TwoViewError for images that are blank, not (H, W) / (H, W, 3) uint8, of different sizes, 1-pixel
     strokes in several pieces, bad outlines, heights or options.
     """
     timer = StageTimer()
-    lap, timings = timer.lap, timer.timings
+    lap, timings = timer.lap, timer.seconds
 
     if not isinstance(rng, np.random.Generator):
         raise TwoViewError(f"rng is a {type(rng).__name__}: allowed a numpy.random.Generator "
@@ -245,10 +229,10 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     lap("twigs")
     mesh = build_mesh(skeleton, MESH_PARAMS)
     lap("mesh")
-    report = {"timings": timings, "brush": brush, "metres_per_pixel": mpp, "side_scale": scale,
-              "front_2d": front_2d, "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
-              "twig_level": level, "outlines": outlines}
-    return TwoViewResult(skeleton, mesh, report)
+    maps = {"brush": brush, "metres_per_pixel": mpp, "side_scale": scale, "front_2d": front_2d,
+            "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
+            "main_skeleton": main.positions, "twig_level": level, "outlines": outlines}
+    return Reconstruction("two-view", skeleton, mesh, timings=timings, maps=maps)
 
 
 def _with_drawn_radii(skeleton: Skeleton, level: np.ndarray, drawn: np.ndarray) -> Skeleton:

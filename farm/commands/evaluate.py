@@ -15,6 +15,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from reconstruct.methods import METHODS
+
 from farm.commands import CommandLineError, check_flag_int
 from farm.commands.ray_options import add_ray_options, check_workers
 
@@ -30,8 +32,7 @@ def register(subparsers) -> None:
     parser.add_argument("action", nargs="*", metavar="compare A B", help="compare two reports")
     parser.add_argument("--data", nargs="+", default=[], metavar="DIR", help="dataset folders (farm generate)")
     parser.add_argument("--methods", default=DEFAULT_METHODS,
-                        help=f"comma-separated, of params, sketch-depth, two-view, cloud, photos (default "
-                             f"{DEFAULT_METHODS})")
+                        help=f"comma-separated, of {', '.join(METHODS)} (default {DEFAULT_METHODS})")
     parser.add_argument("--models", help="model registry URI or folder (default: the shipped models/)")
     parser.add_argument("--out", help="the report folder (a rerun resumes it)")
     parser.add_argument("--trees", type=int, help="at most N held-out trees per dataset (spread evenly)")

@@ -13,36 +13,58 @@ blurred Canny edges become the silhouette sketch. --models: a model registry (it
 shipped in models/. --params-out writes the dictionary (params method), which `farm tree --params` rebuilds byte
 for byte when both files share a stem. --report writes a PNG of the input, the maps, the skeleton and the result.
 Drawings of any size are normalised as the training sketches were: black strokes on white, colour trunk strokes
-in the palette of docs/reconstruct.md.
+in the palette of docs/reconstruct.md. The methods (the registry `reconstruct.methods.METHODS`):
 """
 from __future__ import annotations
 
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from reconstruct.methods import INPUT_KINDS, METHODS, Method, RunOptions
 from species.errors import user_path
 
 from farm.commands import CommandLineError, reconstruct_cloud
 from farm.commands.ray_options import check_workers
 
-METHODS = ("params", "sketch-depth", "two-view", "cloud", "photos")
+# The RunOptions fields a drawing method may read that a flag of this command sets.
+OPTION_FLAGS = {"photo": "--photo", "species": "--species"}
+
+
+def _joined(words) -> str:
+    """"a", "a and b", "a, b and c"."""
+    words = list(words)
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
+
+
+def _drawing_methods() -> list[Method]:
+    return [m for m in METHODS.values() if m.reads[0].kind == "image"]
 
 
 def register(subparsers) -> None:
+    methods = "".join(f"  {m.name:<13} {m.summary} ({m.source})\n" for m in METHODS.values())
     parser = subparsers.add_parser("reconstruct", help="reconstruct a tree from sketches (GLB/OBJ)",
-                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                                   description=__doc__ + methods, formatter_class=argparse.RawDescriptionHelpFormatter)
+    positional: dict[str, list[str]] = {}  # kind -> the methods reading it as INPUT
+    flags: dict[str, tuple] = {}           # input flag -> (its Input, the methods reading it)
+    for method in METHODS.values():
+        for item in method.reads:
+            if item.flag:
+                flags.setdefault(item.name, (item, []))[1].append(method.name)
+            else:
+                positional.setdefault(item.kind, []).append(method.name)
     parser.add_argument("inputs", nargs="*", metavar="INPUT",
-                        help="the sketch (params, sketch-depth), cloud files or photo folders (cloud, photos)")
-    parser.add_argument("--method", choices=METHODS, help="default: inferred from the inputs")
-    parser.add_argument("--strokes", help="colour trunk strokes drawn over the sketch (sketch-depth)")
+                        help=", ".join(f"{INPUT_KINDS[kind][1]} ({', '.join(dict.fromkeys(names))})"
+                                       for kind, names in positional.items()))
+    parser.add_argument("--method", choices=list(METHODS), help="default: inferred from the inputs")
+    for name, (item, names) in flags.items():
+        parser.add_argument(f"--{name}", help=f"{item.help or item.what} ({', '.join(names)})")
     parser.add_argument("--photo", action="store_true",
                         help="INPUT is a photo: its blurred Canny edges are the silhouette sketch (sketch-depth)")
-    parser.add_argument("--front", help="the front drawing (two-view)")
-    parser.add_argument("--side", help="the side drawing, 90 degrees from the front (two-view)")
     parser.add_argument("--species", default=None,
                         help="sketch-depth: a colonization preset (sc_*), or auto (TreeSketchNet reads it); "
                              "default sc_round_maple")
@@ -58,44 +80,69 @@ def register(subparsers) -> None:
     parser.set_defaults(run=run)
 
 
-def read_image(path: str) -> np.ndarray:
-    """An image file as an array: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA; 16-bit greys stay uint16."""
-    from PIL import Image, UnidentifiedImageError
-
-    with user_path(path, "read"):
-        try:
-            with Image.open(path) as image:
-                image.load()
-                if image.mode in ("P", "PA", "CMYK", "YCbCr", "LAB", "HSV", "1", "LA"):
-                    image = image.convert("RGBA" if "A" in image.mode or "transparency" in image.info else "RGB")
-                return np.asarray(image)
-        except UnidentifiedImageError:
-            raise CommandLineError(f"{path} is not an image file: allowed PNG, JPEG, TIFF, BMP or WebP") from None
+def _input_flags(method: Method) -> list[str]:
+    return [f"--{item.name}" for item in method.reads if item.flag]
 
 
-def _method(args: argparse.Namespace) -> str:
-    two_view = args.front is not None or args.side is not None
-    method = args.method or ("two-view" if two_view else "sketch-depth" if args.strokes or args.photo else "params")
-    if method in ("cloud", "photos"):
-        raise CommandLineError(f"--method {method} takes {'cloud files' if method == 'cloud' else 'photo folders'} "
-                               "as INPUT (got none that exist)")
+def _given(args: argparse.Namespace, method: Method, switches_only: bool = False) -> list[str]:
+    """The method's flags on the command line: its input flags given, and its options set (only the switches,
+    such as --photo, with `switches_only`)."""
+    given = [f"--{item.name}" for item in method.reads if item.flag and getattr(args, item.name) is not None]
+    for option in method.options:
+        value = getattr(args, option, None) if option in OPTION_FLAGS else None
+        if value is True or (not switches_only and value not in (None, False)):
+            given.append(OPTION_FLAGS[option])
+    return given
+
+
+def _inferred(args: argparse.Namespace) -> str:
+    """The drawing method the flags given point to: the one that reads most of them (input flags and switches),
+    more input flags breaking a tie; with none given, the first that reads one INPUT and nothing else."""
+    drawing = _drawing_methods()
+    best = max(drawing, key=lambda m: (len(_given(args, m, switches_only=True)), len(_input_flags(m))))
+    if _given(args, best, switches_only=True):
+        return best.name
+    return next((m.name for m in drawing if len(m.reads) == 1 and not m.reads[0].flag), drawing[0].name)
+
+
+def _method(args: argparse.Namespace) -> Method:
+    method = METHODS[args.method or _inferred(args)]
+    kind = method.reads[0].kind
+    if kind != "image":
+        raise CommandLineError(f"--method {method.name} takes {INPUT_KINDS[kind][1]} as INPUT (got none that exist)")
     cloud_only = [flag for flag, value in (("--skeleton-ply", args.skeleton_ply), ("--qsm-csv", args.qsm_csv),
                                            ("--workers", args.workers), ("--address", args.address)) if value]
     if cloud_only or args.up != "z" or args.frame != "base":
-        raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are cloud and photos options, not "
-                               f"{method}'s")
-    if method == "two-view":
-        if args.front is None or args.side is None or args.inputs:
-            raise CommandLineError("--method two-view takes --front FRONT.png and --side SIDE.png (no INPUT)")
-    elif len(args.inputs) != 1 or two_view:
-        raise CommandLineError(f"--method {method} takes one INPUT image (got {len(args.inputs)}); --front/--side "
-                               "are for two-view")
-    if method == "sketch-depth" and args.strokes is None:
-        raise CommandLineError("--method sketch-depth needs --strokes STROKES.png (the colour trunk strokes)")
-    if method != "sketch-depth" and (args.strokes or args.photo or args.species):
-        raise CommandLineError(f"--strokes, --photo and --species are sketch-depth options, not {method}'s")
-    if method != "params" and args.params_out:
-        raise CommandLineError(f"--params-out writes the params method's dictionary; --method {method} has none")
+        scans = [m.name for m in METHODS.values() if m.reads[0].kind != "image"]
+        raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are {_joined(scans)} options, not "
+                               f"{method.name}'s")
+    flagged = [item for item in method.reads if item.flag]
+    n_inputs = len(method.reads) - len(flagged)
+    if not n_inputs:
+        if any(getattr(args, item.name) is None for item in flagged) or args.inputs:
+            raise CommandLineError(f"--method {method.name} takes "
+                                   f"{' and '.join(f'--{i.name} {i.name.upper()}.png' for i in flagged)} (no INPUT)")
+    else:
+        flag_only = [m for m in _drawing_methods() if m is not method and all(item.flag for item in m.reads)]
+        if len(args.inputs) != n_inputs or any(_given(args, m) for m in flag_only):
+            count = "one INPUT image" if n_inputs == 1 else f"{n_inputs} INPUT images"
+            elsewhere = "".join(f"; {'/'.join(_input_flags(m))} are for {m.name}" for m in flag_only)
+            raise CommandLineError(f"--method {method.name} takes {count} (got {len(args.inputs)}){elsewhere}")
+        missing = [item for item in flagged if getattr(args, item.name) is None]
+        if missing:
+            item = missing[0]
+            raise CommandLineError(f"--method {method.name} needs --{item.name} {item.name.upper()}.png "
+                                   f"({item.what})")
+    own = set(_given(args, method))
+    for other in _drawing_methods():
+        if other is not method and set(_given(args, other)) - own:
+            options = [OPTION_FLAGS[o] for o in other.options if o in OPTION_FLAGS]
+            raise CommandLineError(f"{_joined(_input_flags(other) + options)} are {other.name} options, not "
+                                   f"{method.name}'s")
+    if not method.rebuilds and args.params_out:
+        rebuilding = [m.name for m in METHODS.values() if m.rebuilds]
+        raise CommandLineError(f"--params-out writes the {_joined(rebuilding)} method's dictionary; --method "
+                               f"{method.name} has none")
     return method
 
 
@@ -121,9 +168,7 @@ def _models(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    from dataclasses import replace
-
-    import reconstruct
+    from farm.dataset import read_image  # here, not at the top: the dataset format's readers (start-up time)
     from species.meshing import write_tree
 
     check_workers(args.workers)
@@ -140,22 +185,13 @@ def run(args: argparse.Namespace) -> int:
         raise CommandLineError(f"--seed {args.seed} is invalid: allowed an integer >= 0")
     started = time.perf_counter()
     models = _models(args)
-    rng = np.random.default_rng(args.seed)
-    if method == "params":
-        image = read_image(args.inputs[0])
-        result = reconstruct.from_params(image, models=models, seed=args.seed, height=args.height)
-        panels = [("input", result.maps["input"])]
-    elif method == "sketch-depth":
-        image = read_image(args.inputs[0])
-        strokes = read_image(args.strokes)
-        result = reconstruct.from_sketch(image, strokes, models=models, species=args.species, height=args.height,
-                                         rng=rng, photo=args.photo)
-        panels = [("input", result.maps["sketch"]), ("front depth", result.maps["front"]),
-                  ("trunk depth", result.maps["trunk_depth"]), ("strokes", result.maps["strokes"])]
-    else:
-        front, side = read_image(args.front), read_image(args.side)
-        result = reconstruct.two_view(front, side, height=args.height, rng=rng)
-        panels = [("front", front), ("side", side)]
+    positional = iter(args.inputs)
+    inputs = {item.name: read_image(getattr(args, item.name) if item.flag else next(positional))
+              for item in method.reads}
+    result = method.run(inputs, RunOptions(seed=args.seed, height=args.height, models=models, species=args.species,
+                                           photo=args.photo))
+    shown = {**inputs, **result.maps}  # a panel names a map of the result, or else an input
+    panels = [(label, shown[name]) for label, name in method.report_panels]
     mesh = replace(result.mesh, name=out.stem)
     if args.params_out:
         with user_path(args.params_out, "write"):
@@ -166,9 +202,10 @@ def run(args: argparse.Namespace) -> int:
         from reconstruct.report import write_report
 
         with user_path(args.report, "write"):
-            write_report(args.report, panels, result.skeleton, mesh, title=f"{method}: {Path(out).name}")
+            write_report(args.report, panels, result.skeleton, mesh, title=f"{method.name}: {Path(out).name}")
     skeleton = result.skeleton
     stages = ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items() if k != "total")
-    print(f"{method}: {skeleton.n_nodes} nodes, height {skeleton.height:.2f} m, crown {skeleton.crown_radius:.2f} m, "
-          f"{mesh.n_faces} faces -> {files[0]} ({time.perf_counter() - started:.2f} s; {stages})")
+    print(f"{method.name}: {skeleton.n_nodes} nodes, height {skeleton.height:.2f} m, crown "
+          f"{skeleton.crown_radius:.2f} m, {mesh.n_faces} faces -> {files[0]} "
+          f"({time.perf_counter() - started:.2f} s; {stages})")
     return 0

@@ -15,9 +15,10 @@ import csv
 import sys
 import time
 import traceback
+from dataclasses import replace
 from pathlib import Path
 
-
+from reconstruct.methods import INPUT_KINDS, METHODS, RunOptions
 from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
@@ -55,16 +56,25 @@ def _is_photo_folder(path: Path) -> bool:
     return path.is_dir() and any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
 
 
+def _scan_methods() -> dict[str, str]:
+    """The registry's methods that read a cloud file or a photo folder -> that kind."""
+    return {name: m.reads[0].kind for name, m in METHODS.items() if m.reads[0].kind in ("cloud", "photos")}
+
+
 def cloud_inputs(args: argparse.Namespace) -> tuple[str, list[Path], bool] | None:
-    """(method, inputs, batch) when the inputs are clouds or photo folders, else None (a drawing method)."""
+    """(method, inputs, batch) when the inputs are clouds or photo folders, else None (a drawing method).
+    Without --method, a kind's method is the registry's first that reads it."""
     paths = [Path(p) for p in args.inputs]
-    if not paths or args.front or args.side:
+    scans = _scan_methods()
+    # the inputs of a method that reads flags only (two-view's --front/--side) make it that method
+    flag_only = [item.name for m in METHODS.values() if all(i.flag for i in m.reads) for item in m.reads]
+    if not paths or any(getattr(args, name) for name in flag_only):
         return None
-    if args.method not in (None, "cloud", "photos"):
+    if args.method is not None and args.method not in scans:
         return None
     for path in paths:
         if not path.exists():
-            if args.method in ("cloud", "photos") or path.suffix.lower() in _cloud_suffixes():
+            if args.method in scans or path.suffix.lower() in _cloud_suffixes():
                 raise CommandLineError(f"{path} does not exist: allowed a cloud file or a folder of photos")
             return None
     items: list[tuple[str, Path]] = []
@@ -80,20 +90,21 @@ def cloud_inputs(args: argparse.Namespace) -> tuple[str, list[Path], bool] | Non
             if not any(_is_cloud(p) or _is_photo_folder(p) for p in inside):
                 raise CommandLineError(f"{path} holds no point cloud ({', '.join(_cloud_suffixes())}) and no photos: "
                                        "allowed a cloud file, a folder of photos, or a folder of those")
-        elif args.method in ("cloud", "photos"):
+        elif args.method in scans:
             raise CommandLineError(f"{path} is not a point cloud: allowed {', '.join(_cloud_suffixes())} files or a "
                                    "folder of photos")
         else:
             return None
-    methods = {m for m, _ in items}
-    if args.method is not None and methods != {args.method}:
-        wrong = next(p for m, p in items if m != args.method)
-        raise CommandLineError(f"--method {args.method} does not take {wrong}: it is "
-                               f"{'a point cloud' if _is_cloud(wrong) else 'a folder of photos'}")
-    if len(methods) > 1:
+    kinds = {kind for kind, _ in items}
+    if args.method is not None and kinds != {scans[args.method]}:
+        kind, wrong = next((k, p) for k, p in items if k != scans[args.method])
+        raise CommandLineError(f"--method {args.method} does not take {wrong}: it is {INPUT_KINDS[kind][0]}")
+    if len(kinds) > 1:
         raise CommandLineError("the inputs mix point clouds and photo folders: allowed one kind a run (--method)")
     batch = len(items) > 1 or any(p.is_dir() and not _is_photo_folder(p) for p in paths) or Path(args.out).suffix == ""
-    return methods.pop(), [p for _, p in items], batch
+    kind = kinds.pop()
+    method = args.method or next(name for name, k in scans.items() if k == kind)
+    return method, [p for _, p in items], batch
 
 
 def _cloud_suffixes() -> tuple[str, ...]:
@@ -102,44 +113,35 @@ def _cloud_suffixes() -> tuple[str, ...]:
     return CLOUD_SUFFIXES
 
 
-def _options(args: argparse.Namespace, batch: bool = False) -> dict:
+def _options(args: argparse.Namespace, batch: bool = False) -> RunOptions:
     """What each tree's reconstruction takes; a batch's SfM runs on one thread a Ray task."""
-    return {"up": args.up, "frame": args.frame, "completion": args.complete, "seed": args.seed,
-            "height": args.height, "poses": args.poses, "threads": 1 if batch else 0}
+    return RunOptions(seed=args.seed, height=args.height, up=args.up, frame=args.frame, completion=args.complete,
+                      poses=args.poses, threads=1 if batch else 0)
 
 
-def reconstruct_one(method: str, source: Path, out: Path, options: dict, skeleton_ply: Path | None = None,
+def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, skeleton_ply: Path | None = None,
                     qsm_csv: Path | None = None, report: Path | None = None) -> dict:
     """Reconstruct one tree and write its files; returns its summary row (TreefarmErrors propagate)."""
-    import reconstruct
-
     started = time.perf_counter()
-    common = {k: options[k] for k in ("frame", "completion", "seed")}
-    if method == "cloud":
-        result = reconstruct.from_cloud(source, up=options["up"], name=out.stem, **common)
-    else:
-        from reconstruct.sfm import SfmSettings
-
-        settings = SfmSettings(poses=options["poses"], threads=options["threads"], seed=options["seed"])
-        result = reconstruct.from_photos(source, height=options["height"], name=out.stem, settings=settings,
-                                         **common)
+    entry = METHODS[method]
+    result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem))
     with user_path(out, "write"):
         result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
+    points = result.scan.cloud.points
     if report is not None:
         from reconstruct.report import cloud_drawing, write_report
 
         with user_path(report, "write"):
-            write_report(report, [("cloud front", cloud_drawing(result.cloud.points, 0)),
-                                  ("cloud side", cloud_drawing(result.cloud.points, 1))],
+            write_report(report, [("cloud front", cloud_drawing(points, 0)), ("cloud side", cloud_drawing(points, 1))],
                          result.skeleton, result.mesh, title=f"{method}: {out.name}")
-    measures = result.measures
-    return {"input": str(source), "status": "ok", "output": str(out), "points": len(result.cloud.points),
+    measures = result.scan.measures
+    return {"input": str(source), "status": "ok", "output": str(out), "points": len(points),
             "height_m": round(measures["height_m"], 3),
             "dbh_m": None if measures["dbh_m"] is None else round(measures["dbh_m"], 4),
             "total_volume_m3": round(measures["total_volume_m3"], 5), "branches": measures["branch_count"],
             "faces": result.mesh.n_faces, "seconds": round(time.perf_counter() - started, 3),
             "message": "; ".join(result.warnings), "_timings": result.timings, "_skeleton": result.skeleton,
-            "_cloud": result.cloud.points}
+            "_cloud": points}
 
 
 def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
@@ -162,7 +164,7 @@ def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
     return 0
 
 
-def _batch_task(method: str, source: str, out: str, options: dict, extras: bool) -> dict:
+def _batch_task(method: str, source: str, out: str, options: RunOptions, extras: bool) -> dict:
     out_path = Path(out)
     try:
         row = reconstruct_one(method, Path(source), out_path, options,

@@ -4,12 +4,13 @@ Layout: manifest.json, trees/part-NNNNN.parquet, views/part-NNNNN.parquet (docs/
 (the tables and their part files' bytes), `readers` (the manifest, part files, columns across them, pyarrow,
 pandas, DuckDB, Ray Data, Hugging Face), `manifest` (shard records, the manifest, validation), `storage` (a local
 folder or object-store prefix), `format_json` (JSON files that name their format, checked), `image_codec` (maps as
-PNG) and `torch_dataset` (a torch `Dataset` over the views). It imports only `species`, numpy, pyarrow and the
-image libraries.
+PNG), `image_files` (image files a user gives, read as arrays) and `torch_dataset` (a torch `Dataset` over the
+views). It imports only `species`, numpy, pyarrow and the image libraries.
 """
 from __future__ import annotations
 
 from .format_json import parse_format_json, read_format_json
+from .image_files import read_image
 from .readers import (duckdb_connect, open, open_part, part_files, read_columns, read_manifest, read_part,
                       stored_float_outputs, to_huggingface, to_pandas, to_ray)
 from .schema import (DATASET_FORMAT, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, float_outputs_of,
@@ -22,7 +23,7 @@ __all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "Da
            "serialize_table", "read_manifest", "part_files", "read_columns", "read_part", "open_part",
            "stored_float_outputs", "open", "to_pandas",
            "duckdb_connect", "to_ray", "to_huggingface", "parse_format_json", "read_format_json", "Location",
-           "ViewsDataset"]
+           "read_image", "ViewsDataset"]
 
 
 def __getattr__(name: str):

@@ -20,6 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
+from farm.dataset import read_image
 from renderers.silhouette_metric import closed_silhouette
 from species.errors import user_path
 
@@ -89,7 +90,7 @@ def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
 
     result = reconstruct.from_cloud(path, seed=ctx.settings.seed)
     start = time.perf_counter()
-    points = result.base_points  # the skeleton's frame
+    points = result.scan.base_points  # the skeleton's frame
     fit = metrics.cloud_fit(result.skeleton, points)
     cloud_height = float(np.ptp(points[:, 2]))
     row = {"cloud_fit_10cm": fit["within"], "cloud_fit_median_m": fit["median_m"],
@@ -103,7 +104,6 @@ def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
 
 def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | None]:
     import reconstruct
-    from farm.commands.reconstruct import read_image
     from reconstruct import metrics
     from reconstruct.scoring import depth_picture
     from scipy.ndimage import binary_fill_holes

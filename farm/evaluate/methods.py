@@ -1,4 +1,5 @@
-"""The reconstruction methods an evaluation runs, what each needs from a dataset, and how each is scored.
+"""How the evaluation runs the reconstruction methods of `reconstruct.methods.METHODS` (the one registry) on a
+held-out tree, what each needs from a dataset, and how each is scored.
 
 A method reads one held-out tree (`HeldOutTree`: the true dictionary, skeleton and mesh, and the dataset's views
 of it) and returns a `MethodResult`: metric values (`reconstruct.scoring.METRICS` names), stage seconds, and the
@@ -7,34 +8,44 @@ gallery panel's cells (input, reconstruction and ground truth in the input view)
 scale, so the sketch methods grow at the true height (two-view: the top of the true main branches, what the strokes
 span).
 
-- params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`; species, levels and the parameter
-  score (Weber-Penn trees only: the codec's dictionaries) beside the geometry.
-- sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
-  networks; with `silhouette_envelope` / `trunk_depth` stored, the networks' foreground depth errors too.
-- two-view (seed 001): the `two-view:shared` front and side `sketch_strokes`.
-- cloud (seed 003): a synthetic scan of the true mesh (`reconstruct.cloud_sampling`: leaf clutter, outliers, an
-  occlusion wedge, seeded per tree) through `from_cloud`; also the scan's fit to the bark and the connectedness.
-- photos (SfM): a leafless orbit rendered with Blender (Cycles), `from_photos` at the cameras' known poses.
+A method runs by the kind of what it reads, and three add what the evaluation knows of them (`RUNNERS`):
+- drawings (`run_drawn`): its inputs from the views the registry names (`Input.rendered`), its networks loaded once
+  per worker, the tree's seed, the true height, and the geometry metrics in its input views.
+  - params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`, with the dictionary's seed 0;
+    species, levels and the parameter score (Weber-Penn trees only: the codec's dictionaries) beside the geometry.
+  - sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
+    networks; with `silhouette_envelope` / `trunk_depth` stored, the networks' foreground depth errors too.
+  - two-view (seed 001): the `two-view:shared` front and side `sketch_strokes`, 1-pixel lines.
+- a point cloud (`run_scan`, the cloud method, seed 003): a synthetic scan of the true mesh
+  (`reconstruct.cloud_sampling`: leaf clutter, outliers, an occlusion wedge, seeded per tree); also the scan's fit
+  to the bark and the connectedness.
+- photos (`run_orbit`, the photos method, SfM): a leafless orbit rendered with Blender (Cycles), reconstructed at the
+  cameras' known poses.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import tempfile
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
+from reconstruct.methods import RunOptions, get_method
 from renderers import Camera, ViewRenderer
+from renderers.camera import parse_rig
 from species.errors import TreefarmError
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 __all__ = ["METHODS", "Method", "Needs", "HeldOutTree", "MethodResult", "EvalSettings", "MethodContext",
-           "tree_rng_seed", "joined_share"]
+           "tree_rng_seed", "joined_share", "needs_of", "run_drawn", "run_method"]
 
 
 @dataclass(frozen=True)
@@ -101,12 +112,17 @@ class MethodContext:
             self._nets[task] = predictor(task, self.models)
         return self._nets[task]
 
+    def nets(self, tasks: Sequence[str]) -> dict[str, object]:
+        return {task: self.net(task) for task in tasks}
+
     def close(self) -> None:
         self.renderer.close()
 
 
 @dataclass(frozen=True)
 class Method:
+    """A registry method as the evaluation runs it."""
+
     name: str
     needs: Needs
     run: Callable[[HeldOutTree, MethodContext], MethodResult]
@@ -124,7 +140,7 @@ def tree_rng_seed(tree: HeldOutTree, method: str, seed: int) -> int:
 def joined_share(result) -> float:
     """The share of a cloud's points its skeleton graph joined to the tree (a skeleton is one tree by
     construction, so connectedness is what the graph reached: `CloudSkeleton.n_reached / n_used`)."""
-    return float(result.fit.n_reached) / max(1, int(result.fit.n_used))
+    return float(result.scan.fit.n_reached) / max(1, int(result.scan.fit.n_used))
 
 
 def _scorer(ctx: MethodContext, tree: HeldOutTree, cameras, seen_azimuths):
@@ -141,73 +157,78 @@ def _pictures(ctx: MethodContext, tree: HeldOutTree, camera: Camera, skeleton: S
             ("ground truth", depth_picture(ctx.renderer, tree.mesh, tree.skeleton, camera))]
 
 
-def _view(tree: HeldOutTree, name: str) -> tuple[Camera, dict[str, np.ndarray]]:
-    return tree.views[name]
+# ------------------------------------------------------------------------------------------------ drawn inputs
+# What a drawn method's extra metrics are made from: (its result, its networks by task, the tree's views).
+ExtraMetrics = Callable[[object, dict, dict], dict]
 
 
-# ------------------------------------------------------------------------------------------------ methods
+def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | None = None,
+              height: float | None = None, labels: Sequence[str] = (), extra: ExtraMetrics | None = None,
+              **options) -> MethodResult:
+    """A registry method whose inputs are rendered drawings, on one tree: its inputs from the tree's views (the
+    registry's `Input.rendered`), its networks, the tree's seed (`tree_rng_seed`, unless `seed`), the true height
+    (unless `height`) and `options` (RunOptions fields); scored with the geometry metrics in its input views
+    (`main_skeleton` from its maps), then `extra`'s metrics. Cells: its inputs (`labels`, default "input" or
+    "input NAME"), then the reconstruction and the truth in its first input view."""
+    method = get_method(name)
+    needs = needs_of(name)
+    inputs = {item.name: tree.views[item.rendered.view][1][item.rendered.output] for item in method.reads}
+    cameras = [tree.views[view][0] for view in needs.views]
+    azimuths = [azimuth for view, azimuth, _ in parse_rig(needs.rig).views if view in needs.views]
+    nets = ctx.nets(method.models)
+    seed = tree_rng_seed(tree, name, ctx.settings.seed) if seed is None else seed
+    start = time.perf_counter()
+    result = method.run(inputs, RunOptions(seed=seed, height=tree.skeleton.height if height is None else height,
+                                           nets=nets, **options))
+    timings = {**result.timings}
+    timings.setdefault("total", time.perf_counter() - start)
+    start = time.perf_counter()
+    row = _scorer(ctx, tree, cameras, azimuths)(result.skeleton, result.mesh, result.maps.get("main_skeleton"))
+    if extra is not None:
+        row.update(extra(result, nets, {view: images for view, (_, images) in tree.views.items()}))
+    timings["scoring"] = time.perf_counter() - start
+    labels = labels or (["input"] if len(inputs) == 1 else [f"input {key}" for key in inputs])
+    cells = [*zip(labels, inputs.values()), *_pictures(ctx, tree, cameras[0], result.skeleton, result.mesh)]
+    return MethodResult(row, timings, cells, {task: net.source for task, net in nets.items()})
+
+
 def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-    import reconstruct
     from reconstruct import metrics
 
-    net = ctx.net("sketchnet")
-    camera, images = _view(tree, "front")
-    result = reconstruct.from_params(images["sketch_tsn"], net=net, height=tree.skeleton.height)
-    start = time.perf_counter()
-    row = _scorer(ctx, tree, [camera], (0,))(result.skeleton, result.mesh)
-    if tree.species in net.codec.species:  # a species the network can name
-        row["species_correct"] = float(result.params.get("species") == tree.species)
-    if tree.params.get("generator", "weber_penn") == "weber_penn":
-        row["levels_correct"] = float(int(result.params.get("levels", -1)) == int(tree.params.get("levels", -2)))
-        row["param_score"] = metrics.parameter_scores(net.codec, result.params, tree.params)["score_overall"]
-    timings = {**result.timings, "scoring": time.perf_counter() - start}
-    cells = [("input", images["sketch_tsn"]), *_pictures(ctx, tree, camera, result.skeleton, result.mesh)]
-    return MethodResult(row, timings, cells, {"sketchnet": net.source})
+    def extra(result, nets, views) -> dict:
+        codec, row = nets["sketchnet"].codec, {}
+        if tree.species in codec.species:  # a species the network can name
+            row["species_correct"] = float(result.params.get("species") == tree.species)
+        if tree.params.get("generator", "weber_penn") == "weber_penn":
+            row["levels_correct"] = float(int(result.params.get("levels", -1)) == int(tree.params.get("levels", -2)))
+            row["param_score"] = metrics.parameter_scores(codec, result.params, tree.params)["score_overall"]
+        return row
+
+    return run_drawn("params", tree, ctx, seed=0, extra=extra)  # seed 0: the dictionary's own, as a user's run
 
 
 def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-    import reconstruct
     from reconstruct.scoring import network_depth_error
 
-    silhouette_net, trunk_net = ctx.net("pix2pix-silhouette"), ctx.net("pix2pix-trunk")
-    camera, images = _view(tree, "front")
-    seed = tree_rng_seed(tree, "sketch-depth", ctx.settings.seed)
-    result = reconstruct.from_sketch(images["sketch_edges"], images["trunk_strokes"], silhouette_net=silhouette_net,
-                                     trunk_net=trunk_net, height=tree.skeleton.height,
-                                     rng=np.random.default_rng(seed))
-    start = time.perf_counter()
-    row = _scorer(ctx, tree, [camera], (0,))(result.skeleton, result.mesh, result.maps["main_skeleton"])
-    if "silhouette_envelope" in images:
-        row["depth_error_silhouette"] = network_depth_error(silhouette_net, "silhouette", images)[0]
-    if "trunk_depth" in images:
-        row["depth_error_trunk"] = network_depth_error(trunk_net, "trunk", images)[0]
-    timings = {**result.timings, "scoring": time.perf_counter() - start}
-    cells = [("input", images["sketch_edges"]), ("trunk strokes", images["trunk_strokes"]),
-             *_pictures(ctx, tree, camera, result.skeleton, result.mesh)]
-    return MethodResult(row, timings, cells, {"pix2pix-silhouette": silhouette_net.source,
-                                              "pix2pix-trunk": trunk_net.source})
+    def extra(result, nets, views) -> dict:
+        images, row = views["front"], {}
+        if "silhouette_envelope" in images:
+            row["depth_error_silhouette"] = network_depth_error(nets["pix2pix-silhouette"], "silhouette", images)[0]
+        if "trunk_depth" in images:
+            row["depth_error_trunk"] = network_depth_error(nets["pix2pix-trunk"], "trunk", images)[0]
+        return row
+
+    return run_drawn("sketch-depth", tree, ctx, labels=("input", "trunk strokes"), extra=extra)
 
 
 def run_two_view(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-    import reconstruct
     from reconstruct.scoring import main_branch_nodes
 
-    (front_camera, front), (side_camera, side) = _view(tree, "front"), _view(tree, "side")
-    seed = tree_rng_seed(tree, "two-view", ctx.settings.seed)
-    start = time.perf_counter()
-    result = reconstruct.two_view(front["sketch_strokes"], side["sketch_strokes"],
-                                  height=float(main_branch_nodes(tree.skeleton)[:, 2].max()),
-                                  rng=np.random.default_rng(seed), brush=False)
-    timings = {**result.report["timings"], "total": time.perf_counter() - start}
-    start = time.perf_counter()
-    row = _scorer(ctx, tree, [front_camera, side_camera], (0, 90))(result.skeleton, result.mesh,
-                                                                   result.report["main"].positions)
-    timings["scoring"] = time.perf_counter() - start
-    cells = [("input front", front["sketch_strokes"]), ("input side", side["sketch_strokes"]),
-             *_pictures(ctx, tree, front_camera, result.skeleton, result.mesh)]
-    return MethodResult(row, timings, cells)
+    # The strokes draw the main branches only, in 1-pixel lines.
+    return run_drawn("two-view", tree, ctx, height=float(main_branch_nodes(tree.skeleton)[:, 2].max()), brush=False)
 
 
+# ------------------------------------------------------------------------------------------------ scans
 def _cloud_scores(ctx: MethodContext, tree: HeldOutTree, result, points: np.ndarray) -> dict[str, float]:
     """Geometry against the true tree and the fit to `points` (the scan's own coordinates)."""
     from reconstruct import metrics
@@ -224,19 +245,20 @@ def _front_camera(ctx: MethodContext, tree: HeldOutTree) -> Camera:
     return ctx.renderer.cameras(tree.mesh, "tsn4", np.random.default_rng(0))[0]
 
 
-def run_cloud(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-    import reconstruct
+def run_scan(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
+    """A registry method that reads a point cloud, on a synthetic scan of the true tree (module docstring)."""
     from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
     from reconstruct.report import cloud_drawing
 
     s = ctx.settings
-    seed = tree_rng_seed(tree, "cloud", s.seed)
+    seed = tree_rng_seed(tree, name, s.seed)
     start = time.perf_counter()
     leaf = s.cloud_leaf_fraction if tree.mesh.leaves.n_faces else 0.0
     scan = sample_tree_cloud(tree.mesh, np.random.default_rng(seed), n_points=s.cloud_points, leaf_fraction=leaf,
                              outlier_fraction=s.cloud_outlier_fraction, occlusion_wedge_deg=s.cloud_wedge_deg)
     sampling = time.perf_counter() - start
-    result = reconstruct.from_cloud(scan.points, seed=seed % 2**32)
+    method = get_method(name)
+    result = method.run({method.reads[0].name: scan.points}, RunOptions(seed=seed % 2**32))
     start = time.perf_counter()
     row = _cloud_scores(ctx, tree, result, scan.points[scan.labels == WOOD])
     timings = {"scan": sampling, **result.timings, "scoring": time.perf_counter() - start}
@@ -245,17 +267,16 @@ def run_cloud(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     return MethodResult(row, timings, cells)
 
 
-def run_photos(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
-    import reconstruct
+def run_orbit(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
+    """A registry method that reads photos, on a leafless Blender orbit of the true tree at known poses."""
     from PIL import Image
 
-    from reconstruct.sfm import SfmSettings
     from renderers.blender import render_photos
     from renderers.camera import perspective_camera
     from species.tree_mesh import MeshPart
 
     s = ctx.settings
-    seed = tree_rng_seed(tree, "photos", s.seed)
+    seed = tree_rng_seed(tree, name, s.seed) % 2**31
     leafless = dataclasses.replace(tree.mesh, leaves=MeshPart.empty())
     points = leafless.bark.vertices
     cameras = [perspective_camera(points, k * 10.0, 15.0 if k % 2 else 8.0, s.photo_size, name=f"view{k}")
@@ -266,30 +287,71 @@ def run_photos(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
         rendering = time.perf_counter() - start
         with Image.open(photos.images[0]) as photo:
             first = np.asarray(photo.convert("RGB"))
-        result = reconstruct.from_photos(Path(folder) / "photos", seed=seed % 2**31,
-                                         settings=SfmSettings(poses="known", threads=1, seed=seed % 2**31),
-                                         workdir=Path(folder) / "sfm")
+        method = get_method(name)
+        result = method.run({method.reads[0].name: Path(folder) / "photos"},
+                            RunOptions(seed=seed, poses="known", threads=1, workdir=Path(folder) / "sfm"))
     start = time.perf_counter()
     bare = dataclasses.replace(tree, mesh=leafless)
-    in_world = result.base_points @ result.transform[:3, :3].T + result.transform[:3, 3]  # the renders' frame
+    transform = result.scan.transform
+    in_world = result.scan.base_points @ transform[:3, :3].T + transform[:3, 3]  # the renders' frame
     row = _cloud_scores(ctx, bare, result, in_world)
     timings = {"photos (Cycles)": rendering, **result.timings, "scoring": time.perf_counter() - start}
     cells = [("input photo", first), *_pictures(ctx, bare, _front_camera(ctx, bare), *result.in_scan_frame())]
     return MethodResult(row, timings, cells)
 
 
-METHODS: dict[str, Method] = {
-    "params": Method("params", Needs("tsn4", ("front",), ("sketch_tsn",)), run_params, ("sketchnet",),
-                     "TreeSketchNet's dictionary from one sketch (seed 004)"),
-    "sketch-depth": Method("sketch-depth", Needs("two-view", ("front",), ("sketch_edges", "trunk_strokes"),
-                                                 ("silhouette_envelope", "trunk_depth")),
-                           run_sketch_depth, ("pix2pix-silhouette", "pix2pix-trunk"),
-                           "depth-guided growth from a sketch and trunk strokes (seed 000)"),
-    "two-view": Method("two-view", Needs("two-view:shared", ("front", "side"), ("sketch_strokes",)), run_two_view,
-                       (), "two orthogonal drawings, no network (seed 001)"),
-    "cloud": Method("cloud", Needs(), run_cloud, (), "a synthetic scan through from_cloud (seed 003)"),
-    "photos": Method("photos", Needs(), run_photos, (), "Blender photos through pycolmap SfM (slow)"),
-}
+# ------------------------------------------------------------------------------------------------ the registry
+# What the evaluation knows of a method beyond its registry entry: how it feeds and scores it. Every other method
+# runs as `run_drawn` when every input is a rendered drawing, or by the kind of its one input (KIND_RUNNERS).
+RUNNERS: dict[str, Callable[[HeldOutTree, MethodContext], MethodResult]] = {
+    "params": run_params, "sketch-depth": run_sketch_depth, "two-view": run_two_view}
+KIND_RUNNERS: dict[str, Callable[[str, HeldOutTree, MethodContext], MethodResult]] = {
+    "cloud": run_scan, "photos": run_orbit}
+# Outputs a method is scored on when a dataset stores them (beside the inputs the registry names).
+SCORED_OUTPUTS = {"sketch-depth": ("silhouette_envelope", "trunk_depth")}
+
+
+def needs_of(name: str) -> Needs:
+    """The views a registry method reads from a dataset: its inputs' `rendered` outputs (all of one rig), or none
+    for a method whose inputs the evaluation makes from the true tree."""
+    rendered = [item.rendered for item in get_method(name).reads if item.rendered is not None]
+    if not rendered:
+        return Needs()
+    return Needs(rendered[0].rig, tuple(dict.fromkeys(r.view for r in rendered)),
+                 tuple(dict.fromkeys(r.output for r in rendered)), SCORED_OUTPUTS.get(name, ()))
+
+
+def _runner(name: str) -> Callable[[HeldOutTree, MethodContext], MethodResult]:
+    if name in RUNNERS:
+        return RUNNERS[name]
+    reads = get_method(name).reads
+    if all(item.kind == "image" and item.rendered is not None for item in reads):
+        return functools.partial(run_drawn, name)
+    if len(reads) == 1 and reads[0].kind in KIND_RUNNERS:
+        return functools.partial(KIND_RUNNERS[reads[0].kind], name)
+
+    def unsupported(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
+        raise TreefarmError(f"method {name!r}: the evaluation makes drawings the registry names a rendered output "
+                            "for, one scan or one set of photos, not its inputs")
+
+    return unsupported
+
+
+class _EvaluatedMethods(Mapping):
+    """The registry's methods as the evaluation runs them, read from `reconstruct.methods.METHODS` on each use."""
+
+    def __getitem__(self, name: str) -> Method:
+        method = RECONSTRUCTION_METHODS[name]
+        return Method(name, needs_of(name), _runner(name), method.models, method.summary)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(RECONSTRUCTION_METHODS)
+
+    def __len__(self) -> int:
+        return len(RECONSTRUCTION_METHODS)
+
+
+METHODS: Mapping[str, Method] = _EvaluatedMethods()
 
 
 def run_method(method: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:

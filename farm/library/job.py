@@ -17,12 +17,13 @@ from renderers.blender_assets import export_fbx_batch
 from renderers.gl_coverage import CoverageRenderer
 from species.meshing.gltf import z_up_to_y_up
 from species.studio.collision import capsule_mesh
+from species.timing import StageTimer
 
 from ..jobs import preset_names
 from ..dataset.manifest import JOB_RECORD
 from ..pipeline import run_job
 from ..dataset.storage import Location, sha256_hex
-from ..tree_chain import BuiltTree, StageTimer, to_json, tree_seed
+from ..tree_chain import BuiltTree, to_json, tree_seed
 from .asset import LibraryAsset, build_asset
 from .catalog import write_catalog
 from .gltf_asset import asset_to_glb, glb_size

@@ -25,9 +25,9 @@ from renderers.alpha_coverage import coverage_tree
 from renderers.framing import framing_points
 from renderers.gl_coverage import CoverageRenderer
 from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
+from species.timing import StageTimer
 
 from ..dataset.storage import Location
-from ..tree_chain import StageTimer
 from .asset import build_asset, leaf_fractions
 from .records import read_library_spec
 

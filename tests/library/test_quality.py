@@ -12,7 +12,8 @@ from farm.library.asset import build_asset, leaf_alphas
 from farm.library.catalog import IOU_TARGET, quality_shortfalls
 from farm.library.gltf_asset import asset_to_glb, glb_size
 from farm.library.spec import parse_library_spec
-from farm.tree_chain import StageTimer, tree_seed
+from farm.tree_chain import tree_seed
+from species.timing import StageTimer
 from renderers.alpha_coverage import CoverageError, opaque_fraction, shrunk_cards, triangle_coverage
 from renderers.camera import orthographic_camera, perspective_camera
 from renderers.framing import framing_points

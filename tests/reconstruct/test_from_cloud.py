@@ -30,17 +30,17 @@ def y_points():
 
 def test_from_cloud_measures_the_trunk_and_writes_valid_files(y_points, tmp_path):
     result = from_cloud(y_points, completion=False)
-    assert result.frame == "base"
-    np.testing.assert_allclose(result.measured.positions[0], 0.0, atol=1e-6)   # the base at the origin
-    assert result.measures["dbh_m"] == pytest.approx(0.30, abs=0.03)            # the 0.15 m trunk at 1.3 m
-    assert result.measures["height_m"] == pytest.approx(4.0, rel=0.03)
+    assert result.method == "cloud" and result.scan.frame == "base"
+    np.testing.assert_allclose(result.scan.measured.positions[0], 0.0, atol=1e-6)   # the base at the origin
+    assert result.scan.measures["dbh_m"] == pytest.approx(0.30, abs=0.03)            # the 0.15 m trunk at 1.3 m
+    assert result.scan.measures["height_m"] == pytest.approx(4.0, rel=0.03)
     result.write(tmp_path / "y.glb", skeleton_ply=tmp_path / "y.ply", qsm_csv=tmp_path / "y.csv")
     assert_valid_glb((tmp_path / "y.glb").read_bytes(), tmp_path)
     back = read_skeleton_ply(tmp_path / "y.ply")
-    np.testing.assert_allclose(back.positions, result.measured.positions, atol=1e-5)
+    np.testing.assert_allclose(back.positions, result.scan.measured.positions, atol=1e-5)
     rows = list(csv.DictReader(open(tmp_path / "y.csv")))
-    assert len(rows) == result.measured.n_branches
-    assert sum(float(r["length_m"]) for r in rows) == pytest.approx(result.measured.total_length, rel=1e-4)
+    assert len(rows) == result.scan.measured.n_branches
+    assert sum(float(r["length_m"]) for r in rows) == pytest.approx(result.scan.measured.total_length, rel=1e-4)
     assert not list(tmp_path.glob("*.partial"))
 
 
@@ -59,12 +59,12 @@ def test_scan_frame_puts_the_tree_back_where_the_scan_had_it(y_points, tmp_path)
 def test_other_up_axis_gives_the_same_tree(y_points):
     z_up = from_cloud(y_points, completion=False)
     y_up = from_cloud(y_points[:, [0, 2, 1]] * [1, 1, -1], up="y", completion=False)
-    assert y_up.measured.height == pytest.approx(z_up.measured.height, rel=0.01)
+    assert y_up.scan.measured.height == pytest.approx(z_up.scan.measured.height, rel=0.01)
 
 
 def test_completion_adds_twigs_and_leaves_and_is_seeded(y_points):
     a, b = from_cloud(y_points, seed=3), from_cloud(y_points, seed=3)
-    assert a.skeleton.n_leaves > 0 and len(a.skeleton) > len(a.measured)
+    assert a.skeleton.n_leaves > 0 and len(a.skeleton) > len(a.scan.measured)
     assert a.glb() == b.glb()
 
 

@@ -28,14 +28,14 @@ def posed(photos):
 
 
 def test_known_poses_give_the_tree_alone_where_the_renderer_put_it(photos, photo_tree, posed):
-    record = posed.provenance["sfm"]
+    record = posed.scan.provenance["sfm"]
     assert record["poses"] == "known" and record["scale"] == "cameras.json" and record["registered"] == 10
     counts = list(record["points"].values())
     assert counts == sorted(counts, reverse=True) and counts[-1] >= 100
     # most of what SfM finds on a textured ground is ground; it all goes
     assert record["points"]["ground"] < 0.5 * record["points"]["sfm"]
     # the isolated points are the tree's: in every render they land on its pixels (mask 1 bark, 2 leaves)
-    world = posed.cloud.to_scan_frame(posed.cloud.points)
+    world = posed.scan.cloud.to_scan_frame(posed.scan.cloud.points)
     on_tree = []
     for k, camera in enumerate(photos.cameras):
         mask = load_view(photos, k)["mask"]
@@ -54,7 +54,7 @@ def test_known_poses_give_the_tree_alone_where_the_renderer_put_it(photos, photo
     true, _ = photo_tree
     # (loosely: ten photos on a 90 degree arc see one side of the crown best)
     assert np.linalg.norm(np.median(world[:, :2], axis=0) - true.positions[0, :2]) < 0.8
-    assert 0.5 * true.height < posed.cloud.height + posed.cloud.offset[2] < 1.1 * true.height
+    assert 0.5 * true.height < posed.scan.cloud.height + posed.scan.cloud.offset[2] < 1.1 * true.height
 
 
 def test_the_glb_says_photos_and_passes_the_validator(posed, tmp_path):

@@ -134,19 +134,19 @@ def test_tree_stands_at_the_origin_with_the_asked_height(lines_result):
     skeleton = lines_result.skeleton
     assert np.allclose(skeleton.positions[0], 0.0)
     assert skeleton.positions[:, 2].max() == pytest.approx(6.0, abs=0.05)
-    assert lines_result.report["brush"] is False
+    assert lines_result.maps["brush"] is False
 
 
 def test_every_node_projects_inside_both_crown_outlines(lines_result):
-    front, side = lines_result.report["outlines"]
+    front, side = lines_result.maps["outlines"]
     positions = lines_result.skeleton.positions
     assert front.contains(positions).all() and side.contains(positions).all()
-    assert (lines_result.report["twig_level"] > 0).sum() > 20
+    assert (lines_result.maps["twig_level"] > 0).sum() > 20
 
 
 def test_main_skeleton_matches_both_drawings(lines_result):
-    front, side = lines_result.report["outlines"]
-    main = lines_result.report["main"].positions
+    front, side = lines_result.maps["outlines"]
+    main = lines_result.maps["main"].positions
     for outline, axis in ((front, 0), (side, 1)):
         drawn = np.argwhere(ink_mask(projection(axis)))[:, ::-1]
         distance, _ = cKDTree(drawn).query(outline.project(main))
@@ -176,21 +176,21 @@ def test_default_height_is_documented_one():
 def test_side_drawn_at_another_scale_gives_the_same_main_skeleton():
     same = two_view(projection(0), projection(1), rng=np.random.default_rng(1))
     half = two_view(projection(0), projection(1, scale=0.5), rng=np.random.default_rng(1))
-    assert half.report["side_scale"] == pytest.approx(2.0)
-    a, b = same.report["main"].positions, half.report["main"].positions
+    assert half.maps["side_scale"] == pytest.approx(2.0)
+    a, b = same.maps["main"].positions, half.maps["main"].positions
     distance, _ = cKDTree(a).query(b)
     assert distance.max() <= 0.03 * DEFAULT_HEIGHT
 
 
 def test_brush_drawings_keep_their_drawn_trunk_radius():
     result = two_view(projection(0, width=9), projection(1, width=9), height=5.0, rng=np.random.default_rng(2))
-    assert result.report["brush"] is True
-    metres_per_pixel = result.report["metres_per_pixel"]
-    trunk = result.report["main"].positions[:, 2] < 0.4 * 5.0
+    assert result.maps["brush"] is True
+    metres_per_pixel = result.maps["metres_per_pixel"]
+    trunk = result.maps["main"].positions[:, 2] < 0.4 * 5.0
     # cv2 draws thickness 9 as 11 pixels.
-    radius_px = result.skeleton.radius[: len(result.report["main"])][trunk] / metres_per_pixel
+    radius_px = result.skeleton.radius[: len(result.maps["main"])][trunk] / metres_per_pixel
     assert abs(np.median(radius_px) - 5.5) <= 1.0
-    front, side = result.report["outlines"]
+    front, side = result.maps["outlines"]
     assert front.contains(result.skeleton.positions).all() and side.contains(result.skeleton.positions).all()
 
 
