@@ -21,7 +21,7 @@ from renderers import FLOAT_OUTPUTS
 from species.errors import TreefarmError
 from species.timing import StageTimer
 
-from .dataset import part_name, serialize_table, trees_schema, views_schema
+from .dataset import part_name, read_manifest, serialize_table, trees_schema, views_schema
 from .jobs import PipelineSpec, species_of_trees
 from .dataset.manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_version, file_entry, finished_shards, read_shard_record,
                        write_job_record, write_manifest, write_shard_record)
@@ -399,8 +399,6 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
             manifest = build_manifest(spec, records, time.perf_counter() - start)
             write_manifest(location, manifest)
         else:
-            from .dataset import read_manifest
-
             manifest = read_manifest(location)
     finally:
         if bar is not None:

@@ -13,6 +13,7 @@ from typing import Any, Callable, Protocol
 import numpy as np
 
 import renderers
+import species
 from species.timing import StageTimer
 
 from .dataset import trees_schema
@@ -83,8 +84,6 @@ class SpeciesChain:
         return self._renderer
 
     def __call__(self, species_name: str, seed: int, timer: StageTimer) -> BuiltTree:
-        import species
-
         sample_rng, render_rng = stage_rngs(seed)
         with timer.stage("sample"):
             params = species.sample(species_name, sample_rng)

@@ -29,6 +29,7 @@ from species.skeleton import Skeleton
 from species.timing import StageTimer
 
 from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
+from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 from .result import Reconstruction
 from .trunk_tracing import stroke_labels, trace_trunk
 
@@ -301,7 +302,6 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     Maps add "sketch" (the silhouette network's input) and "trunk_depth", "strokes", "silhouette" (in its
     window); timings add "networks".
     """
-    from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 
     start = time.perf_counter()
     if not isinstance(rng, np.random.Generator):

@@ -54,7 +54,7 @@ def as_image(value, name: str, channels: tuple[int, ...] = (1, 3, 4)) -> np.ndar
 
 def predictor(task: str, models=None):
     """The trained predictor of `task` (`trainers.models.load`: shipped default or a registry's champion)."""
-    from trainers.models import load
+    from trainers.models import load  # here: trainers.models imports torch, which a drawing's arrays do not need
 
     return load(task, models)
 

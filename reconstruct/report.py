@@ -12,7 +12,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from renderers import ViewRenderer, write_contact_sheet
+from renderers import PALETTE, ViewRenderer, write_contact_sheet
 from renderers.sketch import shaded
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
@@ -74,7 +74,6 @@ def write_report(path: str | Path, panels: Sequence[tuple[str, np.ndarray]], ske
 def palette_legend(swatch: int = 48) -> np.ndarray:
     """(H, W, 3) uint8 legend of the trunk-stroke palette: the 12 colours in branch order (1 = the trunk, then the
     main branches breadth-first; the 13th branch takes colour 1 again), each with its number and RGB value."""
-    from renderers import PALETTE
 
     rows = []
     for k, colour in enumerate(PALETTE):

@@ -10,15 +10,20 @@ skeleton's unit-cube Hausdorff. The keys are METRICS' names.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 
-from renderers import Camera, ViewRenderer, main_branches
+from renderers import Camera, ViewRenderer, main_branches, viewable
 from renderers.silhouette_metric import closed_silhouette
 from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
+from trainers.data import TARGET_BACKGROUND
+from trainers.pix2pix import targets_from_views
+from trainers.preprocess import apply_crop
+from trainers.tasks import get_task
 
 from . import metrics
 
@@ -132,7 +137,6 @@ class TreeScorer:
 def depth_picture(renderer: ViewRenderer, mesh: TreeMesh, skeleton: Skeleton, camera: Camera) -> np.ndarray:
     """(H, W, 3) uint8 shaded depth of a tree in a camera, for galleries and contact sheets (black where nothing
     is, and for a tree with no faces)."""
-    from renderers import viewable
 
     if mesh.n_faces == 0:
         return np.zeros((camera.height, camera.width, 3), np.uint8)
@@ -143,12 +147,6 @@ def depth_picture(renderer: ViewRenderer, mesh: TreeMesh, skeleton: Skeleton, ca
 def network_depth_error(net, task_name: str, images: dict) -> tuple[float, float]:
     """(foreground depth error of a pix2pix network on one view's images, the network's seconds): the target cut
     to the network's crop of its input as training cut it, scored on the task's depth channels and mask rule."""
-    import time
-
-    from trainers.data import TARGET_BACKGROUND
-    from trainers.pix2pix import targets_from_views
-    from trainers.preprocess import apply_crop
-    from trainers.tasks import get_task
 
     task = get_task(f"pix2pix-{task_name}")
     source, target_name = task.inputs[0], task.targets[0]

@@ -12,7 +12,7 @@ import numpy as np
 
 from species.meshing.png import png_bytes
 
-from .views import METRIC_MAPS
+from .views import LABEL_MAPS, METRIC_MAPS
 
 __all__ = ["to_rgb8", "viewable", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
 
@@ -45,7 +45,7 @@ def viewable(name: str, image: np.ndarray) -> np.ndarray:
         else:
             grey = np.zeros(img.shape, np.float32)
         return to_rgb8(grey.astype(np.float32))
-    if name in ("mask", "order"):
+    if name in LABEL_MAPS:
         return to_rgb8((np.minimum(img.astype(np.int32) * 80, 255)).astype(np.uint8))
     return to_rgb8(img)
 

@@ -21,8 +21,8 @@ from .gl_depth import DepthRenderer
 from .maps import combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
 from .strokes import trunk_strokes
 
-__all__ = ["ViewRenderer", "RenderedView", "Output", "OUTPUTS", "FLOAT_OUTPUTS", "METRIC_MAPS", "DEFAULT_OUTPUTS",
-           "OutputError", "check_outputs"]
+__all__ = ["ViewRenderer", "RenderedView", "Output", "OUTPUTS", "FLOAT_OUTPUTS", "METRIC_MAPS", "LABEL_MAPS",
+           "DEFAULT_OUTPUTS", "OutputError", "check_outputs"]
 
 
 class OutputError(TreefarmError):
@@ -82,11 +82,13 @@ class Output:
     make   : function of the view frame -> (H, W) or (H, W, 3) array of `dtype`.
     dtype  : numpy.uint8 or numpy.float32.
     metric : float32 in metres with 0 = background (depth maps); False for uint8 and for float32 in [0, 1].
+    label  : uint8 class labels (0, 1, 2, ...), not grey levels: shown spread over the grey range.
     """
 
     make: Callable[[_ViewFrame], np.ndarray]
     dtype: np.dtype
     metric: bool = False
+    label: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dtype", np.dtype(self.dtype))
@@ -94,6 +96,8 @@ class Output:
             raise OutputError(f"an output of dtype {self.dtype} is invalid: allowed uint8 or float32")
         if self.metric and self.dtype != np.float32:
             raise OutputError(f"a metric output of dtype {self.dtype} is invalid: allowed float32 (metres)")
+        if self.label and self.dtype != np.uint8:
+            raise OutputError(f"a label output of dtype {self.dtype} is invalid: allowed uint8 (class labels)")
 
     @property
     def is_float(self) -> bool:
@@ -105,8 +109,8 @@ _U8, _F32 = np.uint8, np.float32
 OUTPUTS: dict[str, Output] = {
     "depth": Output(lambda f: f.visible[0], _F32, metric=True),
     "depth01": Output(lambda f: f.camera.depth01(f.visible[0]), _F32),
-    "mask": Output(lambda f: f.visible[1], _U8),
-    "order": Output(lambda f: f.visible[2], _U8),
+    "mask": Output(lambda f: f.visible[1], _U8, label=True),
+    "order": Output(lambda f: f.visible[2], _U8, label=True),
     "normals": Output(lambda f: f.normals, _U8),
     "silhouette": Output(lambda f: silhouette_map(f.camera, f.visible[0], f.back), _F32),
     "silhouette_envelope": Output(lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back), _F32),
@@ -142,10 +146,11 @@ class _OutputNames(Set):
         return f"<{self._description}: {', '.join(self)}>"
 
 
-# The outputs stored as float maps (16-bit PNG with `<name>_scale` and `<name>_offset` columns), and those of them
-# in metres with 0 = background.
+# The outputs stored as float maps (16-bit PNG with `<name>_scale` and `<name>_offset` columns), those of them
+# in metres with 0 = background, and the uint8 maps of class labels.
 FLOAT_OUTPUTS = _OutputNames(lambda output: output.is_float, "float32 outputs")
 METRIC_MAPS = _OutputNames(lambda output: output.metric, "metric outputs")
+LABEL_MAPS = _OutputNames(lambda output: output.label, "label outputs")
 DEFAULT_OUTPUTS = ("depth", "mask", "silhouette", "trunk_strokes", "trunk_depth", "sketch_tsn")
 
 

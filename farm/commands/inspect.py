@@ -53,10 +53,6 @@ def summary_table(path: str) -> str:
     return "\n".join(lines)
 
 
-# uint8 maps holding class labels rather than grey levels.
-LABEL_MAPS = ("mask", "order")
-
-
 def contact_rows(path: str, n_rows: int) -> list:
     """Contact-sheet rows: (tree id and species, [(output, decoded image of the tree's first view), ...])."""
     import pyarrow as pa
@@ -64,7 +60,7 @@ def contact_rows(path: str, n_rows: int) -> list:
 
     from farm.dataset import open as open_table, read_manifest
     from farm.dataset.image_codec import decode_map
-    from renderers import METRIC_MAPS
+    from renderers import LABEL_MAPS, METRIC_MAPS
 
     outputs = read_manifest(path)["job"]["render"]["outputs"]
     trees = open_table(path, "trees").to_table(columns=["tree_id", "species", "error"])

@@ -56,12 +56,14 @@ def _tree_params(args: argparse.Namespace) -> dict:
 def encode_image(name: str, image: np.ndarray, camera) -> tuple[np.ndarray, dict]:
     """An output array as a PNG-ready array and its decoding note: metric depth becomes uint16 with a metres
     scale (0 = background), [0, 1] floats become uint16 / 65535, masks and ids stay uint8 values."""
-    if name in ("depth", "depth_back"):
+    from renderers import LABEL_MAPS, METRIC_MAPS
+
+    if name in METRIC_MAPS:
         scale = max(float(camera.far), 1e-6) / 65535.0
         return np.round(image / scale).astype(np.uint16), {"scale": scale, "unit": "metres", "background": 0}
     if image.dtype == np.float32 or image.dtype == np.float64:
         return np.round(np.clip(image, 0.0, 1.0) * 65535).astype(np.uint16), {"scale": UNIT_SCALE, "unit": "1"}
-    return image, {"scale": 1, "unit": "label" if name in ("mask", "order") else "8-bit"}
+    return image, {"scale": 1, "unit": "label" if name in LABEL_MAPS else "8-bit"}
 
 
 def _write_png(path: Path, image: np.ndarray) -> None:

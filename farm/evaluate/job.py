@@ -24,7 +24,15 @@ from typing import Sequence
 
 import numpy as np
 
+from farm.dataset import DatasetError, read_columns, read_manifest
+from farm.pipeline import ray_connection
+from reconstruct.networks import predictor
+from renderers import rig_parts
+from renderers.camera import parse_rig
+from renderers.contact_sheet import contact_sheet
 from species.errors import TreefarmError
+from species.meshing.png import png_bytes
+from trainers.registry import check_registry_exists
 
 from .inputs import input_units, run_input
 from .methods import METHODS, EvalSettings, run_method
@@ -58,8 +66,6 @@ class EvaluationPlan:
 
 def _view_names(rig: str) -> dict[str, list[str]]:
     """rig part (":jitter" dropped) -> the dataset's view names in it, as `renderers.make_rig` names them."""
-    from renderers import rig_parts
-    from renderers.camera import parse_rig
 
     parts = rig_parts(rig)
     out = {}
@@ -90,8 +96,7 @@ def serves(method: str, rig: str, outputs: Sequence[str]) -> tuple[tuple[tuple[s
 
 
 def _open_dataset(path: str, part: str) -> DatasetInfo:
-    from farm.dataset import DatasetError, read_columns, read_manifest
-    from trainers.data import split_part
+    from trainers.data import split_part  # here: trainers.data imports torch
 
     try:
         manifest = read_manifest(path)
@@ -165,8 +170,6 @@ def evaluate_unit(unit: Unit, report_dir: str, models: str | None, settings: Eva
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from renderers.contact_sheet import contact_sheet
-    from species.meshing.png import png_bytes
 
     report = Path(report_dir)
     row = {"method": unit.method, "source": unit.source, "dataset": unit.dataset, "spec_digest": unit.spec_digest,
@@ -240,9 +243,6 @@ def read_rows(report_dir: str | Path, units: Sequence[Unit] | None = None):
 def _check_models(plan: EvaluationPlan, models: str | None) -> dict[str, str]:
     """Load each network the plan's methods use once, before anything is written: a models URI without one is
     one line (EvaluationError). Returns task -> the model's source."""
-    from reconstruct.networks import predictor
-
-    from trainers.registry import check_registry_exists
 
     tasks = sorted({task for m in {u.method for u in plan.units} for task in METHODS[m].models})
     sources = {}
@@ -268,7 +268,6 @@ def run_evaluation(plan: EvaluationPlan, out: str | Path, *, models: str | None 
     import ray
     from tqdm import tqdm
 
-    from farm.pipeline import ray_connection
 
     report = Path(out)
     sources = _check_models(plan, models)

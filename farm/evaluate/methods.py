@@ -36,13 +36,19 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
 from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
 from reconstruct.methods import RunOptions, get_method
+from reconstruct.report import cloud_drawing
 from renderers import Camera, ViewRenderer
-from renderers.camera import parse_rig
+from renderers.blender import render_photos
+from renderers.camera import parse_rig, perspective_camera
 from species.errors import TreefarmError
 from species.skeleton import Skeleton
-from species.tree_mesh import TreeMesh
+from species.tree_mesh import MeshPart, TreeMesh
+
+# reconstruct.metrics and reconstruct.scoring are imported where used: both import torch, which planning an
+# evaluation (`farm evaluate --print-data-spec`, the command's checks) does not need.
 
 __all__ = ["METHODS", "Method", "Needs", "HeldOutTree", "MethodResult", "EvalSettings", "MethodContext",
            "tree_rng_seed", "joined_share", "needs_of", "run_drawn", "run_method"]
@@ -247,9 +253,6 @@ def _front_camera(ctx: MethodContext, tree: HeldOutTree) -> Camera:
 
 def run_scan(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     """A registry method that reads a point cloud, on a synthetic scan of the true tree (module docstring)."""
-    from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
-    from reconstruct.report import cloud_drawing
-
     s = ctx.settings
     seed = tree_rng_seed(tree, name, s.seed)
     start = time.perf_counter()
@@ -270,10 +273,6 @@ def run_scan(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
 def run_orbit(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     """A registry method that reads photos, on a leafless Blender orbit of the true tree at known poses."""
     from PIL import Image
-
-    from renderers.blender import render_photos
-    from renderers.camera import perspective_camera
-    from species.tree_mesh import MeshPart
 
     s = ctx.settings
     seed = tree_rng_seed(tree, name, s.seed) % 2**31

@@ -7,6 +7,10 @@ import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import species
+from farm.dataset import output_columns, read_columns, read_manifest, stored_float_outputs
+from farm.dataset.image_codec import decode_map
+from renderers import Camera
 from species.errors import TreefarmError
 
 from .methods import METHODS, EvalSettings, HeldOutTree, MethodContext
@@ -47,11 +51,6 @@ class Unit:
 def load_tree(unit: Unit) -> HeldOutTree:
     """The unit's true tree (`species.rebuild` of the stored dictionary) and the views its method reads."""
     import pyarrow.compute as pc
-
-    import species
-    from farm.dataset import output_columns, read_columns, read_manifest, stored_float_outputs
-    from farm.dataset.image_codec import decode_map
-    from renderers import Camera
 
     this_tree = pc.field("tree_id") == unit.tree_id
     found = read_columns(unit.dataset, "trees", ["tree_id", "species", "params_json"], filters=this_tree).to_pylist()

@@ -14,18 +14,16 @@ import numpy as np
 
 from farm.dataset import Location, open_part, output_columns, read_manifest, read_part, stored_float_outputs
 from farm.dataset.image_codec import decode_map, encode_map
-from renderers import METRIC_MAPS
+from renderers import LABEL_MAPS, METRIC_MAPS
 from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
 
-__all__ = ["DatasetIndex", "NotFound", "TreeRef", "LIST_COLUMNS", "viewable_png", "LABEL_MAPS"]
+__all__ = ["DatasetIndex", "NotFound", "TreeRef", "LIST_COLUMNS", "viewable_png"]
 
 # Columns the tree list shows and filters on (everything but the heavy arrays and GLB bytes).
 LIST_COLUMNS = ["tree_id", "index", "shard", "species", "generator", "seed", "height", "crown_radius", "n_nodes",
                 "n_branches", "n_leaves", "bark_triangles", "leaf_triangles", "n_vertices", "n_views", "error"]
-# uint8 maps that hold small class labels: spread over the grey range to be seen.
-LABEL_MAPS = frozenset({"mask", "order"})
 # Row groups kept decoded (GLB columns are the big ones: a few MiB per shard).
 _CACHE_ENTRIES = 8
 

@@ -6,8 +6,8 @@ import json
 import numpy as np
 import pytest
 
-from renderers import (DEFAULT_OUTPUTS, FLOAT_OUTPUTS, METRIC_MAPS, OUTPUTS, CameraError, Output, OutputError,
-                       write_contact_sheet)
+from renderers import (DEFAULT_OUTPUTS, FLOAT_OUTPUTS, LABEL_MAPS, METRIC_MAPS, OUTPUTS, CameraError, Output,
+                       OutputError, viewable, write_contact_sheet)
 from renderers.camera import perspective_camera
 from species.tree_mesh import MeshPart, TreeMesh
 
@@ -46,11 +46,25 @@ def test_float_and_metric_names_follow_the_entries_even_one_registered_later(mon
     assert "test_metres" in FLOAT_OUTPUTS and "test_metres" in METRIC_MAPS and len(METRIC_MAPS) == 3
 
 
+def test_label_maps_follow_the_entries_and_the_contact_sheet_spreads_them(monkeypatch):
+    assert set(LABEL_MAPS) == {"mask", "order"}
+    monkeypatch.setitem(OUTPUTS, "test_classes", Output(lambda frame: frame.visible[1], np.uint8, label=True))
+    labels = np.array([[0, 1, 2]], np.uint8)
+    assert "test_classes" in LABEL_MAPS and "test_classes" not in FLOAT_OUTPUTS
+    assert viewable("test_classes", labels)[0, :, 0].tolist() == [0, 80, 160]  # spread over the grey range
+    assert viewable("sketch_tsn", labels)[0, :, 0].tolist() == [0, 1, 2]  # grey levels as they are
+
+
 @pytest.mark.parametrize("dtype, metric, named", [(np.float64, False, "dtype float64"),
                                                    (np.uint8, True, "metric output of dtype uint8")])
 def test_an_entry_of_another_dtype_or_a_metric_uint8_one_is_refused(dtype, metric, named):
     with pytest.raises(OutputError, match=named):
         Output(lambda frame: frame.visible[0], dtype, metric=metric)
+
+
+def test_a_label_entry_of_float_dtype_is_refused():
+    with pytest.raises(OutputError, match="label output of dtype float32"):
+        Output(lambda frame: frame.visible[0], np.float32, label=True)
 
 
 def test_views_carry_index_name_and_json_camera(all_outputs):
