@@ -10,6 +10,7 @@ import json
 
 from species.errors import TreefarmError
 
+from ..dataset import read_format_json
 from ..dataset.storage import Location
 from ..tree_chain import to_json, tree_seed
 from .asset import asset_id
@@ -20,6 +21,7 @@ __all__ = ["LibraryError", "LIBRARY_RECORD", "ASSETS", "ADDED", "BLENDER_PENDING
            "library_asset_ids"]
 
 LIBRARY_RECORD = "library.json"
+LIBRARY_FORMAT = "treefarm-library"  # library.json's "format"
 ASSETS = "assets"
 ADDED = "_added"  # one {species, seed} record per asset `farm library add` built
 BLENDER_PENDING = "blender outputs pending (renderers.blender_assets is not available)"
@@ -37,16 +39,15 @@ def asset_record_path(ident: str) -> str:
 
 def write_library_record(location: Location, spec: LibrarySpec) -> None:
     """Write library.json: the spec and its digest (a run into a folder of another spec is refused)."""
-    location.write_atomic(LIBRARY_RECORD, json.dumps({"format": "treefarm-library", "spec": spec.to_dict(),
+    location.write_atomic(LIBRARY_RECORD, json.dumps({"format": LIBRARY_FORMAT, "spec": spec.to_dict(),
                                                       "spec_digest": spec.digest()}, indent=1).encode())
 
 
 def read_library_spec(location: Location) -> LibrarySpec:
     """The LibrarySpec a library folder was made with; LibraryError when the folder is not a library."""
-    if not location.exists(LIBRARY_RECORD):
-        raise LibraryError(f"{location.uri} is not an asset library (no {LIBRARY_RECORD}); make one with "
-                           f"`farm library --out DIR`")
-    return library_spec_from_record(json.loads(location.read_bytes(LIBRARY_RECORD))["spec"])
+    record = read_format_json(location, LIBRARY_RECORD, LIBRARY_FORMAT, error=LibraryError,
+                              hint="it is not an asset library; make one with `farm library --out DIR`")
+    return library_spec_from_record(record["spec"])
 
 
 def write_added_record(location: Location, species_name: str, seed: int) -> None:

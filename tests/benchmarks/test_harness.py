@@ -10,6 +10,7 @@ import pytest
 
 from benchmarks import harness, performance_doc
 from benchmarks.headline import HEADLINE
+from farm.dataset import DatasetError
 
 
 def test_a_case_timed_over_repeats_keeps_every_repeat_and_the_last_result():
@@ -61,7 +62,7 @@ def test_no_results_option_writes_nothing(tmp_path):
 def test_a_file_of_another_format_is_refused(tmp_path):
     path = tmp_path / "other.json"
     path.write_text(json.dumps({"format": "something-else"}))
-    with pytest.raises(ValueError, match="something-else"):
+    with pytest.raises(DatasetError, match="format 'something-else', allowed 'treefarm-benchmark-results'"):
         harness.read_results(path)
 
 
