@@ -468,7 +468,7 @@ def main(argv=None) -> None:
         headline_figures(bench, run)
     if sheet:
         path = write_contact_sheet(args.out / "reconstructions.png", sheet)
-        bench.note(f"contact sheet: {path}")
+        bench.note(f"contact sheet: {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
     bench.write()
 
 

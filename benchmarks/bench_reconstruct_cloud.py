@@ -22,6 +22,7 @@ from benchmarks.harness import ROOT, Benchmark, Timing, arguments, pin_threads, 
 
 pin_threads()  # one thread per pool, as the targets are stated
 
+import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -194,13 +195,14 @@ def main() -> None:
     parser.add_argument("--quality-points", type=int, default=30_000)
     parser.add_argument("--pytlidar-timeout", type=float, default=PYTLIDAR_TIMEOUT_S,
                         help="seconds PyTLidar may take per cloud; 0 leaves it out")
-    parser.add_argument("--tree1", type=Path, default=TREE1, help=f"AdTree's sample cloud (default {TREE1})")
+    parser.add_argument("--tree1", type=Path, default=TREE1,
+                        help=f"AdTree's sample cloud (default {os.path.relpath(TREE1, ROOT)})")
     args = parser.parse_args()
     bench = Benchmark("reconstruct_cloud", "Point clouds to trees: fit and seconds per stage", args)
     if args.tree1.is_file():
         tree1_table(bench, args.tree1, args.pytlidar_timeout)
     else:
-        bench.note(f"tree1 table left out: {args.tree1} is missing")
+        bench.note(f"tree1 table left out: {os.path.relpath(args.tree1, ROOT)} is missing")
     size_table(bench, args.sizes)
     quality_table(bench, args.trees, args.quality_points, args.pytlidar_timeout)
     bench.write()

@@ -15,7 +15,7 @@ N trees of the task's shipped spec. The tables go to benchmarks/results/train.js
 --skip-quality), the quality reports to --work/bench_train.json.
 
 Run: python -m benchmarks.bench_train --data-root out/train-full [--budget 600] [--export-models models]
-     python -m benchmarks.bench_train --skip-quality --generate 16 --data-root out/bench-train-data   (throughput)
+     python -m benchmarks.bench_train --skip-quality --generate 40 --data-root out/bench-train-data   (throughput)
 """
 from __future__ import annotations
 
@@ -166,8 +166,12 @@ def main(argv: list[str] | None = None) -> None:
         if not args.generate and not (args.data_root / task / "manifest.json").exists():
             sys.exit(f"no {task} dataset in {args.data_root / task}: farm generate "
                      f"{TASKS[task].spec_path.relative_to(ROOT)} --out {args.data_root / task} (or --generate N)")
-    bench = Benchmark("train_throughput" if args.skip_quality else "train",
-                      "Training on CPU: samples per second on 1 and 2 workers, held-out quality", args)
+    if args.skip_quality:
+        bench = Benchmark("train_throughput", "Training throughput on CPU: samples per second on 1 and 2 Ray workers",
+                          args)
+    else:
+        bench = Benchmark("train", "Training on CPU: samples per second on 1 and 2 Ray workers, held-out quality",
+                          args)
     if args.work.exists():
         shutil.rmtree(args.work)
     args.work.mkdir(parents=True)

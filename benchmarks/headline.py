@@ -8,8 +8,9 @@ into out/bench-train-data once). Two parts of the README's figures are not repro
 - reconstruct_cloud: the tree1.xyz table needs AdTree's sample cloud, which is not in the repository (it is read
   from ../shared/data/pointclouds/ beside the checkout, or --tree1 PATH); without it only the synthetic scans run.
 - train_throughput: one network (the silhouette U-Net) on a 15 s window per setting, where the README's row
-  quotes two networks on 40 s windows: each setting starts a Ray Train run of its own, whose start-up would make
-  the two-network run several minutes.
+  quotes two networks on 40 s windows. Each of the three settings starts a Ray Train run of its own, whose
+  start-up is paid on top of the window: one network takes about two minutes on 2 cores (its 40 training trees
+  generated the first time included), two would take four.
 The training quality row (`make models`) trains each network for minutes and has no short run.
 Run: python -m benchmarks.headline [NAME ...]
 """
