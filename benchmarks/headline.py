@@ -9,8 +9,8 @@ into out/bench-train-data once). Two parts of the README's figures are not repro
   from ../shared/data/pointclouds/ beside the checkout, or --tree1 PATH); without it only the synthetic scans run.
 - train_throughput: one network (the silhouette U-Net) on a 15 s window per setting, where the README's row
   quotes two networks on 40 s windows. Each of the three settings starts a Ray Train run of its own, whose
-  start-up is paid on top of the window: one network takes about two minutes on 2 cores (its 40 training trees
-  generated the first time included), two would take four.
+  start-up is paid on top of the window: one network takes about two minutes on 2 cores (half a minute more the
+  first time, which generates its 40 training trees), two would take four.
 The training quality row (`make models`) trains each network for minutes and has no short run.
 Run: python -m benchmarks.headline [NAME ...]
 """
