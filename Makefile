@@ -55,8 +55,8 @@ bench: env
 	$(PY) -m benchmarks.headline
 
 # The default models shipped in models/: the shipped data specs generated (once) into out/train-full, each
-# network trained on bench_train.py's budget recipe (each task's `recipe` in trainers/tasks.py: fixed epochs, seed
-# 0; no time limit, so the same steps on any machine), exported as model folders. The tasks are read from the
+# network trained on benchmarks.bench_train's budget recipe (each task's `recipe` in trainers/tasks.py: fixed
+# epochs, seed 0; no time limit, so the same steps on any machine), exported as model folders. The tasks are read from the
 # registry when the target runs (`=`, not `:=`: other targets do not start Python for it).
 TRAIN_TASKS = $(shell $(PY) -c 'from trainers.tasks import TASKS; print(*TASKS)')
 models: env
@@ -64,7 +64,7 @@ models: env
 	for task in $(TRAIN_TASKS); do test -f out/train-full/$$task/manifest.json || { \
 		$(VENV)/bin/farm train $$task --print-data-spec > out/train-full/$$task.yaml && \
 		$(VENV)/bin/farm generate out/train-full/$$task.yaml --out out/train-full/$$task --quiet; } || exit 1; done
-	$(PY) benchmarks/bench_train.py --data-root out/train-full --skip-throughput --budget 0 --export-models models
+	$(PY) -m benchmarks.bench_train --data-root out/train-full --skip-throughput --budget 0 --export-models models
 
 clean:
 	rm -rf $(VENV) $(BLENDER_VENV) node_modules out

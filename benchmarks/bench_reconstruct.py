@@ -27,41 +27,39 @@ at the lowest stroke point) scaled to `height` = the GT `Skeleton.height` (nodes
 silhouette the drawing shows). The two-view drawings show only the main branches, so their `height` is the top of
 the GT main branches (what the strokes span); its X and Y are the front and side image axes, world X and Y.
 
-Speed: seconds per stage per tree, networks included (ONNX Runtime runs single-threaded). For one core run
-    OMP_NUM_THREADS=1 taskset -c 0 .venv/bin/python benchmarks/bench_reconstruct.py
+Speed: seconds per stage per tree, networks included (ONNX Runtime and every other thread pool run
+single-threaded: `benchmarks.harness.pin_threads`). For one core: taskset -c 0 python -m benchmarks.bench_reconstruct
 Beside seed 000's Table 3.1 (i7-7700HQ + GTX 1080 Ti: trunk 0.069-0.083 s, silhouette 0.058-0.072 s, growth
 1.07-1.53 s) and seed 001 (7 s for a peach tree on a 2 GHz dual core); target: each method under 2 s per tree.
-Writes a contact sheet (input, GT and reconstruction in the input view and in an unseen view) to --out.
+Writes a contact sheet (input, GT and reconstruction in the input view and in an unseen view) to --out, and the
+tables to benchmarks/results/reconstruct.json.
 
-Run: .venv/bin/python benchmarks/bench_reconstruct.py [--trees 12] [--methods params,sketch-depth,two-view]
+Run: python -m benchmarks.bench_reconstruct [--trees 12] [--methods params,sketch-depth,two-view]
      [--sweep-trees 3] [--sweep-views 72] [--surface-samples 100000] [--sheet-trees 3] [--out out/bench_reconstruct]
 """
 from __future__ import annotations
 
-import argparse
-import os
-import platform
-import sys
-import time
-from dataclasses import dataclass
-from pathlib import Path
+from benchmarks.harness import ROOT, Benchmark, arguments, pin_threads
 
-import numpy as np
+if __name__ == "__main__":  # before numpy loads; a test that imports this module keeps its own thread pools
+    pin_threads()
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
+import time  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
 
 import reconstruct  # noqa: E402
 import species  # noqa: E402
 from farm.jobs import load_spec  # noqa: E402
-from farm.table import format_table  # noqa: E402
 from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
 from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
 from reconstruct.methods import METHODS, Method, RunOptions  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
-from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
 from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes, network_depth_error  # noqa: E402
+from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
 from renderers.camera import parse_rig  # noqa: E402
 from species.errors import TreefarmError  # noqa: E402
 
@@ -372,7 +370,12 @@ RUNNERS = {"params": run_params, "sketch-depth": run_sketch_depth, "two-view": r
 
 
 # ------------------------------------------------------------------------------------------------ tables
-def metric_table(run: Run) -> str:
+def number(value) -> str:
+    return f"{value:.3f}" if isinstance(value, float) else value
+
+
+def metric_table(bench: Benchmark, run: Run) -> None:
+    """The method's metrics, mean over trees per variant, beside the papers' figures; failures as notes."""
     variants = list(run.rows)
     names: list[str] = []
     for rows in run.rows.values():
@@ -385,17 +388,18 @@ def metric_table(run: Run) -> str:
             values = [r[name] for r in run.rows[variant] if name in r and np.isfinite(r[name])]
             cells.append(float(np.mean(values)) if values else "-")
         paper = PAPER.get(name, "") if PAPER_METHOD.get(name, run.method) == run.method else ""
-        table.append([name, *[f"{c:.3f}" if isinstance(c, float) else c for c in cells], paper])
+        table.append([name, *map(number, cells), paper])
     for name, by_variant in run.pooled.items():
-        cells = [by_variant.get(v, "") for v in variants]
-        table.append([name, *[f"{c:.3f}" if isinstance(c, float) else c for c in cells],
+        table.append([name, *[number(by_variant.get(v, "")) for v in variants],
                       PAPER.get(name.removesuffix(" (pooled)"), "")])
     counts = [f"{len(run.rows[v])} trees" for v in variants]
-    return format_table(["metric (mean over trees)", *[f"{v} ({c})" for v, c in zip(variants, counts)], "paper"],
-                        table)
+    bench.table(f"{run.method}: quality on held-out trees (job seed {bench_seed(run.method)})",
+                ["metric (mean over trees)", *[f"{v} ({c})" for v, c in zip(variants, counts)], "paper"], table,
+                notes=[f"{variant}: {len(messages)} failed, first: {messages[0]}"
+                       for variant, messages in run.failed.items()])
 
 
-def stage_table(run: Run) -> str:
+def stage_table(bench: Benchmark, run: Run) -> None:
     rows = []
     for stage, seconds in run.stages.items():
         target = ""
@@ -403,24 +407,28 @@ def stage_table(run: Run) -> str:
             target = "yes" if np.mean(seconds) < TARGET_S else "no"
         rows.append([stage, f"{np.mean(seconds):.3f}", f"{np.max(seconds):.3f}", target,
                      STAGE_PAPER.get((run.method, stage), "")])
-    return format_table(["stage", "mean s", "max s", f"< {TARGET_S:.0f} s", "paper"], rows)
+    bench.table(f"{run.method}: seconds per tree and stage", ["stage", "mean s", "max s", f"< {TARGET_S:.0f} s",
+                                                                 "paper"], rows)
 
 
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return f"{cpu}; {cores} core(s) available; OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', 'unset')}"
+def headline_figures(bench: Benchmark, run: Run) -> None:
+    """The method's crown IoU from unseen views (beside the same-preset baseline's) and its seconds per tree."""
+    label = METRICS["crown_iou_unseen"].label
+    variant = next((v for v in run.rows if v != BASELINE), None)
+
+    def mean(rows: list[dict]) -> float:
+        return float(np.mean([r[label] for r in rows if np.isfinite(r.get(label, np.nan))] or [np.nan]))
+
+    if variant is not None:
+        bench.figure(f"{run.method}: {label}", mean(run.rows[variant]), "",
+                     f"another tree of the preset: {mean(run.rows.get(BASELINE, [])):.2f}")
+    if "total" in run.stages:
+        bench.figure(f"{run.method}: seconds per tree", float(np.mean(run.stages["total"])), "s",
+                     f"target < {TARGET_S:.0f} s")
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = arguments(__doc__)
     parser.add_argument("--trees", type=int, default=12, help="held-out trees per method")
     drawn = drawn_methods()
     parser.add_argument("--methods", default=",".join(drawn), help="comma separated: " + ", ".join(drawn))
@@ -439,7 +447,8 @@ def main(argv=None) -> None:
         parser.error(f"methods {unknown} unknown (allowed {', '.join(drawn)}), or --trees < 1, or --sweep-views "
                      f"outside [1, 360]")
     check_seeds()
-    print(f"machine: {machine()}", flush=True)
+    bench = Benchmark("reconstruct", "Reconstruction from drawings: quality on held-out trees and seconds per tree",
+                      args)
     renderer = ViewRenderer(256)
     runs = []
     try:
@@ -451,16 +460,16 @@ def main(argv=None) -> None:
         renderer.close()
     sheet = []
     for run in runs:
-        print(f"\n{run.method}: quality on held-out trees (job seed {bench_seed(run.method)})")
-        print(metric_table(run))
-        for variant, messages in run.failed.items():
-            print(f"  {variant}: {len(messages)} failed, first: {messages[0]}")
-        print(f"\n{run.method}: seconds per tree and stage")
-        print(stage_table(run))
+        metric_table(bench, run)
+        stage_table(bench, run)
         sheet += run.sheet
+    print()
+    for run in runs:
+        headline_figures(bench, run)
     if sheet:
         path = write_contact_sheet(args.out / "reconstructions.png", sheet)
-        print(f"\ncontact sheet: {path}")
+        bench.note(f"contact sheet: {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
+    bench.write()
 
 
 if __name__ == "__main__":

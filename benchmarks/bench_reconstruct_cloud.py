@@ -1,11 +1,10 @@
 """Point clouds to trees (issue 24): speed per stage and fit, on tree1.xyz and on synthetic scans of 10k to 1M points.
 
-  .venv/bin/python benchmarks/bench_reconstruct_cloud.py [--sizes 10000 30000 100000 1000000] [--trees 3]
-
 Tables:
-1. tree1.xyz (AdTree's sample tree), our default k-NN graph and AdTree's Delaunay graph, beside AdTree's own run on
-   this cloud (issue 24: height +0.1 %, 99 % of points within 10 cm, median 1.2 cm, 1.34 s, 246k branch faces);
-   skeletonisation seconds are the median of 3 runs on one core; and one PyTLidar run (TreeQSM is randomised).
+1. tree1.xyz (AdTree's sample tree, `--tree1`: by default ../shared/data/pointclouds/ beside the checkout; the table
+   is left out where the file is missing), our default k-NN graph and AdTree's Delaunay graph, beside AdTree's own
+   run on this cloud (issue 24); skeletonisation seconds are the median of 3 runs on one core; and one PyTLidar
+   run (TreeQSM is randomised).
 2. time per stage against cloud size: synthetic scans (`reconstruct.cloud_sampling`) of one generated tree.
 3. quality on synthetic scans of generated trees (leaf-off, noise 5 mm, 2 % outliers, a 40 degree occlusion
    wedge): skeleton Chamfer distance / true height, the Smart-Tree F1 AUC, trunk radius and height errors, and the
@@ -13,88 +12,85 @@ Tables:
    TreeQSM (`benchmarks/pytlidar_qsm.py`, installed for the benchmark only: pip install PyTLidar) on clouds of up
    to PYTLIDAR_MAX_POINTS points, its cylinders read as a Skeleton and scored by the same metrics. It runs in a
    child process with a time limit (--pytlidar-timeout); a failure is reported in its row, not raised.
+
+Run: python -m benchmarks.bench_reconstruct_cloud [--sizes 10000 30000 100000 1000000] [--trees 5]
+     [--quality-points 30000] [--pytlidar-timeout 300] [--tree1 PATH]
 """
 from __future__ import annotations
 
-import argparse
-import os
-import sys
-import time
-from pathlib import Path
+from benchmarks.harness import ROOT, Benchmark, Timing, arguments, pin_threads, time_case
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core, as the issue's targets are stated
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+pin_threads()  # one thread per pool, as the issue's targets are stated
+
+import os  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import species  # noqa: E402
+from benchmarks.pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud  # noqa: E402
 from reconstruct.clouds import read_cloud  # noqa: E402
 from reconstruct.from_cloud import from_cloud  # noqa: E402
 from reconstruct.metrics import MetricError, cloud_fit, point_set_distances, skeleton_precision_recall  # noqa: E402
 from reconstruct.skeleton import SkeletonSettings, cloud_skeleton  # noqa: E402
-from pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
 
-TREE1 = Path(__file__).resolve().parents[2] / "shared" / "data" / "pointclouds" / "tree1.xyz"
+TREE1 = ROOT.parent / "shared" / "data" / "pointclouds" / "tree1.xyz"
 ADTREE_TREE1 = {"height": "+0.1 %", "within": "99 %", "median": "1.2 cm", "seconds": "1.34", "faces": "246k"}
 QUALITY_PRESETS = ("sc_broad_oak", "sc_open_fruit_tree", "sc_vase_elm", "sc_round_maple", "sc_birch_oval")
 PYTLIDAR_MAX_POINTS = 30_000  # the issue's bound: the clouds PyTLidar finishes in minutes
 PYTLIDAR_TIMEOUT_S = 300
+# The quality tables' columns after the first (what was reconstructed, and by which method).
+QUALITY_COLUMNS = ["height m", "Chamfer / height", "F1 AUC", "trunk radius error", "height error", "within 10 cm",
+                   "s"]
 
 
-def median_run(cloud, settings, runs: int = 3):
-    best = []
-    for _ in range(runs):
-        started = time.perf_counter()
-        result = cloud_skeleton(cloud, settings)
-        best.append((time.perf_counter() - started, result))
-    best.sort(key=lambda item: item[0])
-    return best[len(best) // 2]
-
-
-def _patch_note(inputs: dict) -> str:
+def patch_note(inputs: dict) -> str:
     return ", ".join(f"{key} {100 * value:.1f} cm" for key, value in inputs.items())
 
 
-def tree1_table(pytlidar_timeout: float) -> None:
-    cloud = read_cloud(TREE1)
-    print(f"\n## tree1.xyz: {len(cloud.points)} points, {cloud.height:.3f} m high\n")
-    print("| method | height error | points within 10 cm | median distance | skeleton s | branch faces |")
-    print("|---|---|---|---|---|---|")
-    for name, settings in (("ours, k-NN graph (default)", SkeletonSettings()),
-                           ("ours, Delaunay graph", SkeletonSettings(graph="delaunay"))):
-        seconds, result = median_run(cloud, settings)
-        fit = cloud_fit(result.skeleton, cloud.points)
-        full = from_cloud(cloud, settings=settings, completion=False)
-        error = (result.skeleton.height - cloud.height) / cloud.height
-        print(f"| {name} | {error:+.1%} | {fit['within']:.1%} | {100 * fit['median_m']:.1f} cm | {seconds:.2f} | "
-              f"{full.mesh.bark.n_faces / 1000:.0f}k |")
+def graph_run(cloud, name: str, settings: SkeletonSettings) -> tuple[list, Timing, dict]:
+    """One skeleton graph on tree1: its row of the table, its timing (3 runs) and its fit to the points."""
+    timing = time_case(lambda: cloud_skeleton(cloud, settings), repeats=3)
+    skeleton = timing.result.skeleton
+    fit = cloud_fit(skeleton, cloud.points)
+    full = from_cloud(cloud, settings=settings, completion=False)
+    error = (skeleton.height - cloud.height) / cloud.height
+    return [name, f"{error:+.1%}", f"{fit['within']:.1%}", f"{100 * fit['median_m']:.1f} cm", f"{timing.median:.2f}",
+            f"{full.mesh.bark.n_faces / 1000:.0f}k"], timing, fit
+
+
+def tree1_table(bench: Benchmark, path: Path, pytlidar_timeout: float) -> None:
+    cloud = read_cloud(path)
+    default_row, default, fit = graph_run(cloud, "ours, k-NN graph (default)", SkeletonSettings())
+    delaunay_row, _, _ = graph_run(cloud, "ours, Delaunay graph", SkeletonSettings(graph="delaunay"))
     a = ADTREE_TREE1
-    print(f"| AdTree (issue 24) | {a['height']} | {a['within']} | {a['median']} | {a['seconds']} | {a['faces']} |")
-    inputs = _pytlidar_tree1_row(cloud, pytlidar_timeout)
-    stages = median_run(cloud, SkeletonSettings())[1].timings
-    print("\nstages (default): " + ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in stages.items()))
+    adtree_row = ["AdTree (issue 24)", a["height"], a["within"], a["median"], a["seconds"], a["faces"]]
+    pytlidar_row, inputs = pytlidar_tree1_row(cloud, pytlidar_timeout)
+    notes = ["stages (default): " + ", ".join(f"{k} {1000 * v:.0f} ms" for k, v in default.result.timings.items())]
     if inputs:
-        print(f"PyTLidar's inputs (its own estimate): {_patch_note(inputs)}")
+        notes.append(f"PyTLidar's inputs (its own estimate): {patch_note(inputs)}")
+    bench.table(f"tree1.xyz: {len(cloud.points)} points, {cloud.height:.3f} m high",
+                ["method", "height error", "points within 10 cm", "median distance", "skeleton s", "branch faces"],
+                [default_row, delaunay_row, adtree_row, pytlidar_row], notes)
+    bench.figure("tree1.xyz: points within 10 cm of the bark", 100 * fit["within"], "%", f"AdTree {a['within']}")
+    bench.figure("tree1.xyz: skeleton seconds", default.median, "s", f"AdTree {a['seconds']} s")
 
 
-def _pytlidar_tree1_row(cloud, timeout_s: float) -> dict:
-    """Print PyTLidar's row of the tree1 table (one run: TreeQSM is randomised); its inputs, or {} if none ran."""
+def pytlidar_tree1_row(cloud, timeout_s: float) -> tuple[list, dict]:
+    """PyTLidar's row of the tree1 table (one run: TreeQSM is randomised) and its inputs ({} if none ran)."""
     label = "PyTLidar (TreeQSM), one run"
     missing = pytlidar_missing(timeout_s)
     if missing is not None:
-        print(f"| {label} | {missing} | | | | |")
-        return {}
+        return [label, missing, "", "", "", ""], {}
     try:
         run = pytlidar_run(cloud.points, timeout_s)
         fit = cloud_fit(run.skeleton, cloud.points)
     except (PyTLidarFailed, MetricError) as error:
-        print(f"| {label} | failed: {error} | | | | |")
-        return {}
+        return [label, f"failed: {error}", "", "", "", ""], {}
     error = (run.skeleton.height - cloud.height) / cloud.height
-    print(f"| {label} | {error:+.1%} | {fit['within']:.1%} | {100 * fit['median_m']:.1f} cm | {run.seconds:.2f} | "
-          f"{run.n_cylinders} cylinders |")
-    return run.inputs
+    return [label, f"{error:+.1%}", f"{fit['within']:.1%}", f"{100 * fit['median_m']:.1f} cm", f"{run.seconds:.2f}",
+            f"{run.n_cylinders} cylinders"], run.inputs
 
 
 def grown(preset: str, seed: int):
@@ -102,25 +98,21 @@ def grown(preset: str, seed: int):
     return species.rebuild(params)
 
 
-def size_table(sizes) -> None:
+def size_table(bench: Benchmark, sizes) -> None:
     skeleton, mesh = grown("sc_broad_oak", 0)
-    print(f"\n## time per stage against cloud size (sc_broad_oak seed 0, {skeleton.height:.1f} m, leaf-off scan)\n")
-    names = None
+    names, rows = [], []
     for n in sizes:
         scan = sample_tree_cloud(mesh, np.random.default_rng(1), n_points=int(n))
-        started = time.perf_counter()
-        result = cloud_skeleton(scan.points)
-        total = time.perf_counter() - started
-        if names is None:
-            names = list(result.timings)
-            print("| points | used | " + " | ".join(names) + " | total s |")
-            print("|---" * (len(names) + 3) + "|")
-        print(f"| {n} | {result.n_used} | " + " | ".join(f"{result.timings[k]:.3f}" for k in names)
-              + f" | {total:.2f} |")
+        timing = time_case(lambda: cloud_skeleton(scan.points), repeats=1)
+        result = timing.result
+        names = names or list(result.timings)
+        rows.append([n, result.n_used, *[f"{result.timings[k]:.3f}" for k in names], f"{timing.median:.2f}"])
+    bench.table(f"time per stage against cloud size (sc_broad_oak seed 0, {skeleton.height:.1f} m, leaf-off scan)",
+                ["points", "used", *names, "total s"], rows)
 
 
-def _scores(predicted: species.Skeleton, trunk_radius: float, true: species.Skeleton, true_here: species.Skeleton,
-            wood: np.ndarray, seconds: float) -> tuple[float, ...]:
+def scores(predicted: species.Skeleton, trunk_radius: float, true: species.Skeleton, true_here: species.Skeleton,
+           wood: np.ndarray, seconds: float) -> tuple[float, ...]:
     """(Chamfer / height, F1 AUC, trunk radius error, height error, within 10 cm, seconds) of one reconstruction."""
     chamfer = point_set_distances(predicted.positions, true_here.positions, true.height).chamfer
     match = skeleton_precision_recall(predicted, true_here)
@@ -129,82 +121,91 @@ def _scores(predicted: species.Skeleton, trunk_radius: float, true: species.Skel
     return chamfer, match.auc, trunk_error, height_error, cloud_fit(predicted, wood)["within"], seconds
 
 
-def _quality_row(label: str, height: str, scores) -> str:
-    chamfer, auc, trunk, tall, within, seconds = scores
-    return (f"| {label} | {height} | {chamfer:.3f} | {auc:.2f} | {trunk:+.0%} | {tall:+.1%} | {within:.0%} | "
-            f"{seconds:.2f} |")
+def quality_row(label: str, height: str, scored) -> list[str]:
+    """A row of the quality tables (QUALITY_COLUMNS after `label`) from `scores`."""
+    chamfer, auc, trunk, tall, within, seconds = scored
+    return [label, height, f"{chamfer:.3f}", f"{auc:.2f}", f"{trunk:+.0%}", f"{tall:+.1%}", f"{within:.0%}",
+            f"{seconds:.2f}"]
 
 
-def _mean_row(label: str, rows) -> str:
-    mean = np.mean(np.abs(np.array(rows)), axis=0)
-    return (f"| {label} | | {mean[0]:.3f} | {mean[1]:.2f} | {mean[2]:.0%} | {mean[3]:.1%} | {mean[4]:.0%} | "
-            f"{mean[5]:.2f} |")
+def message_row(label: str, height: str, message: str) -> list[str]:
+    """A row of the quality tables that says why a method has no scores."""
+    return [label, height, message] + [""] * (len(QUALITY_COLUMNS) - 2)
 
 
-def quality_table(trees: int, n_points: int, pytlidar_timeout: float) -> None:
-    print(f"\n## quality on synthetic scans ({n_points} points, 2 % outliers, 40 degree wedge, 5 mm noise)\n")
-    print("| tree, method | height m | Chamfer / height | F1 AUC | trunk radius error | height error | within 10 cm "
-          "| s |")
-    print("|---|---|---|---|---|---|---|---|")
+def mean_row(label: str, scored_rows) -> list[str]:
+    mean = np.mean(np.abs(np.array(scored_rows)), axis=0)
+    return [label, "", f"{mean[0]:.3f}", f"{mean[1]:.2f}", f"{mean[2]:.0%}", f"{mean[3]:.1%}", f"{mean[4]:.0%}",
+            f"{mean[5]:.2f}"]
+
+
+def quality_table(bench: Benchmark, trees: int, n_points: int, pytlidar_timeout: float) -> None:
     missing = pytlidar_missing(pytlidar_timeout)
     # PyTLidar sees the same recentred points ours does, so both skeletons share the truth's frame.
-    ours, theirs, ours_where_theirs, notes = [], [], [], []
+    ours, theirs, ours_where_theirs, notes, rows = [], [], [], [], []
     for k in range(trees):
         preset = QUALITY_PRESETS[k % len(QUALITY_PRESETS)]
         true, mesh = grown(preset, k)
+        height = f"{true.height:.1f}"
         scan = sample_tree_cloud(mesh, np.random.default_rng(100 + k), n_points=n_points, outlier_fraction=0.02,
                                  occlusion_wedge_deg=40.0)
-        started = time.perf_counter()
-        result = cloud_skeleton(scan.points)
-        seconds = time.perf_counter() - started
+        timing = time_case(lambda: cloud_skeleton(scan.points), repeats=1)
         # Back to the tree's frame: the cloud was recentred on its box and its lowest point.
         cloud = read_cloud(scan.points)
         shift = -cloud.offset.astype(np.float32)
         true_here = species.Skeleton(true.positions + shift, true.parent, true.radius, true.order)
         wood = cloud.points[scan.labels == WOOD]
-        ours.append(_scores(result.skeleton, result.trunk_radius, true, true_here, wood, seconds))
-        print(_quality_row(f"{preset} #{k}, ours", f"{true.height:.1f}", ours[-1]))
+        ours.append(scores(timing.result.skeleton, timing.result.trunk_radius, true, true_here, wood, timing.median))
+        rows.append(quality_row(f"{preset} #{k}, ours", height, ours[-1]))
         label = f"{preset} #{k}, PyTLidar"
         if missing is not None:
-            print(f"| {label} | {true.height:.1f} | {missing} | | | | | |")
+            rows.append(message_row(label, height, missing))
             continue
         if len(cloud.points) > PYTLIDAR_MAX_POINTS:
-            print(f"| {label} | {true.height:.1f} | skipped: {len(cloud.points)} points, over "
-                  f"{PYTLIDAR_MAX_POINTS} | | | | | |")
+            rows.append(message_row(label, height, f"skipped: {len(cloud.points)} points, over "
+                                                   f"{PYTLIDAR_MAX_POINTS}"))
             continue
         try:
             run = pytlidar_run(cloud.points, pytlidar_timeout)
             # TreeQSM's trunk radius: its base cylinder's (node 0 carries it).
-            theirs.append(_scores(run.skeleton, float(run.skeleton.radius[0]), true, true_here, wood, run.seconds))
+            theirs.append(scores(run.skeleton, float(run.skeleton.radius[0]), true, true_here, wood, run.seconds))
         except (PyTLidarFailed, MetricError) as error:
-            print(f"| {label} | {true.height:.1f} | failed: {error} | | | | | |")
+            rows.append(message_row(label, height, f"failed: {error}"))
             continue
         ours_where_theirs.append(ours[-1])
-        notes.append(f"{preset} #{k}: {run.n_cylinders} cylinders; {_patch_note(run.inputs)}")
-        print(_quality_row(label, f"{true.height:.1f}", theirs[-1]))
-    print(_mean_row(f"mean (abs), ours, {len(ours)} trees", ours))
+        notes.append(f"PyTLidar's inputs, {preset} #{k} (its own estimate from the stem near the base and the point "
+                     f"spacing): {run.n_cylinders} cylinders; {patch_note(run.inputs)}")
+        rows.append(quality_row(label, height, theirs[-1]))
+    rows.append(mean_row(f"mean (abs), ours, {len(ours)} trees", ours))
     if theirs:
         if len(theirs) < len(ours):
-            print(_mean_row(f"mean (abs), ours, the {len(theirs)} trees PyTLidar finished", ours_where_theirs))
-        print(_mean_row(f"mean (abs), PyTLidar, {len(theirs)} trees", theirs))
-    if notes:
-        print("\nPyTLidar's inputs (its own estimate from the stem near the base and the point spacing):")
-        for note in notes:
-            print(f"- {note}")
+            rows.append(mean_row(f"mean (abs), ours, the {len(theirs)} trees PyTLidar finished", ours_where_theirs))
+        rows.append(mean_row(f"mean (abs), PyTLidar, {len(theirs)} trees", theirs))
+    bench.table(f"quality on synthetic scans ({n_points} points, 2 % outliers, 40 degree wedge, 5 mm noise)",
+                ["tree, method", *QUALITY_COLUMNS], rows, notes)
+    if ours:
+        bench.figure(f"synthetic scans: points within 10 cm of the bark, mean of {len(ours)} trees",
+                     100 * float(np.mean([row[4] for row in ours])), "%")
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__)
     parser.add_argument("--sizes", type=int, nargs="*", default=[10_000, 30_000, 100_000, 1_000_000])
     parser.add_argument("--trees", type=int, default=5)
     parser.add_argument("--quality-points", type=int, default=30_000)
     parser.add_argument("--pytlidar-timeout", type=float, default=PYTLIDAR_TIMEOUT_S,
                         help="seconds PyTLidar may take per cloud; 0 leaves it out")
+    parser.add_argument("--tree1", type=Path, default=TREE1,
+                        help=f"AdTree's sample cloud (default {os.path.relpath(TREE1, ROOT)})")
     args = parser.parse_args()
-    if TREE1.is_file():
-        tree1_table(args.pytlidar_timeout)
-    size_table(args.sizes)
-    quality_table(args.trees, args.quality_points, args.pytlidar_timeout)
+    bench = Benchmark("reconstruct_cloud", "Point clouds to trees: fit and seconds per stage", args)
+    if args.tree1.is_file():
+        tree1_table(bench, args.tree1, args.pytlidar_timeout)
+    else:
+        bench.note(f"tree1 table left out: {os.path.relpath(args.tree1, ROOT)} is missing")
+    size_table(bench, args.sizes)
+    quality_table(bench, args.trees, args.quality_points, args.pytlidar_timeout)
+    bench.write()
 
 
 if __name__ == "__main__":

@@ -1,8 +1,5 @@
 """Photos to trees (issue 24): an orbit of Blender photos of a generated tree through the full SfM path.
 
-  .venv/bin/python benchmarks/bench_reconstruct_photos.py [--views 36] [--size 640] [--tree sc_broad_oak:0]
-      [--leafless] [--max-features 4096] [--matcher sequential]
-
 The orbit (`--views` photos 360/views degrees apart, alternating 8 and 15 degrees up, Cycles `--samples` per
 pixel) is rendered once and cached under ~/.cache/treefarm/bench-photos/ (Cycles takes seconds a photo). Then,
 on the same photos, in one run:
@@ -12,26 +9,28 @@ on the same photos, in one run:
 2. quality against the generated tree's skeleton: Chamfer distance / height, the Smart-Tree F1 AUC, trunk radius
    and height errors, and the share of the tree's isolated points within 10 cm of the reconstructed bark, for ours
    and, on the same isolated cloud, PyTLidar's TreeQSM (installed for the benchmark only).
+
+Run: python -m benchmarks.bench_reconstruct_photos [--views 36] [--size 640] [--tree sc_broad_oak:0] [--leafless]
+     [--max-features 4096] [--matcher sequential]
 """
 from __future__ import annotations
 
-import argparse
-import dataclasses
-import json
-import os
-import shutil
-import sys
-import time
-from pathlib import Path
+from benchmarks.harness import Benchmark, arguments, pin_threads, time_case
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+pin_threads()
+
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import os  # noqa: E402
+import shutil  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 import species  # noqa: E402
-from bench_reconstruct_cloud import _quality_row, _scores  # noqa: E402
-from pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
+from benchmarks.bench_reconstruct_cloud import QUALITY_COLUMNS, message_row, quality_row, scores  # noqa: E402
+from benchmarks.pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
 from reconstruct.from_photos import from_photos  # noqa: E402
 from reconstruct.metrics import MetricError  # noqa: E402
 from reconstruct.sfm import PhotoError, SfmSettings  # noqa: E402
@@ -41,6 +40,8 @@ from species.tree_mesh import MeshPart  # noqa: E402
 
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "treefarm" / "bench-photos"
 PYTLIDAR_TIMEOUT_S = 300
+WAYS_COLUMNS = ["way", "registered", "reprojection px", "SfM points", "colour", "ground", "footprint", "group",
+                "outliers", "stem", "features s", "matching s", "mapping s", "tree s", "total s"]
 
 
 def orbit(preset: str, seed: int, views: int, size: int, samples: int, leafless: bool
@@ -73,8 +74,20 @@ def photos_only(folder: Path) -> Path:
     return bare
 
 
+def ways_row(label: str, result, total: float) -> list:
+    """A row of the ways table: the SfM record's counts and the seconds of each stage."""
+    record, t = result.scan.provenance["sfm"], result.timings
+    counts = record["points"]
+    tree_s = sum(v for k, v in t.items() if not k.startswith("sfm."))
+    mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
+    return [label, f"{record['registered']}/{record['photos']}", f"{record['reprojection_px']:.2f}", counts["sfm"],
+            counts["colour"], counts["ground"], counts["footprint"], counts["cluster"], counts["outliers"],
+            counts["stem"], f"{t['sfm.features']:.1f}", f"{t['sfm.matching']:.1f}", f"{mapping:.1f}",
+            f"{tree_s:.2f}", f"{total:.1f}"]
+
+
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__)
     parser.add_argument("--views", type=int, default=36)
     parser.add_argument("--size", type=int, default=640)
     parser.add_argument("--samples", type=int, default=4)
@@ -92,60 +105,50 @@ def main() -> None:
     folder, true = orbit(preset, int(seed), args.views, args.size, args.samples, args.leafless)
     if args.render_only:
         return
+    bench = Benchmark("reconstruct_photos", "Photos to trees: an orbit of Blender photos through SfM", args)
     ways = [("estimated, scaled by the height", photos_only(folder), "auto", true.height),
             ("estimated, aligned to cameras.json", folder, "estimate", None),
             ("known poses (cameras.json)", folder, "known", None)]
-    print(f"\n## {args.views} photos of {preset} #{seed} ({true.height:.1f} m) at {args.size} px, "
-          f"{args.samples} spp{', leafless' if args.leafless else ', in leaf'}; {args.matcher} matching, "
-          f"{args.max_features} features a photo\n")
-    print("| way | registered | reprojection px | SfM points | colour | ground | footprint | group | outliers | "
-          "stem | features s | matching s | mapping s | tree s | total s |")
-    print("|---" * 15 + "|")
-    results = []
+    rows, results = [], []
     for label, source, poses, height in ways:
-        started = time.perf_counter()
+        settings = SfmSettings(poses=poses, threads=args.threads, max_features=args.max_features,
+                               matcher=args.matcher)
         try:
-            settings = SfmSettings(poses=poses, threads=args.threads, max_features=args.max_features,
-                                   matcher=args.matcher)
-            result = from_photos(source, height=height, settings=settings)
+            timing = time_case(lambda: from_photos(source, height=height, settings=settings), repeats=1)
         except PhotoError as error:
-            print(f"| {label} | failed: {error} |" + " |" * 13)
+            rows.append([label, f"failed: {error}"] + [""] * (len(WAYS_COLUMNS) - 2))
             continue
-        total = time.perf_counter() - started
-        record, t = result.scan.provenance["sfm"], result.timings
-        counts = record["points"]
-        tree_s = sum(v for k, v in t.items() if not k.startswith("sfm."))
-        mapping = t.get("sfm.mapping", t.get("sfm.triangulation", 0.0))
-        print(f"| {label} | {record['registered']}/{record['photos']} | {record['reprojection_px']:.2f} | "
-              f"{counts['sfm']} | {counts['colour']} | {counts['ground']} | {counts['footprint']} | "
-              f"{counts['cluster']} | {counts['outliers']} | {counts['stem']} | {t['sfm.features']:.1f} | "
-              f"{t['sfm.matching']:.1f} | {mapping:.1f} | {tree_s:.2f} | {total:.1f} |")
-        results.append((label, result, total))
-    print("\n## quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)\n")
-    print("| way, method | height m | Chamfer / height | F1 AUC | trunk radius error | height error | within 10 cm "
-          "| s |")
-    print("|---|---|---|---|---|---|---|---|")
+        rows.append(ways_row(label, timing.result, timing.median))
+        results.append((label, timing.result, timing.median))
+    bench.table(f"{args.views} photos of {preset} #{seed} ({true.height:.1f} m) at {args.size} px, {args.samples} "
+                f"spp{', leafless' if args.leafless else ', in leaf'}; {args.matcher} matching, {args.max_features} "
+                "features a photo", WAYS_COLUMNS, rows)
     missing = pytlidar_missing(args.pytlidar_timeout)
     base = true.positions[0]
     true_here = species.Skeleton(true.positions - base, true.parent, true.radius, true.order)
+    height, rows = f"{true.height:.1f}", []
     for label, result, total in results:
         # Both trees in the base frame: ours has its root at the origin; the isolated cloud is shifted the same.
         scan = result.scan
         shift = (scan.transform[:3, 3] - scan.cloud.offset).astype(np.float32)
         cloud = scan.cloud.points - shift
-        print(_quality_row(f"{label}, ours", f"{true.height:.1f}",
-                           _scores(scan.measured, scan.measures["trunk_radius_fit_m"], true, true_here, cloud, total)))
+        rows.append(quality_row(f"{label}, ours", height,
+                                scores(scan.measured, scan.measures["trunk_radius_fit_m"], true, true_here, cloud,
+                                       total)))
         if missing is not None:
-            print(f"| {label}, PyTLidar | | {missing} | | | | | |")
+            rows.append(message_row(f"{label}, PyTLidar", "", missing))
             continue
         try:
             run = pytlidar_run(cloud, args.pytlidar_timeout)
-            print(_quality_row(f"{label}, PyTLidar", f"{true.height:.1f}",
-                               _scores(run.skeleton, float(run.skeleton.radius[0]), true, true_here, cloud,
-                                       run.seconds)))
+            rows.append(quality_row(f"{label}, PyTLidar", height,
+                                    scores(run.skeleton, float(run.skeleton.radius[0]), true, true_here, cloud,
+                                           run.seconds)))
         except (PyTLidarFailed, MetricError) as error:
-            print(f"| {label}, PyTLidar | | failed: {error} | | | | | |")
-    print("\n" + json.dumps({label: r.scan.provenance["sfm"] for label, r, _ in results}, indent=None))
+            rows.append(message_row(f"{label}, PyTLidar", "", f"failed: {error}"))
+    bench.table("quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)",
+                ["way, method", *QUALITY_COLUMNS], rows)
+    bench.note("SfM records: " + json.dumps({label: r.scan.provenance["sfm"] for label, r, _ in results}))
+    bench.write()
 
 
 if __name__ == "__main__":

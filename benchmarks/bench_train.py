@@ -10,15 +10,16 @@
    metrics, curves): `make models` exports into `models/`, the defaults `farm reconstruct` loads.
 
 The tasks, and the budget recipe each trains with (`Task.recipe`, the shipped default models'), are
-`trainers.tasks.TASKS`.
+`trainers.tasks.TASKS`. A task's dataset is `--data-root/TASK`; with `--generate N`, a missing one is made here:
+N trees of the task's shipped spec. The tables go to benchmarks/results/train.json (train_throughput.json with
+--skip-quality), the quality reports to --work/bench_train.json.
 
-Run: .venv/bin/python benchmarks/bench_train.py --data-root out/train-full [--budget 600] [--export-models models]
+Run: python -m benchmarks.bench_train --data-root out/train-full [--budget 600] [--export-models models]
+     python -m benchmarks.bench_train --skip-quality --generate 40 --data-root out/bench-train-data   (throughput)
 """
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import shutil
 import sys
 import tempfile
@@ -28,17 +29,17 @@ from pathlib import Path
 import numpy as np
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from farm.pipeline import ray_connection  # noqa: E402
-from farm.table import format_table  # noqa: E402
-from trainers.data import TaskDataset  # noqa: E402
-from trainers.models import model_files  # noqa: E402
-from trainers.networks import TrainSettings  # noqa: E402
-from trainers.sketchnet import grown_tree_errors  # noqa: E402
-from trainers.tasks import TASKS  # noqa: E402
-from trainers.training import train  # noqa: E402
+# No thread pinning: each throughput setting sets its own torch threads (`train(threads_per_worker=...)`), and the
+# quality runs use every core.
+from benchmarks.harness import ROOT, Benchmark, arguments
+from farm.jobs import load_spec
+from farm.pipeline import ray_connection, run_job
+from trainers.data import TaskDataset
+from trainers.models import model_files
+from trainers.networks import TrainSettings
+from trainers.sketchnet import grown_tree_errors
+from trainers.tasks import TASKS
+from trainers.training import train
 
 # Published figures after full training (seeds-digest 1.13 and 4.5) and our targets, for the shipped tasks; a task
 # without them gets no such line.
@@ -47,20 +48,35 @@ REFERENCES = {"pix2pix-silhouette": "thesis 0.041 after 4 days on a GTX 1080 Ti,
               "sketchnet": "paper: 2,000 epochs, batch 8, Adam 1e-5; target here >= 95 % species accuracy"}
 TARGETS = {"pix2pix-silhouette": "error >= 30 % below the baseline's", "pix2pix-trunk": "error >= 30 % below "
            "the baseline's", "sketchnet": ">= 95 % species, every head above the baseline"}
+TARGET_SCALING = 1.7  # 2 workers of 1 thread against 1 worker of 1 thread
+SETTINGS = ((1, 1), (1, 2), (2, 1))  # (workers, torch threads each) of the throughput table
+
 
 def throughput(task: str, data: list[str], seconds: float, work: Path) -> list[list]:
+    """Rows (network, workers, threads each, samples, samples/s, against 1 worker x 1 thread) of each setting."""
     rows = []
-    for workers, threads in ((1, 1), (1, 2), (2, 1)):
+    for workers, threads in SETTINGS:
         settings = TrainSettings(epochs=1000, time_budget_s=seconds, seed=0)
         result = train(task, data, settings=settings, run_dir=work / f"{task}-{workers}x{threads}",
                        workers=workers, threads_per_worker=threads)
-        last = result.history[-1]
-        rate = result.steps * settings.batch_size * workers / last["seconds"]
-        rows.append([task, workers, threads, result.steps * settings.batch_size * workers, f"{rate:.2f}"])
-    single = float(rows[0][4])
-    for row in rows:
-        row.append(f"{float(row[4]) / single:.2f}x")
-    return rows
+        samples = result.steps * settings.batch_size * workers
+        rows.append([task, workers, threads, samples, samples / result.history[-1]["seconds"]])
+    single = rows[0][4]
+    return [[*row, f"{row[4] / single:.2f}x"] for row in rows]
+
+
+def throughput_table(bench: Benchmark, tasks: list[str], args) -> None:
+    rows = []
+    for task in tasks:
+        rows += throughput(task, [str(args.data_root / task)], args.throughput_seconds, args.work)
+    bench.table(f"training throughput, {args.throughput_seconds:.0f} s per setting (start-up included)",
+                ["network", "workers", "threads each", "samples", "samples/s", "vs 1x1"], rows,
+                [f"target: 2 workers >= {TARGET_SCALING}x one single-threaded worker"])
+    for task in tasks:
+        by_setting = {(row[1], row[2]): row[4] for row in rows if row[0] == task}
+        bench.figure(f"{task}: samples/s, 2 workers", by_setting[2, 1], "samples/s",
+                     f"1 worker {by_setting[1, 1]:.2f}; {by_setting[2, 1] / by_setting[1, 1]:.2f}x, target >= "
+                     f"{TARGET_SCALING}x")
 
 
 def grown_errors(result, limit: int = 400) -> dict:
@@ -117,9 +133,15 @@ def quality_rows(report: dict) -> list[list]:
     return rows
 
 
-def arguments() -> argparse.ArgumentParser:
+def generate(task: str, folder: Path, trees: int) -> None:
+    """`trees` trees of the task's shipped spec into `folder` (Ray connected)."""
+    print(f"generating {trees} trees of {TASKS[task].spec_path.relative_to(ROOT)} into {folder}", flush=True)
+    run_job(load_spec(TASKS[task].spec_path).with_trees(trees), str(folder), progress=False)
+
+
+def option_parser():
     """The benchmark's options; `--tasks` defaults to every task of the registry."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = arguments(__doc__)
     parser.add_argument("--data-root", type=Path, default=ROOT / "out" / "train-full",
                         help="folder with one dataset per task (named as the task)")
     parser.add_argument("--tasks", default=",".join(TASKS), help="comma-separated names of trainers.tasks.TASKS")
@@ -128,42 +150,47 @@ def arguments() -> argparse.ArgumentParser:
     parser.add_argument("--throughput-seconds", type=float, default=40.0)
     parser.add_argument("--skip-throughput", action="store_true")
     parser.add_argument("--skip-quality", action="store_true", help="only the throughput table")
+    parser.add_argument("--generate", type=int, default=0, metavar="N",
+                        help="make a task's missing dataset here: N trees of its shipped spec")
     parser.add_argument("--export-models", type=Path, help="write the trained networks as model folders here")
     parser.add_argument("--work", type=Path, default=ROOT / "out" / "bench_train")
     return parser
 
 
 def main(argv: list[str] | None = None) -> None:
-    args = arguments().parse_args(argv)
+    args = option_parser().parse_args(argv)
     tasks = [t for t in args.tasks.split(",") if t]
     for task in tasks:
         if task not in TASKS:
             sys.exit(f"task {task!r} is unknown: allowed {', '.join(TASKS)}")
-        if not (args.data_root / task / "manifest.json").exists():
+        if not args.generate and not (args.data_root / task / "manifest.json").exists():
             sys.exit(f"no {task} dataset in {args.data_root / task}: farm generate "
-                     f"{TASKS[task].spec_path.relative_to(ROOT)} --out {args.data_root / task}")
+                     f"{TASKS[task].spec_path.relative_to(ROOT)} --out {args.data_root / task} (or --generate N)")
+    if args.skip_quality:
+        bench = Benchmark("train_throughput", "Training throughput on CPU: samples per second on 1 and 2 Ray workers",
+                          args)
+    else:
+        bench = Benchmark("train", "Training on CPU: samples per second on 1 and 2 Ray workers, held-out quality",
+                          args)
     if args.work.exists():
         shutil.rmtree(args.work)
     args.work.mkdir(parents=True)
     with ray_connection(log_to_driver=False):
+        for task in tasks:
+            if not (args.data_root / task / "manifest.json").exists():
+                generate(task, args.data_root / task, args.generate)
         if not args.skip_throughput:
-            rows = []
-            for task in tasks:
-                rows += throughput(task, [str(args.data_root / task)], args.throughput_seconds, args.work)
-            print(f"\ntraining throughput, {os.cpu_count()} cores, {args.throughput_seconds:.0f} s per setting "
-                  f"(start-up included)")
-            print(format_table(["network", "workers", "threads each", "samples", "samples/s", "vs 1x1"], rows))
+            throughput_table(bench, tasks, args)
         reports = [] if args.skip_quality else [
             quality(task, [str(args.data_root / task)], args.budget, args.work, args.export_models) for task in tasks]
-    if not reports:
-        return
-    rows = [row for report in reports for row in quality_rows(report)]
-    print(f"\nheld-out quality after {args.budget:.0f} s of training per network (one worker, every core)")
-    print(format_table(["network", "metric", "model", "baseline", "trained"], rows))
-    for task in tasks:
-        if task in TARGETS:
-            print(f"  {task}: target {TARGETS[task]}; reference {REFERENCES[task]}")
-    (args.work / "bench_train.json").write_text(json.dumps(reports, indent=1, sort_keys=True))
+    if reports:
+        bench.table(f"held-out quality after {args.budget:.0f} s of training per network (one worker, every core)",
+                    ["network", "metric", "model", "baseline", "trained"],
+                    [row for report in reports for row in quality_rows(report)],
+                    [f"{task}: target {TARGETS[task]}; reference {REFERENCES[task]}" for task in tasks
+                     if task in TARGETS])
+        (args.work / "bench_train.json").write_text(json.dumps(reports, indent=1, sort_keys=True))
+    bench.write()
 
 
 if __name__ == "__main__":

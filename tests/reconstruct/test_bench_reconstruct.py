@@ -1,21 +1,13 @@
-"""benchmarks/bench_reconstruct.py end to end on one tree per method: it prints every method's quality and stage
+"""benchmarks.bench_reconstruct end to end on one tree per method: it prints every method's quality and stage
 tables beside the papers' figures and writes the contact sheet. (Speed is measured there, not asserted here.)"""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-BENCH = Path(__file__).resolve().parents[2] / "benchmarks" / "bench_reconstruct.py"
-_spec = importlib.util.spec_from_file_location("bench_reconstruct", BENCH)
-bench = importlib.util.module_from_spec(_spec)
-sys.modules[_spec.name] = bench  # its dataclasses look their module up
-_spec.loader.exec_module(bench)
+from benchmarks import bench_reconstruct as bench
 
 
 def test_one_tree_per_method_prints_every_table_and_writes_the_sheet(tmp_path, capsys):
     bench.main(["--trees", "1", "--sweep-trees", "1", "--sweep-views", "2", "--surface-samples", "500",
-                "--sheet-trees", "1", "--out", str(tmp_path)])
+                "--sheet-trees", "1", "--out", str(tmp_path), "--no-results"])
     text = capsys.readouterr().out
     for method in bench.drawn_methods():
         assert f"{method}: quality on held-out trees" in text

@@ -1,17 +1,16 @@
 """The reconstruction registry reaches every place that lists methods. A throwaway method registered in
 `reconstruct.methods.METHODS` (a stick as tall as asked, read from a rendered mask) is a choice of `farm reconstruct`
 and runs there, is planned and evaluated by `farm evaluate` (one unit in this process: a Ray worker would not see
-the patch), and is in benchmarks/bench_reconstruct.py's methods; docs/reconstruct.md's table is the registry's."""
+the patch), and is in benchmarks.bench_reconstruct's methods; docs/reconstruct.md's table is the registry's."""
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
 
+from benchmarks import bench_reconstruct
 from farm.cli import main
 from farm.evaluate.job import EvaluationError, evaluation_data_spec, evaluate_unit, plan_evaluation
 from farm.evaluate.methods import METHODS as EVALUATED, EvalSettings, Needs, needs_of
@@ -89,13 +88,9 @@ def test_a_registered_method_is_planned_and_evaluated(stick, one_tree, tmp_path,
 
 
 def test_a_registered_drawing_method_is_benchmarked(stick, tmp_path, capsys):
-    spec = importlib.util.spec_from_file_location("bench_reconstruct", ROOT / "benchmarks" / "bench_reconstruct.py")
-    bench = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = bench  # its dataclasses look their module up
-    spec.loader.exec_module(bench)
-    assert bench.drawn_methods() == ["params", "sketch-depth", "two-view", STICK]
-    bench.main(["--methods", STICK, "--trees", "1", "--surface-samples", "0", "--sheet-trees", "0",
-                "--out", str(tmp_path)])
+    assert bench_reconstruct.drawn_methods() == ["params", "sketch-depth", "two-view", STICK]
+    bench_reconstruct.main(["--methods", STICK, "--trees", "1", "--surface-samples", "0", "--sheet-trees", "0",
+                            "--out", str(tmp_path), "--no-results"])
     text = capsys.readouterr().out
     assert "stick: quality on held-out trees" in text and "stick: seconds per tree and stage" in text
     assert "failed" not in text

@@ -5,20 +5,18 @@ predictor, and bench_train's task list and recipe. A place that kept its own lis
 from __future__ import annotations
 
 import json
-import runpy
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from benchmarks import bench_train
 from farm.cli import build_parser
 from farm.cli import main as farm_main
 from trainers import models as trained_models
 from trainers.registry import open_registry
 from trainers.tasks import TASKS, Task, TrainingDataError, get_task
 
-ROOT = Path(__file__).resolve().parents[2]
 torch.set_num_threads(1)
 
 # A depth network on the trunk pairs under a name, model name and recipe no other place knows.
@@ -91,12 +89,11 @@ def test_farm_train_trains_it_registers_its_model_and_farm_models_lists_it(throw
 
 @pytest.mark.slow
 def test_bench_train_lists_it_and_trains_it_on_its_recipe(throwaway, training_datasets, tmp_path, capsys):
-    bench = runpy.run_path(str(ROOT / "benchmarks" / "bench_train.py"), run_name="bench_train")
-    assert bench["arguments"]().parse_args([]).tasks.split(",") == list(TASKS)
+    assert bench_train.option_parser().parse_args([]).tasks.split(",") == list(TASKS)
     (tmp_path / "data").mkdir()
     (tmp_path / "data" / throwaway.name).symlink_to(training_datasets["pix2pix-trunk"])
-    bench["main"](["--data-root", str(tmp_path / "data"), "--tasks", throwaway.name, "--skip-throughput",
-                   "--budget", "0", "--work", str(tmp_path / "work")])
+    bench_train.main(["--data-root", str(tmp_path / "data"), "--tasks", throwaway.name, "--skip-throughput",
+                      "--budget", "0", "--work", str(tmp_path / "work"), "--no-results"])
     assert "throwaway-depth" in capsys.readouterr().out
     [report] = json.loads((tmp_path / "work" / "bench_train.json").read_text())
     assert report["task"] == throwaway.name and report["epochs"] == throwaway.recipe["epochs"]
