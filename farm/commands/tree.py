@@ -20,12 +20,13 @@ import argparse
 import json
 import os
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 import species
-from species.errors import TreefarmError, user_path
+from species.errors import ParameterError, TreefarmError, user_path
 from species.meshing import write_tree
 
 from farm.commands import CommandLineError, check_flag_int
@@ -79,7 +80,7 @@ def _read_params(path: str):
         raise ParamsFileError(f"parameter file {path} is missing or not a file: allowed a JSON file of parameters "
                               f"or a Sapling preset (.py)")
     if file.suffix == ".py":
-        with user_path(path, "read"):
+        with user_path(path, "read"), _naming(path, ParameterError):
             preset = load_sapling_preset(file)
         return preset.params, preset
     with user_path(path, "read"):
@@ -93,14 +94,20 @@ def _read_params(path: str):
     if not isinstance(params, dict):
         raise ParamsFileError(f"{path} must hold a JSON object of parameters, not {type(params).__name__}")
     if params.get("generator", "weber_penn") == "weber_penn":
-        try:
-            as_preset = reads_as_sapling_preset(params)
-        except TreefarmError as exc:
-            raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
-        if as_preset:  # the file already read: loaded as the add-on loads a preset
-            preset = sapling_preset_from_settings(params)
-            return preset.params, preset
+        with _naming(path, TreefarmError):
+            if reads_as_sapling_preset(params):  # the file already read: loaded as the add-on loads a preset
+                preset = sapling_preset_from_settings(params)
+                return preset.params, preset
     return params, None
+
+
+@contextmanager
+def _naming(path: str, errors: type[Exception]):
+    """Raise an error of `errors` inside the block as a ParamsFileError whose line starts with the file's name."""
+    try:
+        yield
+    except errors as exc:
+        raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
 
 
 def _species_output(args: argparse.Namespace) -> tuple[Path, str]:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ParameterError, PathError
+from ..growth import check_describes_a_tree
 from .sapling_keys import BLENDER_ONLY_KEYS, OLD_SAPLING_KEYS, RANGE_ONLY_KEYS, REALIZED_ONLY_KEYS, ignored_keys
 from .schema import SCHEMA
 
@@ -82,11 +83,13 @@ def load_sapling_preset(path: str | Path) -> SaplingPreset:
 def sapling_preset_from_settings(settings: dict) -> SaplingPreset:
     """A Sapling settings dict already read from its file, loaded as the add-on loads it (see
     `load_sapling_preset`); the keys it ignores are left out of the dictionary and listed in `ignored`, except
-    the Blender-only ones, which `schema.validate` takes and leaves out."""
+    the Blender-only and old ones, which `schema.validate` takes and leaves out. A preset whose every key is
+    ignored describes no tree and is refused, naming its keys."""
     params = {key: _lists(value) for key, value in settings.items()}
     _upgrade_old_preset(params)
     params.setdefault("draws", "ranges")
     unused = _unused_keys(params)
+    check_describes_a_tree(params, ignored=(*BLENDER_ONLY_KEYS, *OLD_SAPLING_KEYS, *unused))
     params = {key: value for key, value in params.items() if key not in unused}
     params, clamped = clamp_to_sapling(params, skip=REALIZED_FACTORS if params["draws"] == "realized" else ())
     return SaplingPreset(params=params, ignored={**ignored_keys(params), **unused}, clamped=clamped)

@@ -45,7 +45,7 @@ BAD_INPUTS = [
     (["tree", "--params", "{tmp}/in/generator_only.json", "--out", "{tmp}/out"], "at least one weber_penn"),
     (["tree", "--params", "{tmp}/in/colonization_only.json", "--out", "{tmp}/out"], "at least one colonization"),
     (["tree", "--params", "{tmp}/in/unknown_only.json", "--out", "{tmp}/out"], "'lenght' = 3"),
-    (["tree", "--params", "{tmp}/in/unknown_only.py", "--out", "{tmp}/out"], "at least one weber_penn"),
+    (["tree", "--params", "{tmp}/in/unknown_only.py", "--out", "{tmp}/out"], "unknown_only.py: parameter"),
     (["tree", "--params", "{tmp}/in/old_bad.py", "--out", "{tmp}/out"], "'levels' = 'three'"),
     (["render", "--species", "maple", "--size", "100000", "--out", "{tmp}/views"], "--size 100000"),
     (["render", "--species", "maple", "--seed", "-1", "--out", "{tmp}/views"], "--seed -1"),

@@ -229,3 +229,10 @@ def test_a_dictionary_with_no_key_that_describes_a_tree_is_refused(params, gener
 def test_one_describing_key_is_enough_and_validate_still_gives_the_defaults():
     assert species.grow({"levels": 1}, np.random.default_rng(0)).n_nodes > 1
     assert validate({})["levels"] == validate({"seed": 3})["levels"]
+
+
+def test_a_preset_whose_every_key_is_ignored_is_refused_naming_its_keys(tmp_path):
+    path = tmp_path / "nothing.py"
+    path.write_text(repr({"lenght": 3, "windSpeed": 2.0, "gust": 1.0}))
+    with pytest.raises(ParameterError, match="beside generator, species, seed, draws, name, lenght, windSpeed, gust"):
+        load_sapling_preset(path)
