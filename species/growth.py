@@ -1,12 +1,13 @@
 """One `grow` for every growth model: dispatch on the dictionary's `generator` key.
 
-A dictionary without a generator key is Weber-Penn, so Sapling dictionaries load unchanged.
+A dictionary without a generator key is Weber-Penn, so Sapling dictionaries load unchanged. A dictionary with no
+key that describes a tree (`{}`, or only `generator`) is refused: it would grow the generator's default tree.
 """
 from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -15,7 +16,8 @@ from .meshing import build_mesh
 from .skeleton import Skeleton
 from .tree_mesh import TreeMesh
 
-__all__ = ["grow", "rebuild", "Generator", "GENERATORS", "generator_of", "rng_for"]
+__all__ = ["grow", "rebuild", "Generator", "GENERATORS", "generator_of", "rng_for", "check_describes_a_tree",
+           "RECORD_KEYS"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,21 @@ def generator_of(params: dict) -> str:
     return name
 
 
+# Keys that route, label or seed a dictionary: none says what tree to grow, so a dictionary of only these grows
+# the generator's default tree, which nobody asks for by writing `{}` or `{"generator": ...}`.
+RECORD_KEYS = ("generator", "species", "seed", "draws", "name")
+
+
+def check_describes_a_tree(params: dict, ignored: Iterable[str] = ()) -> None:
+    """Raise ParameterError when `params` holds no key beside RECORD_KEYS and the `ignored` ones (keys its
+    generator accepts and grows nothing from)."""
+    if set(params) - set(RECORD_KEYS) - set(ignored):
+        return
+    beside = [*RECORD_KEYS, *(key for key in params if key in set(ignored))]
+    raise ParameterError("params", params, f"a dictionary with at least one {generator_of(params)} parameter "
+                         f"beside {', '.join(beside)} (`farm tree --species NAME --save-params` writes one)")
+
+
 def _grower(name: str) -> Callable[[dict, np.random.Generator], Skeleton]:
     module, function = GENERATORS[name].grow.split(":")
     return getattr(importlib.import_module(module), function)
@@ -56,7 +73,9 @@ def grow(params: dict, rng: np.random.Generator) -> Skeleton:
     """Grow the tree a parameter dictionary describes. Same dictionary and same rng state, same skeleton."""
     if not isinstance(rng, np.random.Generator):
         raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-    return _grower(generator_of(params))(params, rng)
+    name = generator_of(params)
+    check_describes_a_tree(params)
+    return _grower(name)(params, rng)
 
 
 def rng_for(params: dict) -> np.random.Generator:

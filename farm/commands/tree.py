@@ -7,9 +7,12 @@ A --params file is a JSON dictionary or a preset file of Blender's Sapling add-o
 same as JSON). Its `draws` key says how the variation keys read: `realized` (TreeSketchNet's dictionaries and
 treefarm's presets: scaleV, scaleV0, leafScaleV, curveV1/2, splitAngleV1/2, ... are stored draws) or `ranges`
 (Sapling's presets: scaleV, scaleV0, leafScaleV, curveV, splitAngleV are ranges drawn from the dictionary's seed as
-Sapling draws them). Without it, a dictionary holding curveV, splitAngleV or a Blender-only key reads as `ranges`,
-any other as `realized`. Sapling presets load as the add-on loads them (values clamped to its limits); keys that
-only drive Blender (armature, wind animation, display) are ignored: --verbose lists them and the clamped values.
+Sapling draws them). Without it, a dictionary holding curveV, splitAngleV, a Blender-only key or an old Sapling key
+reads as `ranges`, any other as `realized`. Sapling presets load as the add-on loads them: values clamped to its
+limits, and the keys it does not use ignored (keys it no longer defines or never did, and the stored draws beside
+its ranges: the tree grows from the ranges; a JSON preset that says `draws: realized` keeps its stored draws).
+Keys that only drive Blender (armature, wind animation, display) are ignored in any dictionary. --verbose lists
+the ignored keys and the clamped values. A dictionary with no key that describes a tree (`{}`) is refused.
 """
 from __future__ import annotations
 
@@ -17,12 +20,13 @@ import argparse
 import json
 import os
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
 import species
-from species.errors import TreefarmError, user_path
+from species.errors import ParameterError, TreefarmError, user_path
 from species.meshing import write_tree
 
 from farm.commands import CommandLineError, check_flag_int
@@ -50,7 +54,7 @@ def register(subparsers) -> None:
     parser.add_argument("--format", choices=FORMATS, default=None, help="glb (default) or obj")
     parser.add_argument("--save-params", action="store_true", help="also write the sampled dictionary as JSON")
     parser.add_argument("--verbose", action="store_true",
-                        help="say how each --params file reads: draws, ignored Blender-only keys, clamped values")
+                        help="say how each --params file reads: draws, ignored keys, clamped values")
     parser.set_defaults(run=run)
 
 
@@ -69,14 +73,14 @@ def load_params(path: str) -> dict:
 
 def _read_params(path: str):
     """(dictionary, SaplingPreset or None) of a --params file."""
-    from species.weber_penn import draws_semantics, load_sapling_preset, sapling_preset_from_settings
+    from species.weber_penn import load_sapling_preset, reads_as_sapling_preset, sapling_preset_from_settings
 
     file = Path(path)
     if not file.is_file():
         raise ParamsFileError(f"parameter file {path} is missing or not a file: allowed a JSON file of parameters "
                               f"or a Sapling preset (.py)")
     if file.suffix == ".py":
-        with user_path(path, "read"):
+        with user_path(path, "read"), _naming(path, ParameterError):
             preset = load_sapling_preset(file)
         return preset.params, preset
     with user_path(path, "read"):
@@ -90,14 +94,20 @@ def _read_params(path: str):
     if not isinstance(params, dict):
         raise ParamsFileError(f"{path} must hold a JSON object of parameters, not {type(params).__name__}")
     if params.get("generator", "weber_penn") == "weber_penn":
-        try:
-            semantics = draws_semantics(params)
-        except TreefarmError as exc:
-            raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
-        if semantics == "ranges":  # the file already read: loaded as the add-on loads a preset
-            preset = sapling_preset_from_settings(params)
-            return preset.params, preset
+        with _naming(path, TreefarmError):
+            if reads_as_sapling_preset(params):  # the file already read: loaded as the add-on loads a preset
+                preset = sapling_preset_from_settings(params)
+                return preset.params, preset
     return params, None
+
+
+@contextmanager
+def _naming(path: str, errors: type[Exception]):
+    """Raise an error of `errors` inside the block as a ParamsFileError whose line starts with the file's name."""
+    try:
+        yield
+    except errors as exc:
+        raise ParamsFileError(f"{path}: {str(exc).strip()}") from None
 
 
 def _species_output(args: argparse.Namespace) -> tuple[Path, str]:
@@ -149,15 +159,17 @@ def _grown_dictionaries(paths: list[str], verbose: bool = False) -> list[tuple[s
 
 
 def _reading(path: str, params: dict, preset) -> str:
-    """How a --params file reads, for --verbose: its draws, and a Sapling preset's ignored and clamped keys."""
-    from species.weber_penn import draws_semantics
+    """How a --params file reads, for --verbose: its draws, the keys it holds that are ignored (and why), and a
+    Sapling preset's clamped values."""
+    from species.weber_penn import draws_reading, ignored_keys
 
     generator = params.get("generator", "weber_penn")
     if generator != "weber_penn":
         return f"{path}: generator {generator}"
-    lines = [f"{path}: Weber-Penn, draws: {draws_semantics(params)}"]
+    lines = [f"{path}: Weber-Penn, draws: {draws_reading(params)}"]
+    ignored = ignored_keys(params) if preset is None else preset.ignored
+    lines += [f"  ignored {key}: {why}" for key, why in sorted(ignored.items())]
     if preset is not None:
-        lines += [f"  ignored {key}: {why}" for key, why in sorted(preset.ignored.items())]
         lines += [f"  clamped {key}: {before} -> {after} (Sapling's limits)"
                   for key, (before, after) in sorted(preset.clamped.items())]
     return "\n".join(lines)

@@ -1,14 +1,16 @@
 """Weber & Penn (1995) in the parameterisation of Blender's Sapling add-on: the dictionary schema and the
 parameter object read from it, the stems and leaves of each level, the crown shapes, assembly into a Skeleton,
-the presets, and Sapling's own preset files (`sapling_preset`: their variation ranges, `draws: ranges`).
+the presets, what Sapling's keys mean (`sapling_keys`: `draws: ranges` or `realized`) and Sapling's own preset
+files (`sapling_preset`).
 """
 from __future__ import annotations
 
 from .generator import grow, grow_tree, grow_validated
 from .schema import REALIZED_DRAWS, SAPLING_KEYS, SCHEMA, validate
 from .params import LeafParams, PruneParams, RealizedDraws, SaplingRanges, StemLevelParams, WeberPennParams
-from .sapling_preset import (BLENDER_ONLY_KEYS, DRAWS, SaplingPreset, draws_semantics, ignored_keys,
-                             load_sapling_preset, read_sapling_preset, sapling_preset_from_settings)
+from .sapling_keys import (BLENDER_ONLY_KEYS, DRAWS, OLD_SAPLING_KEYS, draws_reading, draws_semantics, ignored_keys,
+                           reads_as_sapling_preset)
+from .sapling_preset import SaplingPreset, load_sapling_preset, read_sapling_preset, sapling_preset_from_settings
 from .stems import grow_level, Level, MAX_STEMS_PER_LEVEL
 from .stem_directions import (attract_up, bent_direction, branch_turn, crown_taper, sapling_split_angles,
                               segment_frames, split_angle, spread_angle, world_directions)
@@ -24,8 +26,8 @@ __all__ = [
     "grow", "grow_tree", "grow_validated", "validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS",
     "WeberPennParams", "StemLevelParams", "LeafParams", "PruneParams", "RealizedDraws", "SaplingRanges",
     "read_sapling_preset", "load_sapling_preset", "sapling_preset_from_settings", "SaplingPreset",
-    "draws_semantics", "ignored_keys",
-    "BLENDER_ONLY_KEYS", "DRAWS",
+    "draws_semantics", "draws_reading", "reads_as_sapling_preset", "ignored_keys",
+    "BLENDER_ONLY_KEYS", "OLD_SAPLING_KEYS", "DRAWS",
     "Level", "grow_level", "MAX_STEMS_PER_LEVEL",
     "attract_up", "bent_direction", "world_directions", "split_angle", "spread_angle", "sapling_split_angles",
     "branch_turn",

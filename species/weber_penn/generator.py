@@ -15,11 +15,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import rotations as rot
+from ..growth import check_describes_a_tree
 from ..skeleton import Skeleton
 from .assembly import WeberPennTree, assemble
 from .child_points import ChildPoints, child_points
 from .leaves import leaf_transforms
 from .params import StemLevelParams, WeberPennParams
+from .sapling_keys import BLENDER_ONLY_KEYS, OLD_SAPLING_KEYS
 from .schema import validate
 from .shapes import shape_ratio
 from .size_estimate import check_tree_size
@@ -31,8 +33,11 @@ TAU = 2 * np.pi
 
 
 def grow(params: dict, rng: np.random.Generator) -> Skeleton:
-    """Grow a Weber-Penn tree from a Sapling dictionary; see the module docstring for the realized draws."""
-    return grow_validated(validate(params), rng)
+    """Grow a Weber-Penn tree from a Sapling dictionary; see the module docstring for the realized draws. One
+    whose every key is ignored (Blender-only, old Sapling keys) describes no tree and is refused."""
+    validated = validate(params)
+    check_describes_a_tree(params, ignored=(*BLENDER_ONLY_KEYS, *OLD_SAPLING_KEYS))
+    return grow_validated(validated, rng)
 
 
 def grow_validated(validated: dict, rng: np.random.Generator) -> Skeleton:

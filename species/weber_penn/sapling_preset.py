@@ -1,17 +1,13 @@
-"""Sapling's own preset files, and the two readings of a Weber-Penn dictionary's variation keys.
+"""Sapling's own preset files, loaded as Blender's Sapling add-on loads them.
 
-In: a preset file as Blender's Sapling add-on saves it (`<name>.py` holding the `repr` of its settings dict, or
-`settings = {...}`), or the same dict as JSON. Out: a dictionary `species.grow` takes, with `draws: ranges`.
+In: a preset file as the add-on saves it (`<name>.py` holding the `repr` of its settings dict, or
+`settings = {...}`), or the same dict as JSON. Out: a dictionary `species.grow` takes, with `draws: ranges` unless
+the file says otherwise (`sapling_keys` says what the two readings mean).
 
-A dictionary's `draws` key says how its variation keys are read:
-- `realized` (TreeSketchNet's dictionaries and treefarm's presets): `scaleV` is the metres added to `scale`,
-  `scaleV0` and `leafScaleV` factors, and `curveV1/2`, `splitAngleV1/2`, `rLastAng`, `choiceNegPos1/2`, `rSplits2`
-  the values of Sapling's random draws, stored;
-- `ranges` (Sapling's presets): `scaleV`, `scaleV0`, `leafScaleV`, `curveV` and `splitAngleV` are the ranges Sapling
-  draws from, each draw made from the tree's generator where Sapling makes it (per tree, stem, segment, split or
-  leaf).
-Without a `draws` key the keys present decide (`draws_semantics`). Keys that only drive Blender (UI, armature, wind
-animation) are accepted and ignored; `ignored_keys` names them with the reason.
+The add-on sets every key a preset gives it and uses only its own: a key neither it nor treefarm defines is
+ignored (and listed), and so are the stored draws a `draws: ranges` preset carries beside Sapling's ranges
+(TreeSketchNet's result presets: `curveV1` beside `curveV`): it grows from the ranges. A preset that says
+`draws: realized` keeps its stored draws and ignores the ranges they were drawn from.
 """
 from __future__ import annotations
 
@@ -22,35 +18,17 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ParameterError, PathError
+from ..growth import check_describes_a_tree
+from .sapling_keys import BLENDER_ONLY_KEYS, OLD_SAPLING_KEYS, RANGE_ONLY_KEYS, REALIZED_ONLY_KEYS, ignored_keys
+from .schema import SCHEMA
 
 __all__ = ["read_sapling_preset", "load_sapling_preset", "sapling_preset_from_settings", "SaplingPreset",
-           "draws_semantics", "ignored_keys", "clamp_to_sapling", "BLENDER_ONLY_KEYS", "RANGE_ONLY_KEYS",
-           "REALIZED_ONLY_KEYS", "DRAWS", "SAPLING_BOUNDS", "SAPLING_DEFAULTS"]
+           "clamp_to_sapling", "SAPLING_BOUNDS"]
 
-DRAWS = ("realized", "ranges")
-
-# Sapling's range keys with no realized counterpart of the same name (TreeSketchNet stores curveV1/curveV2 and
-# splitAngleV1/splitAngleV2 instead).
-RANGE_ONLY_KEYS = ("curveV", "splitAngleV")
-# Stored draws that Sapling's own dictionaries never hold.
-REALIZED_ONLY_KEYS = ("curveV1", "curveV2", "splitAngleV1", "splitAngleV2", "rLastAng", "choiceNegPos1",
-                      "choiceNegPos2", "rSplits2")
-
-_ANIMATION = "drives Blender's wind animation of the armature, not the tree's shape"
-_ARMATURE = "drives the armature Sapling can rig the tree with, not the tree's shape"
-# Keys of Sapling 0.3.4's presets that only drive Blender, and why treefarm grows the same tree without them.
-BLENDER_ONLY_KEYS: dict[str, str] = {
-    "af1": _ANIMATION, "af2": _ANIMATION, "af3": _ANIMATION, "gust": _ANIMATION, "gustF": _ANIMATION,
-    "wind": _ANIMATION, "armAnim": _ANIMATION, "leafAnim": _ANIMATION, "frameRate": _ANIMATION,
-    "loopFrames": _ANIMATION,
-    "useArm": _ARMATURE, "armLevels": _ARMATURE, "boneStep": _ARMATURE, "previewArm": _ARMATURE,
-    "makeMesh": "converts Blender's curve object to a mesh; treefarm always writes a mesh",
-    "bevel": "gives Blender's curve its thickness; treefarm's bark is always a tube mesh",
-    "handleType": "Blender's Bezier handle type for the stem curves; treefarm's stems are polylines of curveRes "
-                  "segments, meshed as tubes",
-    "showLeaves": "Blender's switch to add the leaf mesh; treefarm always grows the leaves (`leaves: 0` for none)",
-    "bend": "leaf bend of Sapling before 0.3, reset to 0 by the add-on when it loads a preset",
-}
+_UNKNOWN = "not a property of Sapling 0.3.4 nor a treefarm key; the add-on sets it and never reads it"
+_STORED_DRAW = ("a stored draw (TreeSketchNet's), which the add-on does not know: grown from Sapling's ranges "
+                "(curveV, splitAngleV) as the add-on grows it; `draws: realized` keeps it")
+_DRAWN_RANGE = "the range the dictionary's stored draws were drawn from: `draws: realized` grows from the draws"
 
 
 # The hard limits of Sapling 0.3.4's properties (its operator's min and max): Blender clamps a preset's value to
@@ -66,22 +44,15 @@ SAPLING_BOUNDS: dict[str, tuple[float | None, float | None]] = {
     "scale0": (0.0, None), "scaleV0": (0.0, 1.0), "segSplits": (0.0, None), "splitHeight": (0.0, 1.0),
     "taper": (0.0, 1.0), "taperCrown": (0.0, None),
 }
-
-
-# Sapling 0.3.4's defaults where they differ from treefarm's: what a `draws: ranges` dictionary that leaves the key
-# out grows with (treefarm's own defaults serve `realized` dictionaries, whose presets were made with them).
-SAPLING_DEFAULTS: dict[str, Any] = {
-    "branches": [50, 30, 10, 10], "curveRes": [3, 5, 3, 1], "curveV": [20, 50, 75, 0],
-    "splitAngleV": [0, 0, 0, 0], "scaleV": 3.0, "scaleV0": 0.2, "attractUp": [0, 0, 0, 0], "minRadius": 0.0,
-    "rotate": [137.5, 137.5, 137.5, 137.5], "rotateV": [0, 0, 0, 0], "leafRotateV": 0.0, "leafScaleV": 0.0,
-    "leafDist": 6, "bevelRes": 0,
-}
+# Sapling's bounds on scaleV0 and leafScaleV are a range's; with `draws: realized` the keys hold drawn factors.
+REALIZED_FACTORS = ("scaleV0", "leafScaleV")
 
 
 @dataclass(frozen=True)
 class SaplingPreset:
-    """A Sapling preset file read: the dictionary to grow, the Blender-only keys it holds (key -> why they do not
-    change the tree) and the values Blender clamps (key -> (in the file, as grown))."""
+    """A Sapling preset file read: the dictionary to grow, the keys of the file that do not change the tree (key ->
+    why: Blender-only, old Sapling, unknown keys, and the kind of variation key its `draws` does not read) and the
+    values Blender clamps (key -> (in the file, as grown))."""
 
     params: dict
     ignored: dict[str, str]
@@ -111,20 +82,39 @@ def load_sapling_preset(path: str | Path) -> SaplingPreset:
 
 def sapling_preset_from_settings(settings: dict) -> SaplingPreset:
     """A Sapling settings dict already read from its file, loaded as the add-on loads it (see
-    `load_sapling_preset`)."""
+    `load_sapling_preset`); the keys it ignores are left out of the dictionary and listed in `ignored`, except
+    the Blender-only and old ones, which `schema.validate` takes and leaves out. A preset whose every key is
+    ignored describes no tree and is refused, naming its keys."""
     params = {key: _lists(value) for key, value in settings.items()}
     _upgrade_old_preset(params)
     params.setdefault("draws", "ranges")
-    params, clamped = clamp_to_sapling(params)
-    return SaplingPreset(params=params, ignored=ignored_keys(params), clamped=clamped)
+    unused = _unused_keys(params)
+    check_describes_a_tree(params, ignored=(*BLENDER_ONLY_KEYS, *OLD_SAPLING_KEYS, *unused))
+    params = {key: value for key, value in params.items() if key not in unused}
+    params, clamped = clamp_to_sapling(params, skip=REALIZED_FACTORS if params["draws"] == "realized" else ())
+    return SaplingPreset(params=params, ignored={**ignored_keys(params), **unused}, clamped=clamped)
 
 
-def clamp_to_sapling(params: dict) -> tuple[dict, dict[str, tuple[Any, Any]]]:
+def _unused_keys(params: dict) -> dict[str, str]:
+    """The keys of a preset that neither the add-on nor treefarm grows from, with why: unknown keys, and the one
+    kind of variation key its `draws` does not read (stored draws beside ranges, or the ranges beside draws)."""
+    unused = {key: _UNKNOWN for key in params
+              if key not in SCHEMA and key not in BLENDER_ONLY_KEYS and key not in OLD_SAPLING_KEYS}
+    stored = [key for key in REALIZED_ONLY_KEYS if key in params]
+    if params["draws"] == "ranges":
+        unused.update({key: _STORED_DRAW for key in stored})
+    elif params["draws"] == "realized" and stored:
+        unused.update({key: _DRAWN_RANGE for key in RANGE_ONLY_KEYS if key in params})
+    return unused
+
+
+def clamp_to_sapling(params: dict, skip: tuple[str, ...] = ()) -> tuple[dict, dict[str, tuple[Any, Any]]]:
     """A copy of `params` with every number (or list item) outside SAPLING_BOUNDS clamped into them, and what was
-    clamped (key -> (before, after)). Values of other types are left for validation to name."""
+    clamped (key -> (before, after)); keys in `skip` are left as they are. Values of other types are left for
+    validation to name."""
     out, clamped = dict(params), {}
     for key, (low, high) in SAPLING_BOUNDS.items():
-        if key not in params:
+        if key not in params or key in skip:
             continue
         value = params[key]
         items = value if isinstance(value, list) else [value]
@@ -190,30 +180,3 @@ def _upgrade_old_preset(params: dict) -> None:
                               ("leafRotate", "rotate"), ("leafRotateV", "rotateV")):
             if isinstance(params[key], list) and len(params[key]) == 4:
                 params[leaf_key] = params[key][last]
-
-
-def draws_semantics(params: dict) -> str:
-    """`realized` or `ranges`: the dictionary's `draws` key, else `ranges` when it holds a key only Sapling's own
-    dictionaries hold (curveV, splitAngleV or a Blender-only key), else `realized` (as before `draws` existed).
-    A dictionary that mixes the two kinds of keys is refused, naming one of each."""
-    explicit = params.get("draws")
-    if explicit is not None and explicit not in DRAWS:
-        raise ParameterError("draws", explicit, f"one of {list(DRAWS)}")
-    sapling = [k for k in (*RANGE_ONLY_KEYS, *BLENDER_ONLY_KEYS) if k in params]
-    realized = [k for k in REALIZED_ONLY_KEYS if k in params]
-    semantics = explicit or ("ranges" if sapling else "realized")
-    if semantics == "ranges" and realized:
-        raise ParameterError(realized[0], params[realized[0]],
-                             "no stored draw with `draws: ranges` (Sapling's own keys: curveV, splitAngleV); "
-                             "drop it, or set `draws: realized`")
-    range_only = [k for k in RANGE_ONLY_KEYS if k in params]
-    if semantics == "realized" and range_only:
-        raise ParameterError(range_only[0], params[range_only[0]],
-                             "no Sapling range with `draws: realized` (its stored draws: curveV1/curveV2, "
-                             "splitAngleV1/splitAngleV2); drop it, or set `draws: ranges`")
-    return semantics
-
-
-def ignored_keys(params: dict) -> dict[str, str]:
-    """The Blender-only keys of a dictionary, each with why treefarm grows the same tree without it."""
-    return {key: BLENDER_ONLY_KEYS[key] for key in params if key in BLENDER_ONLY_KEYS}

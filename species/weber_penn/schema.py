@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import ParameterError
-from .sapling_preset import BLENDER_ONLY_KEYS, DRAWS, SAPLING_DEFAULTS, draws_semantics
+from .sapling_keys import BLENDER_ONLY_KEYS, DRAWS, OLD_SAPLING_KEYS, SAPLING_DEFAULTS, draws_semantics
 
 __all__ = ["validate", "SCHEMA", "REALIZED_DRAWS", "SAPLING_KEYS"]
 
@@ -185,14 +185,14 @@ def _check(key: str, value: Any, spec: Key) -> Any:
 
 def validate(params: dict) -> dict:
     """Check every key of a Weber-Penn dictionary; return a normalised copy with defaults filled in and `draws`
-    set (`sapling_preset.draws_semantics`); Blender-only keys are left out of it.
+    set (`sapling_keys.draws_semantics`); Blender-only and old Sapling keys are left out of it.
 
     Realized-draw keys (REALIZED_DRAWS) that are missing stay missing: the generator draws them.
     """
     if not isinstance(params, dict):
         raise ParameterError("params", type(params).__name__, "a JSON object of Weber-Penn parameters")
     semantics = draws_semantics(params)
-    unknown = sorted(set(params) - set(SCHEMA) - set(BLENDER_ONLY_KEYS))
+    unknown = sorted(set(params) - set(SCHEMA) - set(BLENDER_ONLY_KEYS) - set(OLD_SAPLING_KEYS))
     if unknown:
         raise ParameterError(unknown[0], params[unknown[0]], f"a known Weber-Penn key (Sapling's names), e.g. "
                              f"{', '.join(sorted(SAPLING_KEYS)[:6])}, ...")

@@ -40,6 +40,13 @@ BAD_INPUTS = [
     (["tree", "--species", "maple", "--seed", "-3", "--out", "{tmp}/m.glb"], "--seed -3"),
     (["tree", "--species", "maple", "--format", "glb", "--out", "{tmp}/x.obj"], "--format glb"),
     (["tree", "--species", "maple", "--out", "{tmp}/dir/"], "is a folder"),
+    # a dictionary that describes no tree, rather than the default tree grown silently
+    (["tree", "--params", "{tmp}/in/empty.json", "--out", "{tmp}/out"], "at least one weber_penn parameter"),
+    (["tree", "--params", "{tmp}/in/generator_only.json", "--out", "{tmp}/out"], "at least one weber_penn"),
+    (["tree", "--params", "{tmp}/in/colonization_only.json", "--out", "{tmp}/out"], "at least one colonization"),
+    (["tree", "--params", "{tmp}/in/unknown_only.json", "--out", "{tmp}/out"], "'lenght' = 3"),
+    (["tree", "--params", "{tmp}/in/unknown_only.py", "--out", "{tmp}/out"], "unknown_only.py: parameter"),
+    (["tree", "--params", "{tmp}/in/old_bad.py", "--out", "{tmp}/out"], "'levels' = 'three'"),
     (["render", "--species", "maple", "--size", "100000", "--out", "{tmp}/views"], "--size 100000"),
     (["render", "--species", "maple", "--seed", "-1", "--out", "{tmp}/views"], "--seed -1"),
     (["inspect", "{data}", "--rows", "-3"], "--rows -3"),
@@ -75,6 +82,12 @@ def _prepare(tmp: Path, data: Path, argv: list[str]) -> list[str]:
     good = next(iter(sorted(SAPLING.glob("*.json"))))
     (inputs / "bad.json").write_text(json.dumps({**json.loads(good.read_text()), "levels": 9}))
     shutil.copy(good, inputs / "other" / good.name)
+    for name, params in (("empty.json", {}), ("generator_only.json", {"generator": "weber_penn"}),
+                         ("colonization_only.json", {"generator": "colonization"}),
+                         ("unknown_only.json", {"lenght": 3})):
+        (inputs / name).write_text(json.dumps(params))
+    (inputs / "unknown_only.py").write_text(repr({"lenght": 3, "windSpeed": 2.0}))
+    (inputs / "old_bad.py").write_text(repr({"startCurv": 0.0, "levels": "three"}))
     if "{damaged}" in argv:
         _truncate_a_part(data)
     return [w.format(tmp=tmp, good=good, good_name=good.name, data=data, damaged=data) for w in argv]

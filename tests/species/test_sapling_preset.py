@@ -131,7 +131,7 @@ def test_curve_and_split_ranges_make_stems_differ_by_seed_and_nothing_else_does(
 
 def test_a_sapling_dictionary_that_leaves_keys_out_gets_saplings_defaults_and_ours_keeps_ours():
     from species.weber_penn import SCHEMA
-    from species.weber_penn.sapling_preset import SAPLING_DEFAULTS
+    from species.weber_penn.sapling_keys import SAPLING_DEFAULTS
 
     ranged, realized = validate({"draws": "ranges"}), validate({})
     assert all(ranged[key] == value for key, value in SAPLING_DEFAULTS.items())
@@ -148,3 +148,91 @@ def test_negative_variation_ranges_grow_as_saplings_symmetric_draws():
                            np.random.default_rng(3))
     plain = species.grow({**base, "rotateV": [10, 0, 0, 0], "splitAngleV": [5, 5, 0, 0]}, np.random.default_rng(3))
     assert np.array_equal(flipped.positions, plain.positions)
+
+
+# Older and result presets the add-on loads: it sets every key and reads only its own (issue 48, point 1).
+ASPEN = next((p for p in PRESETS if p.stem == "quaking_aspen"), None)
+STORED_DRAWS = {"curveV1": [1.0, 2.0, 0.0, 0.0], "curveV2": [0.5, 1.0, 0.0, 0.0], "rLastAng": [10, 20, 30, 40]}
+
+
+def _preset_file(tmp_path: Path, name: str, extra: dict, as_json: bool = False) -> Path:
+    settings = {**literal(ASPEN), **extra}
+    path = tmp_path / name
+    path.write_text(json.dumps(settings) if as_json else repr(settings))
+    return path
+
+
+@pytest.mark.parametrize("extra, reason", [
+    ({"startCurv": 0.0}, "no longer defines"),
+    ({"windSpeed": 2.0, "windGust": 0.0}, "older wind system"),
+    ({"lenght": 3}, "never reads it"),
+])
+def test_a_preset_with_keys_the_add_on_does_not_define_grows_as_without_them(tmp_path, extra, reason):
+    preset = load_sapling_preset(_preset_file(tmp_path, "old.py", extra))
+    assert set(extra) <= set(preset.ignored) and all(reason in preset.ignored[key] for key in extra)
+    assert not set(extra) & set(validate(preset.params))
+    grown = species.rebuild(preset.params)[0]
+    plain = species.rebuild(load_sapling_preset(ASPEN).params)[0]
+    assert np.array_equal(grown.positions, plain.positions)
+
+
+@pytest.mark.parametrize("as_json", [False, True], ids=["py", "json"])
+def test_a_preset_with_stored_draws_beside_ranges_grows_from_the_ranges(tmp_path, as_json):
+    path = _preset_file(tmp_path, "result.json" if as_json else "result.py", STORED_DRAWS, as_json)
+    preset = load_sapling_preset(path)
+    assert preset.params["draws"] == "ranges" and not set(STORED_DRAWS) & set(preset.params)
+    assert all("grown from Sapling's ranges" in preset.ignored[key] for key in STORED_DRAWS)
+    assert preset.params == load_sapling_preset(ASPEN).params
+
+
+def test_a_json_preset_that_says_realized_keeps_its_stored_draws_and_drops_the_ranges(tmp_path):
+    preset = load_sapling_preset(_preset_file(tmp_path, "r.json", {**STORED_DRAWS, "draws": "realized"}, True))
+    assert preset.params["draws"] == "realized" and preset.params["curveV1"] == STORED_DRAWS["curveV1"]
+    assert {"curveV", "splitAngleV"} <= set(preset.ignored) and "curveV" not in preset.params
+    assert preset.params["scaleV0"] == literal(ASPEN)["scaleV0"]  # a drawn factor: not clamped as a range
+    draws = WeberPennParams.from_dict(preset.params, np.random.default_rng(0)).draws
+    assert np.allclose(np.degrees(draws.curve_variation), STORED_DRAWS["curveV1"]) and draws.ranges is None
+
+
+@pytest.mark.parametrize("params, key", [
+    ({"startCurv": 0.0, "levels": "three"}, "levels"),
+    ({"windSpeed": 2.0, "scale": -4}, "scale"),
+])
+def test_a_known_key_with_a_bad_value_beside_an_old_key_is_still_refused(tmp_path, params, key):
+    path = tmp_path / "bad.py"
+    path.write_text(repr(params))
+    with pytest.raises(ParameterError) as raised:
+        validate(load_sapling_preset(path).params)
+    assert raised.value.key == key
+
+
+def test_an_old_sapling_key_is_ignored_in_a_dictionary_too_and_an_unknown_one_refused():
+    assert validate({"levels": 2, "startCurv": 0.0}) == validate({"levels": 2, "windSpeed": 2.0, "windGust": 0})
+    with pytest.raises(ParameterError, match="known Weber-Penn key"):
+        validate({"levels": 2, "lenght": 3})
+
+
+# A dictionary that describes no tree is refused rather than grown as the default tree (issue 48, point 7).
+@pytest.mark.parametrize("params, generator", [
+    ({}, "weber_penn"),
+    ({"generator": "weber_penn"}, "weber_penn"),
+    ({"species": "maple", "seed": 3, "draws": "ranges"}, "weber_penn"),
+    ({"wind": 1.0, "startCurv": 0.0}, "weber_penn"),
+    ({"generator": "colonization"}, "colonization"),
+])
+def test_a_dictionary_with_no_key_that_describes_a_tree_is_refused(params, generator):
+    with pytest.raises(ParameterError, match=f"at least one {generator} parameter") as raised:
+        species.grow(params, np.random.default_rng(0))
+    assert raised.value.key == "params"
+
+
+def test_one_describing_key_is_enough_and_validate_still_gives_the_defaults():
+    assert species.grow({"levels": 1}, np.random.default_rng(0)).n_nodes > 1
+    assert validate({})["levels"] == validate({"seed": 3})["levels"]
+
+
+def test_a_preset_whose_every_key_is_ignored_is_refused_naming_its_keys(tmp_path):
+    path = tmp_path / "nothing.py"
+    path.write_text(repr({"lenght": 3, "windSpeed": 2.0, "gust": 1.0}))
+    with pytest.raises(ParameterError, match="beside generator, species, seed, draws, name, lenght, windSpeed, gust"):
+        load_sapling_preset(path)
