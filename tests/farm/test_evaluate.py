@@ -176,6 +176,27 @@ def test_real_inputs_are_scored_and_a_failing_one_is_recorded_while_the_job_goes
     assert "cloud (input, 1 ok)" in summary and "## Failures" in summary and "broken.xyz" in summary
 
 
+def test_drawings_with_an_alpha_channel_are_scored_like_the_same_drawing_on_paper(inputs, tmp_path):
+    """RGBA drawings on a transparent background (as drawing programs save them): the rendered sketch as black ink
+    whose alpha is its darkness, and a real hand drawing where present; each gives a row with no error."""
+    folder = tmp_path / "drawings"
+    folder.mkdir()
+    grey = np.asarray(Image.open(inputs / "unlabelled.png").convert("L"))
+    ink = np.dstack([np.zeros(grey.shape + (3,), np.uint8), 255 - grey])  # transparent black paper
+    Image.fromarray(ink, "RGBA").save(folder / "transparent.png")
+    real = SHARED / "sketches" / "mouse_branches_foliage" / "sketch__v2.png"
+    if real.exists():
+        shutil.copy(real, folder / "hand.png")
+    out = tmp_path / "report"
+    assert main(["evaluate", "--inputs", str(folder), "--methods", "params", "--out", str(out), *FAST]) == 0
+    rows = pd.read_parquet(out / "metrics.parquet").set_index("tree_id")
+    rows.index = [Path(i).name for i in rows.index]
+    assert sorted(rows.index) == (["hand.png"] if real.exists() else []) + ["transparent.png"]
+    assert (rows["status"] == "ok").all(), rows["error"].tolist()
+    assert 0.3 < rows.loc["transparent.png", "silhouette_iou_input"] <= 1  # as the same sketch on paper
+    assert (rows["silhouette_iou_input"] > 0).all()
+
+
 def test_compare_reports_a_known_change_and_gates_on_it(report, tmp_path, capsys):
     better = tmp_path / "b"
     better.mkdir()
