@@ -181,6 +181,9 @@ def test_bad_input_is_one_line_and_writes_nothing(drawings, tmp_path, capsys):
     text = tmp_path / "notes.png"
     text.write_text("not a picture")
     _one_line_error(capsys, ["reconstruct", str(text), "--out", str(out)], "is not an image file")
+    floats = tmp_path / "floats.tif"
+    Image.fromarray(np.full((64, 64), 0.5, np.float32)).save(floats)
+    _one_line_error(capsys, ["reconstruct", str(floats), "--out", str(out)], "floating-point pixels")
     blank = tmp_path / "blank.png"
     Image.fromarray(np.full((64, 64), 255, np.uint8)).save(blank)
     _one_line_error(capsys, ["reconstruct", str(blank), "--out", str(out)], "blank")
