@@ -18,10 +18,10 @@ __all__ = ["read_image", "IMAGE_SUFFIXES"]
 # The file names taken for images where a folder is scanned (`farm evaluate --inputs`).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 
-# PIL modes of one grey channel: 8-bit, bi-level, 16-bit (in several byte orders) and 32-bit integer (how some
-# formats hand over 16-bit greys).
-_GREY_MODES = ("L", "1", "I", "I;16", "I;16B", "I;16L", "I;16N")
+# PIL modes of one grey channel: 16-bit (in several byte orders) and 32-bit integer (how some formats hand over
+# 16-bit greys), then 8-bit and bi-level.
 _WIDE_GREY_MODES = ("I", "I;16", "I;16B", "I;16L", "I;16N")
+_GREY_MODES = _WIDE_GREY_MODES + ("L", "1")
 _GREY_ALPHA_MODES = ("LA", "La")
 _PAPER = 255.0  # transparent pixels show white paper
 

@@ -18,7 +18,7 @@ import species
 from farm.cli import main
 from farm.evaluate.job import ROWS, evaluation_data_spec, plan_evaluation, serves
 from farm.evaluate.methods import EvalSettings
-from farm.evaluate.inputs import outline_iou
+from farm.evaluate.inputs import input_units, outline_iou
 from farm.jobs import parse_spec
 from farm.pipeline import run_job
 from reconstruct.scoring import METRICS
@@ -247,6 +247,13 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(eval_data, tmp_path, c
     err = capsys.readouterr().err.strip()
     assert err.startswith("farm: error: ") and message in err and len(err.splitlines()) == 1
     assert not out.exists() and not (tmp_path / "nothing" / "mlflow.sqlite").exists()
+
+
+def test_inputs_take_sketches_of_every_image_kind_the_reader_reads(tmp_path):
+    for name in ("a.png", "b.jpg", "c.JPEG", "d.tif", "e.webp", "notes.md"):
+        (tmp_path / name).write_bytes(b"")
+    units, skipped = input_units(str(tmp_path), ["params"])
+    assert [Path(u.tree_id).name for u in units] == ["a.png", "b.jpg", "c.JPEG", "d.tif", "e.webp"] and not skipped
 
 
 def test_outline_iou_compares_shapes_at_one_height_on_known_answers():
