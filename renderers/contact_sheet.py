@@ -12,9 +12,9 @@ import numpy as np
 
 from species.meshing.png import png_bytes
 
-from .views import LABEL_MAPS, METRIC_MAPS
+from .views import LABEL_MAPS, METRIC_MAPS, OUTPUTS
 
-__all__ = ["to_rgb8", "viewable", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
+__all__ = ["to_rgb8", "viewable", "without_background", "contact_sheet", "write_contact_sheet", "views_sheet_rows"]
 
 LABEL_PX = 18
 # Sheets are looked at, not archived: a fast zlib level.
@@ -33,10 +33,22 @@ def to_rgb8(image: np.ndarray) -> np.ndarray:
     return img
 
 
+def without_background(name: str, image: np.ndarray) -> np.ndarray:
+    """A renderer output with 0 (black) outside its foreground mask, for an output that carries one
+    (`Output.mask_channel`: the silhouette maps, whose background is otherwise far depth, a red picture); any
+    other output as it is."""
+    img = np.asarray(image)
+    output = OUTPUTS.get(name)
+    if output is None or output.mask_channel is None or img.ndim != 3:
+        return img
+    return np.where(img[..., output.mask_channel:output.mask_channel + 1] > 0, img, 0).astype(img.dtype)
+
+
 def viewable(name: str, image: np.ndarray) -> np.ndarray:
     """(H, W, 3) uint8 picture of a renderer output by its name: metric depth scaled to its own range (near
-    bright, background black), label maps (mask, order) spread over grey levels, the rest as `to_rgb8`."""
-    img = np.asarray(image)
+    bright, background black), label maps (mask, order) spread over grey levels, maps with a mask channel black
+    outside the tree, the rest as `to_rgb8`."""
+    img = without_background(name, image)
     if name in METRIC_MAPS:
         hit = img > 0
         if hit.any():

@@ -83,12 +83,15 @@ class Output:
     dtype  : numpy.uint8 or numpy.float32.
     metric : float32 in metres with 0 = background (depth maps); False for uint8 and for float32 in [0, 1].
     label  : uint8 class labels (0, 1, 2, ...), not grey levels: shown spread over the grey range.
+    mask_channel : the channel of an (H, W, C) output that is its foreground mask (the silhouette maps): a picture
+             of the output shows the pixels outside the mask as background, not as the other channels' values there.
     """
 
     make: Callable[[_ViewFrame], np.ndarray]
     dtype: np.dtype
     metric: bool = False
     label: bool = False
+    mask_channel: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dtype", np.dtype(self.dtype))
@@ -112,8 +115,9 @@ OUTPUTS: dict[str, Output] = {
     "mask": Output(lambda f: f.visible[1], _U8, label=True),
     "order": Output(lambda f: f.visible[2], _U8, label=True),
     "normals": Output(lambda f: f.normals, _U8),
-    "silhouette": Output(lambda f: silhouette_map(f.camera, f.visible[0], f.back), _F32),
-    "silhouette_envelope": Output(lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back), _F32),
+    "silhouette": Output(lambda f: silhouette_map(f.camera, f.visible[0], f.back), _F32, mask_channel=2),
+    "silhouette_envelope": Output(lambda f: envelope_silhouette_map(f.camera, f.visible[0], f.back), _F32,
+                                  mask_channel=2),
     "depth_back": Output(lambda f: f.back, _F32, metric=True),
     "trunk_strokes": Output(lambda f: f.trunk[0], _U8),
     "trunk_depth": Output(lambda f: f.trunk[1], _F32),

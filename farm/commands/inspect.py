@@ -60,7 +60,7 @@ def contact_rows(path: str, n_rows: int) -> list:
 
     from farm.dataset import open as open_table, read_manifest
     from farm.dataset.image_codec import decode_map
-    from renderers import LABEL_MAPS, METRIC_MAPS
+    from renderers import LABEL_MAPS, METRIC_MAPS, viewable
 
     outputs = read_manifest(path)["job"]["render"]["outputs"]
     trees = open_table(path, "trees").to_table(columns=["tree_id", "species", "error"])
@@ -78,6 +78,8 @@ def contact_rows(path: str, n_rows: int) -> list:
                 image = image / image.max()
             elif name in LABEL_MAPS:  # small class labels (0, 1, 2, ...) spread over the grey range
                 image = (image * (255 // max(1, int(image.max())))).astype(np.uint8)
+            else:  # a silhouette map's background black, not its far depth (red)
+                image = viewable(name, image)
             cells.append((name, image))
         rows.append((f"{view['index']} {species[view['tree_id']]}", cells))
     return rows

@@ -10,7 +10,7 @@ views). It imports only `species`, numpy, pyarrow and the image libraries.
 from __future__ import annotations
 
 from .format_json import parse_format_json, read_format_json
-from .image_files import read_image
+from .image_files import IMAGE_SUFFIXES, read_image
 from .readers import (duckdb_connect, open, open_part, part_files, read_columns, read_manifest, read_part,
                       stored_float_outputs, to_huggingface, to_pandas, to_ray)
 from .schema import (DATASET_FORMAT, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, float_outputs_of,
@@ -23,7 +23,7 @@ __all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "Da
            "serialize_table", "read_manifest", "part_files", "read_columns", "read_part", "open_part",
            "stored_float_outputs", "open", "to_pandas",
            "duckdb_connect", "to_ray", "to_huggingface", "parse_format_json", "read_format_json", "Location",
-           "read_image", "ViewsDataset"]
+           "read_image", "IMAGE_SUFFIXES", "ViewsDataset"]
 
 
 def __getattr__(name: str):

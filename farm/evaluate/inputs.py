@@ -1,8 +1,9 @@
 """Real inputs nobody generated (`farm evaluate --inputs DIR`), scored without a ground-truth tree.
 
 Layout (docs/evaluation.md): DIR holds point clouds (`*.xyz`, `*.txt`, `*.csv`, `*.pts`, `*.ply`, `*.las`,
-`*.laz`) and sketches (`*.png`, dark strokes on light paper), each sketch optionally with a reference dictionary
-beside it (`NAME.json`, the tree the sketch was drawn from). Subfolders are not read.
+`*.laz`) and sketches (image files, `farm.dataset.IMAGE_SUFFIXES`: dark strokes on light or transparent paper),
+each sketch optionally with a reference dictionary beside it (`NAME.json`, the tree the sketch was drawn from).
+Subfolders are not read.
 
 - A cloud goes through the cloud method (`reconstruct.from_cloud`): the share of its points within 10 cm of the
   reconstruction's bark and their median distance (AdTree's fit), the bark's height against the cloud's
@@ -20,7 +21,7 @@ from typing import Sequence
 
 import numpy as np
 
-from farm.dataset import read_image
+from farm.dataset import IMAGE_SUFFIXES, read_image
 from renderers.silhouette_metric import closed_silhouette
 from species.errors import user_path
 
@@ -31,7 +32,7 @@ from .units import EvaluationError, Unit
 
 __all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "outline_iou"]
 
-SKETCH_SUFFIXES = (".png",)
+SKETCH_SUFFIXES = IMAGE_SUFFIXES
 _IOU_SIZE = 128  # both outlines are compared at this size, cut to their bounding boxes
 _INK = 128       # grey levels below this are strokes
 _CLOSING_PX = 6  # gaps up to about twice this closed in a drawing's and a render's outline (at 224-256 px)
@@ -49,7 +50,8 @@ def input_units(folder: str, methods: Sequence[str]):
               (p.suffix.lower() == ".json")]
     sketches = [p for p in files if p.suffix.lower() in SKETCH_SUFFIXES]
     if not clouds and not sketches:
-        raise EvaluationError(f"--inputs {folder} holds no clouds ({', '.join(CLOUD_SUFFIXES)}) or sketches (.png)")
+        raise EvaluationError(f"--inputs {folder} holds no clouds ({', '.join(CLOUD_SUFFIXES)}) "
+                              f"or sketches ({', '.join(SKETCH_SUFFIXES)})")
     units, skipped = [], []
     for kind, method, found in (("clouds", "cloud", clouds), ("sketches", "params", sketches)):
         if not found:
@@ -127,7 +129,7 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
         if reference.get("generator", "weber_penn") == "weber_penn" and "levels" in reference:
             row["param_score"] = metrics.parameter_scores(net.codec, result.params, reference)["score_overall"]
     else:
-        grey = image if image.ndim == 2 else image[..., :3].mean(axis=2)
+        grey = image if image.ndim == 2 else image.mean(axis=2)
         drawn = ctx.renderer.silhouette_masks(result.mesh, [camera])[0]
         # Outlines: a drawing's strokes and the rendered twigs and leaves closed into one filled shape each.
         ink, shape = (binary_fill_holes(closed_silhouette(m, _CLOSING_PX)) for m in (grey < _INK, drawn))

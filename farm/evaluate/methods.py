@@ -36,6 +36,7 @@ from typing import Callable, Iterator, Sequence
 
 import numpy as np
 
+from farm.dataset import read_image
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
 from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
 from reconstruct.methods import RunOptions, get_method
@@ -272,8 +273,6 @@ def run_scan(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
 
 def run_orbit(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     """A registry method that reads photos, on a leafless Blender orbit of the true tree at known poses."""
-    from PIL import Image
-
     s = ctx.settings
     seed = tree_rng_seed(tree, name, s.seed) % 2**31
     leafless = dataclasses.replace(tree.mesh, leaves=MeshPart.empty())
@@ -284,8 +283,7 @@ def run_orbit(name: str, tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
         start = time.perf_counter()
         photos = render_photos(leafless.to_glb(), cameras, Path(folder) / "photos", samples=s.photo_samples)
         rendering = time.perf_counter() - start
-        with Image.open(photos.images[0]) as photo:
-            first = np.asarray(photo.convert("RGB"))
+        first = read_image(photos.images[0])
         method = get_method(name)
         result = method.run({method.reads[0].name: Path(folder) / "photos"},
                             RunOptions(seed=seed, poses="known", threads=1, workdir=Path(folder) / "sfm"))

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from farm.dataset import read_image
 from farm.dataset.manifest import code_version
 from farm.table import format_table
 from species.meshing.png import png_bytes
@@ -244,7 +245,7 @@ def _gallery(rows, report: Path, method: str, path: Path) -> Path | None:
     images = []
     for label, position in picks.items():
         row = ranked.iloc[position]
-        panel = cv2.imread(str(report / row["panel"]), cv2.IMREAD_COLOR)[..., ::-1]
+        panel = read_image(report / row["panel"])
         band = np.full((26, panel.shape[1], 3), 255, np.uint8)
         cv2.putText(band, f"{label}: {METRICS[metric].label} = {row[metric]:.3f}  ({row['tree_id']})", (6, 18),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)

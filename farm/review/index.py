@@ -14,7 +14,8 @@ import numpy as np
 
 from farm.dataset import Location, open_part, output_columns, read_manifest, read_part, stored_float_outputs
 from farm.dataset.image_codec import decode_map, encode_map
-from renderers import LABEL_MAPS, METRIC_MAPS
+from renderers import LABEL_MAPS, METRIC_MAPS, OUTPUTS
+from renderers.contact_sheet import without_background
 from species.errors import TreefarmError
 
 from .qa import QA_VERSION, TREE_COLUMNS, QaFlags, ink_flags, tree_flags
@@ -191,8 +192,8 @@ def viewable_png(output: str, png: bytes, scale: float | None, offset: float | N
         if foreground.any():
             near, far = float(image[foreground].min()), float(image[foreground].max())
             shown[foreground] = 255.0 - 200.0 * (image[foreground] - near) / max(far - near, 1e-9)
-    elif output in ("silhouette", "silhouette_envelope"):
-        shown = image.astype(np.float64) * 255.0
+    elif output in OUTPUTS and OUTPUTS[output].mask_channel is not None:  # black outside the tree, not red
+        shown = without_background(output, image).astype(np.float64) * 255.0
     else:  # depth01, trunk_depth: 1 means far / background
         shown = (1.0 - image.astype(np.float64)) * 255.0
     return encode_map(output, np.clip(np.rint(shown), 0, 255).astype(np.uint8))[0]

@@ -18,7 +18,7 @@ import species
 from farm.cli import main
 from farm.evaluate.job import ROWS, evaluation_data_spec, plan_evaluation, serves
 from farm.evaluate.methods import EvalSettings
-from farm.evaluate.inputs import outline_iou
+from farm.evaluate.inputs import input_units, outline_iou
 from farm.jobs import parse_spec
 from farm.pipeline import run_job
 from reconstruct.scoring import METRICS
@@ -176,6 +176,27 @@ def test_real_inputs_are_scored_and_a_failing_one_is_recorded_while_the_job_goes
     assert "cloud (input, 1 ok)" in summary and "## Failures" in summary and "broken.xyz" in summary
 
 
+def test_drawings_with_an_alpha_channel_are_scored_like_the_same_drawing_on_paper(inputs, tmp_path):
+    """RGBA drawings on a transparent background (as drawing programs save them): the rendered sketch as black ink
+    whose alpha is its darkness, and a real hand drawing where present; each gives a row with no error."""
+    folder = tmp_path / "drawings"
+    folder.mkdir()
+    grey = np.asarray(Image.open(inputs / "unlabelled.png").convert("L"))
+    ink = np.dstack([np.zeros(grey.shape + (3,), np.uint8), 255 - grey])  # transparent black paper
+    Image.fromarray(ink, "RGBA").save(folder / "transparent.png")
+    real = SHARED / "sketches" / "mouse_branches_foliage" / "sketch__v2.png"
+    if real.exists():
+        shutil.copy(real, folder / "hand.png")
+    out = tmp_path / "report"
+    assert main(["evaluate", "--inputs", str(folder), "--methods", "params", "--out", str(out), *FAST]) == 0
+    rows = pd.read_parquet(out / "metrics.parquet").set_index("tree_id")
+    rows.index = [Path(i).name for i in rows.index]
+    assert sorted(rows.index) == (["hand.png"] if real.exists() else []) + ["transparent.png"]
+    assert (rows["status"] == "ok").all(), rows["error"].tolist()
+    assert 0.3 < rows.loc["transparent.png", "silhouette_iou_input"] <= 1  # as the same sketch on paper
+    assert (rows["silhouette_iou_input"] > 0).all()
+
+
 def test_compare_reports_a_known_change_and_gates_on_it(report, tmp_path, capsys):
     better = tmp_path / "b"
     better.mkdir()
@@ -226,6 +247,13 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(eval_data, tmp_path, c
     err = capsys.readouterr().err.strip()
     assert err.startswith("farm: error: ") and message in err and len(err.splitlines()) == 1
     assert not out.exists() and not (tmp_path / "nothing" / "mlflow.sqlite").exists()
+
+
+def test_inputs_take_sketches_of_every_image_kind_the_reader_reads(tmp_path):
+    for name in ("a.png", "b.jpg", "c.JPEG", "d.tif", "e.webp", "notes.md"):
+        (tmp_path / name).write_bytes(b"")
+    units, skipped = input_units(str(tmp_path), ["params"])
+    assert [Path(u.tree_id).name for u in units] == ["a.png", "b.jpg", "c.JPEG", "d.tif", "e.webp"] and not skipped
 
 
 def test_outline_iou_compares_shapes_at_one_height_on_known_answers():

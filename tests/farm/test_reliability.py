@@ -149,6 +149,21 @@ def test_inspect_prints_a_species_table_and_writes_a_contact_sheet(reference, tm
     assert width > height > 0  # 3 rows of 6 outputs
 
 
+def test_the_inspect_contact_sheet_shows_the_silhouette_background_black_not_red(reference):
+    from farm.commands.inspect import contact_rows
+    from renderers.contact_sheet import to_rgb8
+
+    columns = 0
+    for _, cells in contact_rows(str(reference[0]), 2):
+        for name, image in cells:
+            if name == "silhouette":
+                picture = to_rgb8(image)
+                red = (picture[..., 0] > 0) & (picture[..., 1:] == 0).all(axis=2)
+                assert (picture[0, 0] == 0).all() and not red.any()
+                columns += 1
+    assert columns == 2
+
+
 def test_export_glb_writes_the_stored_mesh_of_every_tree(reference, tmp_path):
     import trimesh
 

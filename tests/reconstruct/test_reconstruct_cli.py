@@ -134,6 +134,39 @@ def test_sketch_depth_and_two_view_methods_write_valid_glbs(drawings, tmp_path, 
     assert_valid_glb(pair.read_bytes(), tmp_path, "pair.glb")
 
 
+def _as_kind(grey: np.ndarray, kind: str, path: Path) -> Path:
+    """The grey drawing saved as another kind of image file: the same drawing on the page."""
+    if kind == "rgba":  # black ink whose alpha is its darkness, on a transparent background
+        Image.fromarray(np.dstack([np.zeros(grey.shape + (3,), np.uint8), 255 - grey]), "RGBA").save(path)
+    elif kind == "palette":
+        Image.fromarray(grey).convert("P").save(path)
+    elif kind == "deep":
+        Image.fromarray(grey.astype(np.uint16) * 257).save(path)
+    else:
+        Image.fromarray(grey).save(path, quality=95)
+    return path
+
+
+def test_every_kind_of_image_file_reconstructs_as_the_drawing_it_shows(drawings, tmp_path, capsys):
+    """RGBA on a transparent background, a palette PNG and a 16-bit PNG of a drawing grow the tree its 8-bit grey
+    PNG grows, byte for byte; a JPEG of it grows a valid tree. Two-view reads RGBA drawings too."""
+    grey = np.asarray(Image.open(drawings["tsn"]))
+    assert main(["reconstruct", str(drawings["tsn"]), "--out", str(tmp_path / "grey" / "tree.glb")]) == 0
+    for kind, suffix in (("rgba", "png"), ("palette", "png"), ("deep", "png"), ("jpeg", "jpg")):
+        out = tmp_path / kind / "tree.glb"  # one name: the GLB holds it
+        drawing = _as_kind(grey, kind, tmp_path / f"{kind}.{suffix}")
+        assert main(["reconstruct", str(drawing), "--out", str(out), "--report", str(tmp_path / f"{kind}.png")]) == 0
+        if kind == "jpeg":
+            assert_valid_glb(out.read_bytes(), tmp_path, "jpeg.glb")
+        else:
+            assert out.read_bytes() == (tmp_path / "grey" / "tree.glb").read_bytes(), kind
+    pair = {view: _as_kind(np.asarray(Image.open(drawings[view])), "rgba", tmp_path / f"{view}_rgba.png")
+            for view in ("front", "side")}
+    assert main(["reconstruct", "--front", str(pair["front"]), "--side", str(pair["side"]),
+                 "--out", str(tmp_path / "pair.glb")]) == 0
+    assert "two-view:" in capsys.readouterr().out
+
+
 def test_the_api_returns_skeleton_mesh_and_report(drawings):
     image = np.asarray(Image.open(drawings["tsn"]))
     result = from_params(image, seed=3)
@@ -148,6 +181,9 @@ def test_bad_input_is_one_line_and_writes_nothing(drawings, tmp_path, capsys):
     text = tmp_path / "notes.png"
     text.write_text("not a picture")
     _one_line_error(capsys, ["reconstruct", str(text), "--out", str(out)], "is not an image file")
+    floats = tmp_path / "floats.tif"
+    Image.fromarray(np.full((64, 64), 0.5, np.float32)).save(floats)
+    _one_line_error(capsys, ["reconstruct", str(floats), "--out", str(out)], "floating-point pixels")
     blank = tmp_path / "blank.png"
     Image.fromarray(np.full((64, 64), 255, np.uint8)).save(blank)
     _one_line_error(capsys, ["reconstruct", str(blank), "--out", str(out)], "blank")

@@ -55,6 +55,18 @@ def test_label_maps_follow_the_entries_and_the_contact_sheet_spreads_them(monkey
     assert viewable("sketch_tsn", labels)[0, :, 0].tolist() == [0, 1, 2]  # grey levels as they are
 
 
+def test_maps_with_a_mask_channel_show_black_outside_the_tree_in_a_contact_sheet(monkeypatch, all_outputs):
+    for name in ("silhouette", "silhouette_envelope"):
+        image = all_outputs["tsn4"][0].images[name]
+        outside = image[..., 2] == 0
+        assert outside.any() and (image[outside][:, 0] == 1.0).all()  # stored: far depth there, a red picture
+        shown = viewable(name, image)
+        assert (shown[outside] == 0).all() and (shown[~outside] == viewable("sketch_tsn", image)[~outside]).all()
+    monkeypatch.setitem(OUTPUTS, "test_masked", Output(lambda frame: frame.visible[0], np.float32, mask_channel=0))
+    pair = np.array([[[0.0, 0.7, 0.7], [1.0, 0.7, 0.7]]], np.float32)
+    assert viewable("test_masked", pair)[0, :, 1].tolist() == [0, 178]  # a registered output follows its entry
+
+
 @pytest.mark.parametrize("dtype, metric, named", [(np.float64, False, "dtype float64"),
                                                    (np.uint8, True, "metric output of dtype uint8")])
 def test_an_entry_of_another_dtype_or_a_metric_uint8_one_is_refused(dtype, metric, named):

@@ -11,7 +11,8 @@ import pyarrow.parquet as pq
 import pytest
 
 import farm.dataset as dataset
-from farm.dataset.image_codec import decode_map
+from farm.dataset.image_codec import decode_map, encode_map
+from farm.review.index import viewable_png
 from farm.review.server import TOKEN_HEADER
 
 from conftest import running_server
@@ -156,6 +157,17 @@ def test_depth_is_served_as_an_8_bit_png_bright_near_and_black_background(server
     foreground = metres > 0
     nearest, farthest = np.argmin(np.where(foreground, metres, np.inf)), np.argmax(metres)
     assert shown.flat[nearest] > shown.flat[farthest]
+
+
+def test_a_silhouette_map_is_served_black_outside_the_tree_not_red():
+    silhouette = np.zeros((8, 8, 3), np.float32)
+    silhouette[..., 0] = 1.0  # background: far depth, no gap, no mask
+    silhouette[2:6, 2:6] = (0.4, 0.1, 1.0)  # the tree
+    png, scale, offset = encode_map("silhouette", silhouette)
+    shown = decode_map(viewable_png("silhouette", png, scale, offset))
+    outside = np.ones((8, 8), bool)
+    outside[2:6, 2:6] = False
+    assert (shown[outside] == 0).all() and (shown[~outside][:, 2] == 255).all()
 
 
 def test_sketch_png_is_served_as_stored_and_unknown_outputs_are_404(server, review_dataset):
