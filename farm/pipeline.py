@@ -27,6 +27,7 @@ from .dataset.manifest import (JOB_RECORD, SHARDS_FOLDER, build_manifest, code_v
                        write_job_record, write_manifest, write_shard_record)
 from .ray_reaper import start_reaper
 from .dataset.storage import Location, TransientWriteError
+from .table import counted
 from .tree_chain import (BuilderFactory, SpeciesChain, failed_tree_row, tree_row, tree_seed,
                          view_rows)
 
@@ -223,8 +224,8 @@ def _check_free_space(location: Location, records: dict[int, dict], trees_left: 
     written = sum(record[table]["bytes"] for record in records.values() for table in ("trees", "views"))
     needed = written * trees_left // trees_done
     if needed > free:
-        raise JobError(f"{location.uri} has {_mebibytes(free)} free; the {trees_left} trees left need about "
-                       f"{_mebibytes(needed)} (at the size of the {trees_done} written): free space there or "
+        raise JobError(f"{location.uri} has {_mebibytes(free)} free; the {counted(trees_left, 'tree')} left need "
+                       f"about {_mebibytes(needed)} (at the size of the {trees_done} written): free space there or "
                        f"resume into a larger --out")
 
 
@@ -352,11 +353,15 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
             trees_left = sum(p.n_trees for p in queue) + sum(p.n_trees for _, p in in_flight.values())
             _check_free_space(location, records, trees_left)
             views_done += record["views"]["rows"]
-            bar.set_postfix(views=views_done, failed=sum(len(r["failures"]) for r in records.values()),
-                            refresh=False)
+            # A job without a views table (an asset library) has no view count to show.
+            shown_views = {"views": views_done} if spec.tables.view_outputs else {}
+            bar.set_postfix(**shown_views, failed=sum(len(r["failures"]) for r in records.values()), refresh=False)
             show_progress(redraw=True)
             submit(actor)
-    finally:  # a failed shard ends the job: its actors must not go on holding their CPUs
+    finally:  # a failed shard or Ctrl-C ends the job: its actors must not go on holding their CPUs
+        # Cancelled first, the shards still running are not retried (Ray would say so) when their actors die.
+        for task in in_flight:
+            ray.cancel(task)
         for actor in actors:
             ray.kill(actor)
         if progress is not None:
@@ -364,12 +369,14 @@ def _run_pending(spec: PipelineSpec, location: Location, pending: list[ShardPlan
 
 
 def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: str | None = None,
-            builder_factory: BuilderFactory = SpeciesChain, progress: bool = True) -> dict:
+            builder_factory: BuilderFactory = SpeciesChain, progress: bool = True,
+            on_resume: Callable[[int, int], None] | None = None) -> dict:
     """Run (or resume) a job into `out` and return its manifest.
 
     workers : actors to start (default: as many as the cluster's CPUs allow with the spec's num_cpus each).
     address : an existing Ray cluster (`ray://...` or `host:port`); default a local Ray started here.
     builder_factory : called once per actor with the spec; returns `builder(species, seed, timer) -> BuiltTree`.
+    on_resume : called with (trees kept, trees of the job) before a job that kept finished shards goes on.
     """
     from tqdm import tqdm
 
@@ -383,6 +390,8 @@ def run_job(spec: PipelineSpec, out: str, workers: int | None = None, address: s
     records = finished_shards(location, spec.digest(), len(plans))
     write_job_record(location, spec)
     pending = [plan for plan in plans if plan.shard not in records]
+    if records and pending and on_resume is not None:
+        on_resume(sum(record["n_trees"] for record in records.values()), spec.n_trees)
     started_ray, reaper, bar = False, None, None
     start = time.perf_counter()
     try:

@@ -1,9 +1,9 @@
-"""Plain-text tables for the command line: left-aligned text, right-aligned numbers."""
+"""Plain-text tables and counts for the command line: left-aligned text, right-aligned numbers, "1 shard"."""
 from __future__ import annotations
 
 from typing import Sequence
 
-__all__ = ["format_table"]
+__all__ = ["format_table", "counted"]
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
@@ -16,3 +16,8 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> st
                      .rstrip())
     lines.insert(1, "  ".join("-" * w for w in widths))
     return "\n".join(lines)
+
+
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """`n` and its noun, singular for one: counted(1, "shard") is "1 shard", counted(4, "shard") "4 shards"."""
+    return f"{n} {noun if n == 1 else plural or noun + 's'}"

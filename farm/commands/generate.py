@@ -6,9 +6,11 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
+from farm.table import counted
 
 # What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
@@ -47,8 +49,15 @@ def run(args: argparse.Namespace) -> int:
     check_workers(args.workers)
     from farm.pipeline import run_job
 
-    manifest = run_job(spec, out, workers=args.workers, address=args.address, progress=not args.quiet)
-    counts, timings = manifest["counts"], manifest["timings"]
-    print(f"{out}: {counts['trees']} trees ({counts['failed']} failed), {counts['views']} views "
-          f"in {counts['shards']} shards; {timings['wall_seconds']:.1f} s this run")
+    def say_resuming(kept: int, total: int) -> None:
+        print(f"{out}: resuming: {kept} of {counted(total, 'tree')} kept", flush=True)  # before the bar starts
+
+    # This command's own clock: the manifest's wall time is that of the run that finished the job.
+    start = time.perf_counter()
+    manifest = run_job(spec, out, workers=args.workers, address=args.address, progress=not args.quiet,
+                       on_resume=say_resuming)
+    seconds = time.perf_counter() - start
+    counts = manifest["counts"]
+    print(f"{out}: {counted(counts['trees'], 'tree')} ({counts['failed']} failed), "
+          f"{counted(counts['views'], 'view')} in {counted(counts['shards'], 'shard')}; {seconds:.1f} s this run")
     return 0

@@ -42,14 +42,15 @@ def summary_table(path: str) -> str:
         reason = " ".join(str(exc).split())
         raise DatasetError(f"{path}: a part file cannot be read ({reason}): `farm validate {path}` names the "
                            f"damaged files") from None
-    lines = [f"{'species':<24}{'trees':>6}{'failed':>7}{'height m':>10}{'crown m':>9}{'nodes':>8}{'leaves':>8}"
-             f"{'triangles':>11}{'views':>7}"]
+    # Wide enough for the longest species name and a gap (some preset names run past the usual 24).
+    name_width = max([24, *(len(row[0]) + 2 for row in rows)])
+    lines = [f"{'species':<{name_width}}{'trees':>6}{'failed':>7}{'height m':>10}{'crown m':>9}{'nodes':>8}"
+             f"{'leaves':>8}{'triangles':>11}{'views':>7}"]
     for name, trees, failed, height, crown, nodes, leaves, triangles, views in rows:
-        def number(value, fmt):
-            return format(value, fmt) if value is not None else "-"
-        lines.append(f"{name:<24}{trees:>6}{failed:>7}{number(height, '>10.2f')}{number(crown, '>9.2f')}"
-                     f"{number(nodes, '>8.0f')}{number(leaves, '>8.0f')}{number(triangles, '>11.0f')}"
-                     f"{int(views or 0):>7}")
+        def number(value, width: int, decimals: int) -> str:  # "-" where no tree of the species has one
+            return f"{value:>{width}.{decimals}f}" if value is not None else f"{'-':>{width}}"
+        lines.append(f"{name:<{name_width}}{trees:>6}{failed:>7}{number(height, 10, 2)}{number(crown, 9, 2)}"
+                     f"{number(nodes, 8, 0)}{number(leaves, 8, 0)}{number(triangles, 11, 0)}{int(views or 0):>7}")
     return "\n".join(lines)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import time
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from species.errors import user_path
 
 from farm.commands import CommandLineError, check_flag_int
 from farm.commands.tree import load_params
+from farm.table import counted
 
 # What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
@@ -90,7 +92,8 @@ def _render_pyrender(args, mesh, skeleton, outputs, out: Path) -> list[dict]:
             _write_png(out / filename, data)
             files[name] = {"file": filename, **note}
         records.append({"index": view.index, **view.camera.to_dict(), "images": files})
-        print(f"view {view.index} {view.name:>12}: {per_view * 1000:.0f} ms (pyrender, {len(outputs)} outputs)")
+        print(f"view {view.index} {view.name:>12}: {per_view * 1000:.0f} ms "
+              f"(pyrender, {counted(len(outputs), 'output')})")
     renderer.close()
     with user_path(out / "contact_sheet.png", "write"):
         write_contact_sheet(out / "contact_sheet.png", views_sheet_rows(views), cell=min(args.size, 256))
@@ -135,6 +138,19 @@ def _photo_sheet_rows(photos) -> list:
     return rows
 
 
+def check_out_folder(out: Path) -> None:
+    """Refuse `--out` before anything is grown: it must be a folder, or a path where one can be made."""
+    existing = out
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        where = "" if existing == out else f" ({existing} is a file)"
+        raise CommandLineError(f"--out {out} is not a folder{where}: allowed a folder, made if missing")
+    if not os.access(existing, os.W_OK):
+        raise CommandLineError(f"--out {out}: cannot write {existing} (permission denied): allowed a folder you "
+                               f"can write")
+
+
 def run(args: argparse.Namespace) -> int:
     from renderers import DEFAULT_OUTPUTS, check_outputs, rig_parts
 
@@ -145,11 +161,12 @@ def run(args: argparse.Namespace) -> int:
     check_flag_int("--seed", args.seed, 0)
     check_flag_int("--samples", args.samples, 1)
     params = _tree_params(args)
+    out = Path(args.out)
+    check_out_folder(out)
     start = time.perf_counter()
     skeleton, mesh = species.rebuild(params)
     print(f"tree: {len(skeleton)} nodes, {mesh.n_faces} triangles, grown and meshed in "
           f"{time.perf_counter() - start:.2f} s")
-    out = Path(args.out)
     with user_path(out, "make the folder"):
         out.mkdir(parents=True, exist_ok=True)
     if args.backend == "blender":
@@ -162,5 +179,5 @@ def run(args: argparse.Namespace) -> int:
         "seed": args.seed, "params": params, "views": records}, indent=1, default=float)
     with user_path(out / "cameras.json", "write"):
         (out / "cameras.json").write_text(cameras)
-    print(f"wrote {len(records)} views to {out}")
+    print(f"wrote {counted(len(records), 'view')} to {out}")
     return 0

@@ -7,6 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
+from farm.table import counted
+
 # What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
@@ -47,8 +49,9 @@ def run(args: argparse.Namespace) -> int:
         names = [n for n in location.list(SHARDS_FOLDER) if n.startswith("part-")]
         records = [r for r in (read_shard_record(location, int(n[5:10])) for n in names) if r is not None]
         done = sum(r["n_trees"] for r in records)
-        print(f"{location.uri}: unfinished job {job['job']['name']!r}: {len(records)} of {job['n_shards']} shards, "
-              f"{done} of {job['n_trees']} trees written (re-run `farm generate` to resume)")
+        print(f"{location.uri}: unfinished job {job['job']['name']!r}: {len(records)} of "
+              f"{counted(job['n_shards'], 'shard')}, {done} of {counted(job['n_trees'], 'tree')} written "
+              f"(re-run `farm generate` to resume)")
         stages: dict[str, float] = {}
         for record in records:
             for stage, seconds in record["timings"]["stages"].items():

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from farm.table import counted
+
 # What a command runs is imported inside its functions: `farm --help` loads every command module (start-up time).
 
 
@@ -30,10 +32,11 @@ def run(args: argparse.Namespace) -> int:
     for problem in problems:
         print(f"damaged: {problem}", file=sys.stderr)
     if problems:
-        print(f"{args.dir}: {len(problems)} damaged file(s); `farm generate` with the same spec regenerates them",
-              file=sys.stderr)
+        print(f"{args.dir}: {counted(len(problems), 'damaged file')}; `farm generate` with the same spec "
+              f"regenerates them", file=sys.stderr)
         return 1
     manifest = read_manifest(args.dir)
-    print(f"{args.dir}: ok, {2 * len(manifest['shards'])} part files match the manifest "
-          f"({manifest['counts']['trees']} trees, {manifest['counts']['views']} views)")
+    counts = manifest["counts"]
+    print(f"{args.dir}: ok, {counted(2 * len(manifest['shards']), 'part file')} match the manifest "
+          f"({counted(counts['trees'], 'tree')}, {counted(counts['views'], 'view')})")
     return 0

@@ -107,6 +107,8 @@ class Location:
                 fs.delete_file(temporary)
             if exc.errno in TRANSIENT_ERRNOS:
                 raise TransientWriteError(exc.errno, f"cannot write {final}: {exc.strerror or exc}") from exc
+            if exc.errno:  # the system's reason, not pyarrow's text naming our temporary file
+                raise PathError(f"cannot write {final}: {os.strerror(exc.errno)}") from exc
             with user_path(final, "write"):
                 raise
 

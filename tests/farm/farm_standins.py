@@ -18,7 +18,7 @@ from farm.tree_chain import BuiltTree, stage_rngs, tree_seed
 from species.errors import ParameterError
 from species.skeleton import Skeleton
 
-SPECIES = ("standin_a", "standin_b", "broken", "memory_hog")
+SPECIES = ("standin_a", "standin_b", "broken", "memory_hog", "standin_with_a_long_preset_name")
 # What a `memory_hog` tree allocates (and touches) as it grows: more than a 1 GiB worker limit allows.
 HOG_BYTES = 3 * 2**30
 OUTPUTS = ("depth", "mask", "silhouette", "sketch_tsn")

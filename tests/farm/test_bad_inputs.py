@@ -4,7 +4,9 @@ The table runs in-process through `farm.cli.main` (fast); a few rows run end to 
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -63,7 +65,13 @@ BAD_INPUTS = [
     (["train", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
     (["retrain", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
     (["reconstruct", "{tmp}/in", "--out", "{tmp}/trees", "--workers", "0"], WORKERS_0),
+    (["render", "--species", "maple", "--out", "{tmp}/in/bad.json"], "--out"),
+    # {readonly} is a folder no one may write in
+    (["generate", "--out", "{readonly}", "--trees", "2", "--quiet"], "cannot write {readonly}/_job.json: "),
+    (["library", "--out", "{readonly}", "--quiet"], "cannot write {readonly}/library.json: "),
 ]
+# What a line must not show of another library's wording: pyarrow's detail and our temporary file names.
+FOREIGN_WORDING = ("Detail: [errno", ".tmp-")
 
 
 def _truncate_a_part(data: Path) -> Path:
@@ -90,20 +98,47 @@ def _prepare(tmp: Path, data: Path, argv: list[str]) -> list[str]:
     (inputs / "old_bad.py").write_text(repr({"startCurv": 0.0, "levels": "three"}))
     if "{damaged}" in argv:
         _truncate_a_part(data)
-    return [w.format(tmp=tmp, good=good, good_name=good.name, data=data, damaged=data) for w in argv]
+    return [w.format(tmp=tmp, good=good, good_name=good.name, data=data, damaged=data, readonly=tmp / "readonly")
+            for w in argv]
+
+
+@contextlib.contextmanager
+def read_only(folder: Path):
+    """`folder`, made, that no one may write in while the block runs: its mode 0o555, and where that does not stop
+    writes (the tests run as root) marked immutable with `chattr +i`; skipped where neither can."""
+    folder.mkdir()
+    folder.chmod(0o555)
+    immutable = False
+    try:
+        if os.access(folder, os.W_OK):
+            marked = subprocess.run(["chattr", "+i", str(folder)], capture_output=True) if shutil.which("chattr") \
+                else None
+            if marked is None or marked.returncode != 0:
+                pytest.skip("running as root, where a read-only mode does not stop writes, and chattr +i is "
+                            "not allowed here")
+            immutable = True
+        yield folder
+    finally:
+        if immutable:
+            subprocess.run(["chattr", "-i", str(folder)], check=True)
+        folder.chmod(0o755)
 
 
 @pytest.mark.parametrize("argv, named", BAD_INPUTS, ids=[" ".join(a[:1] + a[-2:]) for a, _ in BAD_INPUTS])
 def test_a_bad_input_is_one_line_status_2_and_writes_nothing(tmp_path, finished_dataset, capsys, argv, named):
     data = tmp_path / "data"
     shutil.copytree(finished_dataset, data)
+    readonly = tmp_path / "work" / "readonly"
+    named = named.format(readonly=readonly)
     argv = _prepare(tmp_path / "work", data, argv)
-    before_work, before_data = _files(tmp_path / "work"), _files(data)
-    status = main(argv)
-    lines = capsys.readouterr().err.strip().splitlines()
-    assert status == 2 and len(lines) == 1, lines
-    assert lines[0].startswith("farm: error: ") and named in lines[0], lines
-    assert _files(tmp_path / "work") == before_work and _files(data) == before_data
+    with read_only(readonly) if any(str(readonly) in word for word in argv) else contextlib.nullcontext():
+        before_work, before_data = _files(tmp_path / "work"), _files(data)
+        status = main(argv)
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert status == 2 and len(lines) == 1, lines
+        assert lines[0].startswith("farm: error: ") and named in lines[0], lines
+        assert not any(words in lines[0] for words in FOREIGN_WORDING), lines
+        assert _files(tmp_path / "work") == before_work and _files(data) == before_data
 
 
 END_TO_END = [row for row in BAD_INPUTS if row[1] in ("bad.json", "--size 100000", "part-")][:3]

@@ -104,6 +104,46 @@ def test_damaged_part_is_named_by_validate_and_regenerated_by_the_next_run(finis
     assert part_bytes(folder) == finished[2]
 
 
+def farm_generate(spec, out: Path, monkeypatch) -> int:
+    """`farm generate --out OUT --quiet` on a stand-in spec and builder."""
+    from functools import partial
+
+    import farm.pipeline
+    from farm.cli import main
+    from farm.commands import generate as generate_command
+
+    monkeypatch.setattr(generate_command, "load_job", lambda args: spec)
+    monkeypatch.setattr(farm.pipeline, "run_job", partial(run_job, builder_factory=StandinChain))
+    return main(["generate", "--out", str(out), "--quiet"])
+
+
+def test_generate_rerun_of_a_finished_job_reports_this_run_s_seconds(finished, tmp_path, monkeypatch, capsys):
+    spec, folder = finished[0], copy_of(finished, tmp_path)
+    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest["timings"]["wall_seconds"] = 27.6  # the run that finished the job was a long one
+    (folder / "manifest.json").write_text(json.dumps(manifest))
+    assert farm_generate(spec, folder, monkeypatch) == 0
+    (line,) = capsys.readouterr().out.splitlines()
+    seconds = float(line.rsplit(";", 1)[1].split()[0])
+    assert line.endswith(" s this run") and seconds < 20
+
+
+def test_generate_resume_says_how_many_trees_it_kept(finished, tmp_path, monkeypatch, capsys):
+    spec, folder = finished[0], copy_of(finished, tmp_path)
+    (folder / "manifest.json").unlink()
+    (folder / "_shards/part-00001.json").unlink()  # shard 1 (2 of the 5 trees) is built again
+    assert farm_generate(spec, folder, monkeypatch) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{folder}: resuming: 3 of 5 trees kept"
+    assert lines[1].startswith(f"{folder}: 5 trees (0 failed), 10 views in 3 shards; ")
+
+
+def test_generate_counts_one_of_a_kind_in_the_singular(tmp_path, monkeypatch, capsys, ray_session):
+    spec = standin_spec(species={"standin_a": 1})
+    assert farm_generate(spec, tmp_path / "one", monkeypatch) == 0
+    assert f"{tmp_path / 'one'}: 1 tree (0 failed), 2 views in 1 shard; " in capsys.readouterr().out
+
+
 def test_output_folder_of_another_spec_is_refused(finished, tmp_path):
     folder = copy_of(finished, tmp_path)
     with pytest.raises(JobError, match="another job spec"):
@@ -164,3 +204,38 @@ def test_the_progress_bar_advances_per_tree_while_a_shard_runs(tmp_path, monkeyp
     run_job(spec, str(tmp_path), workers=1, builder_factory=SlowChain, progress=True)
     assert shown == sorted(shown) and shown[-1] == 4
     assert {1, 2, 3} <= set(shown)  # one shard: the bar moved before the shard was written
+
+
+def test_an_interrupted_job_ends_its_shards_without_ray_saying_they_will_be_retried(tmp_path, monkeypatch, capfd,
+                                                                                     ray_session):
+    import time
+
+    import tqdm
+
+    class InterruptedBar(tqdm.tqdm):
+        """Ctrl-C as the first tree lands, while both workers are building."""
+
+        def refresh(self, *args, **kwargs):
+            if self.n >= 1:
+                raise KeyboardInterrupt
+            return super().refresh(*args, **kwargs)
+
+    monkeypatch.setattr(tqdm, "tqdm", InterruptedBar)
+    spec = standin_spec(species={"standin_a": 8}, shard_size=4)
+    with pytest.raises(KeyboardInterrupt):
+        run_job(spec, str(tmp_path), workers=2, builder_factory=SlowChain, progress=True)
+    time.sleep(3)  # Ray reports a killed actor's task to the driver a moment later
+    captured = capfd.readouterr()
+    assert "will be retried" not in captured.out + captured.err
+
+
+def test_status_and_validate_count_one_of_a_kind_in_the_singular(tmp_path, capsys, ray_session):
+    from farm.cli import main
+
+    run_job(standin_spec(species={"standin_a": 1}), str(tmp_path), workers=1, builder_factory=StandinChain,
+            progress=False)
+    assert main(["validate", str(tmp_path)]) == 0
+    assert capsys.readouterr().out == f"{tmp_path}: ok, 2 part files match the manifest (1 tree, 2 views)\n"
+    (tmp_path / "manifest.json").unlink()
+    assert main(["status", str(tmp_path)]) == 0
+    assert f"unfinished job 'standin': 1 of 1 shard, 1 of 1 tree written" in capsys.readouterr().out

@@ -132,3 +132,14 @@ def test_read_columns_refuses_an_unknown_table(standin_dataset):
     _, path = standin_dataset
     with pytest.raises(dataset.DatasetError, match="unknown table 'leaves'; known: trees, views"):
         dataset.read_columns(path, "leaves", ["tree_id"])
+
+
+def test_inspect_s_table_keeps_its_columns_under_a_long_species_name(tmp_path, ray_session):
+    from farm.commands.inspect import summary_table
+
+    long_name = "standin_with_a_long_preset_name"
+    spec = standin_spec(species={"standin_a": 1, long_name: 1})
+    run_job(spec, str(tmp_path), workers=1, builder_factory=StandinChain, progress=False)
+    lines = summary_table(str(tmp_path)).splitlines()
+    assert len(lines) == 3 and len({len(line) for line in lines}) == 1, lines  # every column lines up
+    assert lines[2].startswith(f"{long_name} ")

@@ -34,6 +34,30 @@ def test_render_rejects_an_unknown_style_in_one_line(tmp_path, capsys):
     assert status == 2 and "watercolour" in err and "sketch_tsn" in err and len(err.strip().splitlines()) == 1
 
 
+def test_render_refuses_an_out_that_is_a_file_before_growing_the_tree(tmp_path, capsys):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("keep me")
+    assert main(["render", "--species", "maple", "--size", "32", "--out", str(notes)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""  # no "tree: ... grown and meshed" line: the path was checked first
+    assert captured.err.strip().splitlines() == [f"farm: error: --out {notes} is not a folder: allowed a folder, "
+                                                 f"made if missing"]
+    assert notes.read_text() == "keep me" and sorted(tmp_path.iterdir()) == [notes]
+
+
+def test_render_refuses_an_out_under_a_file(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("keep me")
+    assert main(["render", "--species", "maple", "--size", "32", "--out", str(tmp_path / "notes.txt/views")]) == 2
+    assert f"({tmp_path / 'notes.txt'} is a file)" in capsys.readouterr().err
+
+
+def test_render_counts_a_single_output_in_the_singular(tmp_path, capsys):
+    assert main(["render", "--species", "maple", "--rig", "two-view", "--size", "32", "--styles", "depth",
+                 "--out", str(tmp_path / "views")]) == 0
+    out = capsys.readouterr().out
+    assert "(pyrender, 1 output)" in out and f"wrote 2 views to {tmp_path / 'views'}" in out
+
+
 def test_the_blender_backend_writes_a_contact_sheet_too(tmp_path, monkeypatch):
     from renderers import blender
 

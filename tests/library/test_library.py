@@ -368,3 +368,22 @@ def test_twig_cards_carry_a_material_per_season_in_glb_and_usd(library):
             assert (folder / f"textures/twig_atlas_{season}.png").is_file()
     assert with_twigs >= 1  # the sapling draws its dropped twigs as cards
     assert kinds == {True, False}  # the sapling's LOD1 draws bark cards, its farther levels cards with leaves
+
+
+def test_the_progress_bar_shows_no_view_count_for_a_library(tmp_path, monkeypatch, ray_session):
+    import tqdm
+
+    from farm.library.job import run_library
+    from farm.library.spec import parse_library_spec
+
+    shown = []
+
+    class RecordingBar(tqdm.tqdm):
+        def set_postfix(self, *args, **kwargs):
+            super().set_postfix(*args, **kwargs)
+            shown.append(self.postfix)
+
+    monkeypatch.setattr(tqdm, "tqdm", RecordingBar)
+    spec = parse_library_spec({**SPEC, "species": {"lsystem_monopodial": 1}, "formats": ["glb"]})
+    run_library(spec, str(tmp_path / "out"), workers=1, progress=True)
+    assert shown == ["failed=0"]
