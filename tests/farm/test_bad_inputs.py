@@ -56,6 +56,9 @@ BAD_INPUTS = [
     (["train", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
     (["retrain", "sketchnet", "--data", "{data}", "--workers", "0"], WORKERS_0),
     (["reconstruct", "{tmp}/in", "--out", "{tmp}/trees", "--workers", "0"], WORKERS_0),
+    # listing models only reads: a folder that holds no registry is not made one
+    (["models", "list", "--models", "{tmp}/in"], "holds no model registry"),
+    (["models", "show", "sketchnet", "--models", "{tmp}/registry"], "holds no model registry"),
 ]
 
 
