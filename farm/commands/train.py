@@ -159,8 +159,8 @@ def run_train(args: argparse.Namespace) -> int:
 
 
 def _print_result(task: str, result, version, registry) -> None:
-    from trainers.models import counted
     from trainers.model_tables import below_baseline
+    from trainers.models import counted
 
     network = result.network
     rows = [[key, f"{result.test_metrics[key]:.4g}", f"{result.baseline_metrics.get(key, float('nan')):.4g}"]
@@ -215,8 +215,8 @@ def run_retrain(args: argparse.Namespace) -> int:
 
 def run_models(args: argparse.Namespace) -> int:
     """List or show models, reading only: a registry folder that does not hold one is never created."""
-    from trainers.models import DEFAULT_MODELS, holds_shipped_models, shipped_models
     from trainers.model_tables import format_model_versions, format_models_table, format_shipped_model
+    from trainers.models import DEFAULT_MODELS, holds_shipped_models, shipped_models
     from trainers.registry import DATABASE_FILE, DEFAULT_FOLDER, open_registry
 
     if args.action == "show" and not args.name:
