@@ -190,7 +190,7 @@ def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_w
     registry = open_registry(tmp_path / "registry")
     data = [str(training_datasets["pix2pix-trunk"])]
     settings = TrainSettings(epochs=1, **TINY["pix2pix-trunk"])
-    champion = trained_models.register_result(registry, trunk_run, code_version="test")
+    champion = trained_models.register_result(registry, trunk_run, code_version="test", force=True)
     assert champion.is_champion and champion.version == 1
     primary = trunk_run.network.primary
     unbeatable = 1e9 if trunk_run.network.higher_is_better else -1e9
