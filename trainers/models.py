@@ -4,7 +4,8 @@
   weights (`weights.pt`), the ONNX file, the codec's normalisation (TreeSketchNet), the split, the held-out metrics
   beside the trivial baseline's on the same split (`X` and `X_baseline`), the metrics history and curves, the
   datasets' spec digests and part checksums, the settings and the code version. It becomes `latest`; `promote`
-  makes it `champion` (a first version is promoted at once).
+  makes it `champion` (a first version is promoted at once, unless it scores worse than its baseline: then only
+  when forced).
 - `load(name, models=None)` gives a `Predictor` from the registry (`champion`, else `latest`), or from the default
   models shipped in `models/` when no registry is given; it runs the ONNX file with ONNX Runtime, needs neither Ray
   nor torch, and checks the file's inputs and outputs and the codec version against what this code expects.
@@ -21,6 +22,7 @@ import shutil
 import tempfile
 import time
 from dataclasses import dataclass
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Sequence
 
@@ -31,12 +33,13 @@ from species.errors import TreefarmError
 from .data import Split, TaskDataset
 from .onnx_runtime import OnnxModel
 from .preprocess import KINDS, prepare, preprocess
-from .registry import BASELINE_SUFFIX, Registry, RegistryError, open_registry
+from .model_tables import below_baseline
+from .registry import BASELINE_SUFFIX, SHIPPED, ModelVersion, Registry, RegistryError, open_registry
 from .sketchnet_codec import CODEC_VERSION, ParameterCodec
 from .tasks import Task, get_task
 
 __all__ = ["register_result", "load", "Predictor", "retrain", "RetrainOutcome", "DEFAULT_MODELS",
-           "ModelFilesError", "model_files"]
+           "ModelFilesError", "model_files", "shipped_models", "holds_shipped_models", "counted"]
 
 DEFAULT_MODELS = Path(__file__).resolve().parents[1] / "models"  # the shipped defaults, one folder per task
 _MANIFEST = "model.json"  # what a model folder is: task, files, input size, codec version
@@ -72,9 +75,10 @@ def _logged_metrics(result) -> dict[str, float]:
 
 
 def register_result(registry: Registry, result, *, code_version: str = "unknown", promote: bool | None = None,
-                    datasets: list[dict] | None = None, extra_blobs: dict | None = None):
+                    force: bool = False, datasets: list[dict] | None = None, extra_blobs: dict | None = None):
     """Register `result` as a new version of its task's model (see the module docstring); `promote` None promotes
-    it when the model has no champion yet. Returns the ModelVersion."""
+    it when the model has no champion yet and it is not worse than its baseline (`registry.below_baseline`), or
+    `force`. Returns the ModelVersion."""
     from .training import dataset_digests  # torch's training loop: the predictor (ONNX Runtime) loads without it
 
     task = result.network.task
@@ -95,9 +99,37 @@ def register_result(registry: Registry, result, *, code_version: str = "unknown"
                                     tags={"task": task.name, "code_version": code_version,
                                           "primary_metric": result.network.primary},
                                     json_blobs=blobs)
-    if promote or (promote is None and registry.champion(task.model_name) is None):
+    if promote or (promote is None and registry.champion(task.model_name) is None
+                   and (force or below_baseline(version) is None)):
         version = registry.promote(task.model_name, version.version)
     return version
+
+
+# ---------------------------------------------------------------------------------------------- shipped
+def holds_shipped_models(folder: str | Path) -> bool:
+    """Whether `folder` is a folder of model folders (each with model.json), as `models/` is."""
+    folder = Path(folder)
+    return folder.is_dir() and any((child / _MANIFEST).is_file() for child in folder.iterdir())
+
+
+def shipped_models(folder: str | Path = DEFAULT_MODELS) -> list[ModelVersion]:
+    """The model folders in `folder` (default: the shipped `models/`) as registry versions, sorted by name: alias
+    `shipped`, version 0, the held-out metrics of their metrics_report.json beside the baseline's (`X_baseline`),
+    the settings as params. Only reads."""
+    found = []
+    for manifest_path in sorted(Path(folder).glob(f"*/{_MANIFEST}")):
+        manifest = json.loads(manifest_path.read_text())
+        report_path = manifest_path.parent / "metrics_report.json"
+        report = json.loads(report_path.read_text()) if report_path.exists() else {}
+        metrics = {k: float(v) for k, v in report.get("test", {}).items() if v is not None and np.isfinite(v)}
+        metrics.update({f"{k}{BASELINE_SUFFIX}": float(v) for k, v in report.get("baseline", {}).items()
+                        if v is not None and np.isfinite(v)})
+        found.append(ModelVersion(
+            name=get_task(manifest["task"]).model_name, version=0, aliases=(SHIPPED,), run_id="",
+            metrics=metrics, params={k: str(v) for k, v in manifest.get("settings", {}).items()},
+            tags={"task": manifest["task"]}, source=str(manifest_path.parent),
+            created=datetime.fromtimestamp(manifest_path.stat().st_mtime, timezone.utc)))
+    return found
 
 
 # ---------------------------------------------------------------------------------------------- predictor
@@ -272,7 +304,13 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
         test = TaskDataset(result.data, result.split, "test")
         champion_metrics = _score_folder(champion_folder, spec.name, evaluation_batches(test, codec))
     network = result.network
-    if champion_metrics is None:
+    primary, baseline = network.primary, result.baseline_metrics
+    if champion_metrics is None and primary in baseline and network.better(baseline, result.test_metrics):
+        promoted = False
+        reason = (f"the registry has no {name} champion yet, but the challenger's {primary} "
+                  f"{result.test_metrics[primary]:.4g} is worse than its baseline's {baseline[primary]:.4g} "
+                  f"({'higher' if network.higher_is_better else 'lower'} is better): registered, not made champion")
+    elif champion_metrics is None:
         promoted, reason = True, f"the registry has no {name} champion yet: the first version becomes champion"
     elif network.better(result.test_metrics, champion_metrics):
         promoted = True
@@ -308,18 +346,25 @@ def _write_report(folder: Path, report: dict) -> None:
     challenger = report["challenger"]["test"]
     champion = (report["champion"] or {}).get("test", {})
     baseline = report["challenger"]["baseline"]
-    lines = [f"# Retraining {report['task']}: {'promoted' if report['promoted'] else 'champion kept'}", "",
-             report["reason"] + ".", "",
-             f"Challenger: version {report.get('challenger_version')}, {report['challenger']['epochs']} epochs, "
-             f"{report['challenger']['steps']} steps, warm start {report['warm_start'] or 'none'}; "
-             f"data: {report['data']['trees']['train']} training trees, {report['data']['trees']['test']} held out, "
-             f"{report['data']['rejected']} rejected by reviewers.", "",
+    decision = "promoted" if report["promoted"] else \
+        "champion kept" if report["champion_version"] is not None else "not made champion"
+    lines = [f"# Retraining {report['task']}: {decision}", "", report["reason"] + ".", "",
+             f"Challenger: version {report.get('challenger_version')}, "
+             f"{counted(report['challenger']['epochs'], 'epoch')}, {counted(report['challenger']['steps'], 'step')}, "
+             f"warm start {report['warm_start'] or 'none'}; "
+             f"data: {counted(report['data']['trees']['train'], 'training tree')}, "
+             f"{report['data']['trees']['test']} held out, {report['data']['rejected']} rejected by reviewers.", "",
              "| metric | challenger | champion | baseline |", "|---|---|---|---|"]
     for key in sorted(challenger):
         marker = " (decides)" if key == primary else ""
         lines.append(f"| {key}{marker} | {_cell(challenger, key)} | {_cell(champion, key)} | "
                      f"{_cell(baseline, key)} |")
     (folder / "retrain-report.md").write_text("\n".join(lines) + "\n")
+
+
+def counted(number: int, noun: str) -> str:
+    """'1 epoch', '2 epochs': a count with its noun in the number it takes."""
+    return f"{number} {noun}{'' if number == 1 else 's'}"
 
 
 def _cell(values: dict, key: str) -> str:

@@ -148,7 +148,7 @@ class SketchNetwork(TaskNetwork):
     """TreeSketchNet: a sketch (1 channel) to the codec's parameter heads and the species."""
 
     def __init__(self, task: Task, settings: TrainSettings, codec: ParameterCodec):
-        super().__init__(task, settings, primary="score_overall", higher_is_better=True,
+        super().__init__(task, settings, primary=task.primary_metric, higher_is_better=task.higher_is_better,
                          curve_metrics=("score_overall", "accuracy_species", "accuracy_categorical"))
         self.codec = codec
 
@@ -217,7 +217,7 @@ class Pix2PixNetwork(TaskNetwork):
     """A pix2pix U-Net with its discriminator: sketch to depth maps (silhouette: front, gap, mask; trunk)."""
 
     def __init__(self, task: Task, settings: TrainSettings):
-        super().__init__(task, settings, primary="depth_error", higher_is_better=False,
+        super().__init__(task, settings, primary=task.primary_metric, higher_is_better=task.higher_is_better,
                          curve_metrics=("depth_error",))
 
     def build(self) -> "Pix2PixNetwork":

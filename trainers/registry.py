@@ -8,7 +8,7 @@ the alias name `latest` and resolves `models:/NAME/latest` to the newest version
 stored: it is read as the highest version number, which is the last one `register` completed.
 
 Metrics beside baselines: a metric named `X_baseline` is the trivial baseline's value of the metric `X` on the
-same held-out split (mean parameters, mean depth); the tables show it in brackets after `X`.
+same held-out split (mean parameters, mean depth); the tables (`trainers.model_tables`) show it in brackets after `X`.
 """
 from __future__ import annotations
 
@@ -29,11 +29,12 @@ from typing import Iterator, Mapping
 
 from species.errors import TreefarmError
 
-__all__ = ["RegistryError", "ModelVersion", "Registry", "open_registry", "check_registry_exists", "format_models_table",
-           "format_model_versions", "DEFAULT_FOLDER", "CHAMPION", "LATEST", "ARTIFACT_FOLDER", "BASELINE_SUFFIX"]
+__all__ = ["RegistryError", "ModelVersion", "Registry", "open_registry", "check_registry_exists", "DEFAULT_FOLDER",
+           "CHAMPION", "SHIPPED", "LATEST", "ARTIFACT_FOLDER", "BASELINE_SUFFIX", "DATABASE_FILE"]
 
 DEFAULT_FOLDER = "registry"
 CHAMPION = "champion"
+SHIPPED = "shipped"  # the alias of a shipped default model (`trainers.models.shipped_models`), never stored
 LATEST = "latest"
 ARTIFACT_FOLDER = "model"
 BASELINE_SUFFIX = "_baseline"
@@ -119,18 +120,24 @@ def _is_uri(text: str) -> bool:
     return "://" in text or bool(_URI_SCHEME.match(text))
 
 
-def _store_locations(models: str | Path | None) -> tuple[str, str, str | None]:
-    """(label, store URI, artifact root URI or None) for a folder or a URI; a folder is made if it is missing."""
+def _store_locations(models: str | Path | None, create: bool) -> tuple[str, str, str | None]:
+    """(label, store URI, artifact root URI or None) for a folder or a URI; a folder is made if it is missing
+    when `create`, else a store file that is missing is a RegistryError (MLflow would create it on opening)."""
     if models is not None and not isinstance(models, Path) and _is_uri(str(models)):
         uri = str(models)
         if uri.startswith("sqlite:///") and len(uri) > len("sqlite:///"):
             database = Path(uri[len("sqlite:///"):]).expanduser().absolute()
+            if not create and not database.is_file():
+                raise RegistryError(f"no model registry at {uri}: {database} does not exist")
             return uri, uri, (database.parent / ARTIFACTS_SUBFOLDER).as_uri()
         return uri, uri, None
     label = str(DEFAULT_FOLDER if models is None else models)
     folder = Path(label).expanduser().absolute()
     if folder.exists() and not folder.is_dir():
         raise RegistryError(f"cannot open the model registry {label}: it is a file, not a folder")
+    if not create:
+        check_registry_exists(label)
+        return label, f"sqlite:///{folder / DATABASE_FILE}", (folder / ARTIFACTS_SUBFOLDER).as_uri()
     try:
         (folder / ARTIFACTS_SUBFOLDER).mkdir(parents=True, exist_ok=True)
         probe = folder / f".write-test-{os.getpid()}"
@@ -144,17 +151,18 @@ def _store_locations(models: str | Path | None) -> tuple[str, str, str | None]:
 def check_registry_exists(models: str | Path) -> None:
     """RegistryError unless `models` is a URI or a folder that already holds an embedded store: opening one
     creates it, and a command that only reads models must not leave an empty registry behind."""
-    if "://" not in str(models) and not (Path(models) / "mlflow.sqlite").exists():
+    if "://" not in str(models) and not (Path(models) / DATABASE_FILE).exists():
         raise RegistryError(f"--models {models} holds no model registry (no mlflow.sqlite): train one with "
                             "`farm train TASK --data DIR --models DIR`, or leave --models out for the shipped models")
 
 
-def open_registry(models: str | Path | None = None) -> "Registry":
+def open_registry(models: str | Path | None = None, *, create: bool = True) -> "Registry":
     """The registry at `models`: None for the folder `registry/` (relative to the working folder), a folder for an
     embedded SQLite store `DIR/mlflow.sqlite` with artifacts in `DIR/artifacts`, or an MLflow tracking URI
     (`http://`, `https://`, `sqlite:///`, `postgresql://`, ...). It is opened and read once here, so a store that
-    cannot be used fails now, as one `RegistryError` naming `models`."""
-    label, uri, artifact_root = _store_locations(models)
+    cannot be used fails now, as one `RegistryError` naming `models`. `create` False (reading only): an embedded
+    store that does not exist is a RegistryError, and nothing is created or written."""
+    label, uri, artifact_root = _store_locations(models, create)
     mlflow = _mlflow()
     try:
         with _quiet():
@@ -447,72 +455,3 @@ class Registry:
                     step()
             except Exception as cleanup:  # noqa: BLE001 - the first error is the one to raise; this one goes beside
                 exc.add_note(f"while undoing the failed registration: {type(cleanup).__name__}: {_reason(cleanup)}")
-
-
-# ---------------------------------------------------------------------------------------------------- tables
-def _number(value: float) -> str:
-    return f"{value:.4g}"
-
-
-def _metric_cells(metrics: Mapping[str, float]) -> dict[str, str]:
-    """{metric: 'value (baseline b)'}: each `X_baseline` goes in brackets after `X` (alone if `X` is absent)."""
-    cells = {}
-    for key in sorted(metrics):
-        base = metrics.get(f"{key}{BASELINE_SUFFIX}")
-        if key.endswith(BASELINE_SUFFIX) and key[:-len(BASELINE_SUFFIX)] in metrics:
-            continue
-        cells[key] = _number(metrics[key]) + ("" if base is None else f" ({_number(base)})")
-    return cells
-
-
-def _align(headers: list[str], rows: list[list[str]], right: set[int] = frozenset()) -> str:
-    """Columns padded to their widest cell, those in `right` right-aligned, with a rule under the headers."""
-    table = [headers] + rows
-    widths = [max(len(row[i]) for row in table) for i in range(len(headers))]
-
-    def line(row: list[str]) -> str:
-        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(row, widths)))
-
-    return "\n".join(line(row).rstrip() for row in [headers, ["-" * w for w in widths]] + rows)
-
-
-def format_models_table(registry: Registry) -> str:
-    """`farm models list`: per model its number of versions, the latest and champion versions, and the metrics of
-    the champion (of the latest where there is no champion) with baselines in brackets."""
-    names = registry.names()
-    if not names:
-        return f"no models in the model registry {registry.label}"
-    rows = []
-    for name in names:
-        versions = registry.versions(name)
-        latest = versions[-1] if versions else None
-        champion = next((v for v in versions if v.is_champion), None)
-        shown = champion or latest
-        metrics = "" if shown is None else ", ".join(f"{k} {v}" for k, v in _metric_cells(shown.metrics).items())
-        rows.append([name, str(len(versions)), f"v{latest.version}" if latest else "-",
-                     f"v{champion.version}" if champion else "-",
-                     metrics if champion or not metrics else f"(latest) {metrics}"])
-    table = _align(["model", "versions", "latest", "champion", "metrics (baseline)"], rows, right={1, 2, 3})
-    return f"model registry {registry.label}\n\n{table}"
-
-
-def format_model_versions(registry: Registry, name: str) -> str:
-    """`farm models show NAME`: its versions newest first with aliases, creation time and run, then each metric
-    per version with its baseline in brackets; the champion's column is marked."""
-    versions = registry.versions(name)[::-1]
-    if not versions:
-        return f"model {name!r} in the model registry {registry.label} has no versions"
-    champion = next((v.version for v in versions if v.is_champion), None)
-    head = (f"model {name} in the model registry {registry.label}: {len(versions)} version(s), latest "
-            f"v{versions[0].version}, champion {'-' if champion is None else f'v{champion}'}")
-    listing = _align(["version", "aliases", "created (UTC)", "run"],
-                     [[f"v{v.version}", ", ".join(v.aliases) or "-", v.created.strftime("%Y-%m-%d %H:%M:%S"),
-                       v.run_id] for v in versions], right={0})
-    cells = [_metric_cells(v.metrics) for v in versions]
-    keys = sorted({k for c in cells for k in c})
-    if not keys:
-        return f"{head}\n\n{listing}\n\nno metrics logged"
-    columns = [f"v{v.version}" + (" champion" if v.is_champion else "") for v in versions]
-    metrics = _align(["metric (baseline)"] + columns, [[k] + [c.get(k, "-") for c in cells] for k in keys],
-                     right=set(range(1, len(columns) + 1)))
-    return f"{head}\n\n{listing}\n\n{metrics}"

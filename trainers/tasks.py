@@ -16,13 +16,15 @@ from farm.dataset import DatasetError, read_manifest
 from farm.dataset.storage import Location
 from species.errors import TreefarmError
 
-__all__ = ["Task", "TASKS", "NETWORKS", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task",
+__all__ = ["Task", "TASKS", "NETWORKS", "JUDGED_BY", "SPECS_DIR", "TrainingDataError", "MissingOutputError", "get_task",
            "print_data_spec"]
 
 SPECS_DIR = Path(__file__).resolve().parent / "specs"
-# The network families `trainers.networks.network_for` builds: TreeSketchNet (a sketch to a parameter dictionary
-# and its species) and pix2pix (a sketch to depth maps).
-NETWORKS = ("sketchnet", "pix2pix")
+# The network families `trainers.networks.network_for` builds, with the held-out metric that judges a model of the
+# family and whether higher is better: TreeSketchNet (a sketch to a parameter dictionary and its species) and
+# pix2pix (a sketch to depth maps). The registry's tables read it without building a network.
+JUDGED_BY = {"sketchnet": ("score_overall", True), "pix2pix": ("depth_error", False)}
+NETWORKS = tuple(JUDGED_BY)
 
 
 class TrainingDataError(TreefarmError):
@@ -48,6 +50,9 @@ class Task:
     model_name   : the model's name in the registry.
     network      : the network family that learns it, one of `NETWORKS`.
     rigs         : view rigs (`render.rig` without ":jitter") the data must come from; empty: any rig.
+    min_trees    : the fewest trees of the shipped spec (`trees` changed, nothing else) from which the split by tree
+                   hash puts a tree in each of train, validation and test, for that count and every larger one
+                   up to the spec's own (`tests/trainers/test_tasks.py` recomputes it; docs/training.md).
     recipe       : the training settings (`trainers.networks.TrainSettings` keys) of the shipped default model in
                    `models/NAME/`: `make models` and bench_train's budgeted run train with them.
     pix2pix only, about the target (`targets[0]`):
@@ -68,6 +73,7 @@ class Task:
     model_name: str
     network: str
     rigs: tuple[str, ...] = ()
+    min_trees: int = 3
     recipe: Mapping[str, Any] = field(default_factory=dict, hash=False)
     channel_names: tuple[str, ...] = ()
     depth_channels: tuple[int, ...] = ()
@@ -86,6 +92,15 @@ class Task:
     def out_channels(self) -> int:
         """Channels of a pix2pix task's target (0 for sketchnet, whose targets are the trees table's)."""
         return len(self.channel_names)
+
+    @property
+    def primary_metric(self) -> str:
+        """The held-out metric that judges a model of this task (its network family's)."""
+        return JUDGED_BY[self.network][0]
+
+    @property
+    def higher_is_better(self) -> bool:
+        return JUDGED_BY[self.network][1]
 
     @property
     def spec_path(self) -> Path:
@@ -142,7 +157,7 @@ TASKS: dict[str, Task] = {
     # TreeSketchNet (digest 4.2-4.3): a sketch to a Weber-Penn dictionary and its species, 224 px.
     "sketchnet": Task("sketchnet", inputs=("sketch_tsn",), styles=("sketch_hand",), targets=(),
                       input_kind="sketch", input_size=224, spec_name="sketchnet", model_name="sketchnet",
-                      network="sketchnet",
+                      network="sketchnet", min_trees=49,
                       recipe={"width": 0.5, "depth": 0.5, "epochs": 4, "schedule": "cosine"}),
     # Seed 000's cGANs (digest 1.8-1.9): orthographic pairs at 256 px.
     # Edge sketch -> the renderers' "silhouette_envelope": the closed crown's smooth front depth01 (1 background),
@@ -151,14 +166,14 @@ TASKS: dict[str, Task] = {
     "pix2pix-silhouette": Task("pix2pix-silhouette", inputs=("sketch_edges",), styles=(),
                                targets=("silhouette_envelope",), input_kind="sketch", input_size=256,
                                spec_name="pix2pix-silhouette", model_name="pix2pix-silhouette", network="pix2pix",
-                               rigs=("two-view",),
+                               rigs=("two-view",), min_trees=35,
                                recipe={"width": 8, "batch_size": 4, "epochs": 5, "schedule": "cosine"},
                                channel_names=("front", "gap", "mask"), depth_channels=(0, 1), dense_channels=(2,),
                                mask_channel=2),
     # Colour strokes -> trunk depth01 (1 = no stroke); foreground = under a stroke.
     "pix2pix-trunk": Task("pix2pix-trunk", inputs=("trunk_strokes",), styles=(), targets=("trunk_depth",),
                           input_kind="strokes", input_size=256, spec_name="pix2pix-trunk",
-                          model_name="pix2pix-trunk", network="pix2pix", rigs=("two-view",),
+                          model_name="pix2pix-trunk", network="pix2pix", rigs=("two-view",), min_trees=63,
                           recipe={"width": 16, "batch_size": 16, "epochs": 1, "schedule": "cosine"},
                           channel_names=("depth",), depth_channels=(0,)),
 }

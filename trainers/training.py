@@ -41,7 +41,8 @@ from .networks import SettingsError, TaskNetwork, TrainSettings, network_for, sc
 from .sketchnet_codec import ParameterCodec
 from .tasks import Task, get_task
 
-__all__ = ["train", "TrainResult", "TrainingError", "dataset_digests", "evaluation_batches", "RUN_FILES"]
+__all__ = ["train", "checked_split", "TrainResult", "TrainingError", "dataset_digests", "evaluation_batches",
+           "RUN_FILES"]
 
 RUN_FILES = {"metrics": "metrics.csv", "curves": "curves.png", "split": "split.json", "codec": "codec.json",
              "settings": "settings.json"}
@@ -264,6 +265,23 @@ def _check_run_folder(run_dir: Path, task: str, settings: TrainSettings, split: 
     return rows[-1]["epoch"] if rows else None
 
 
+def checked_split(task: str | Task, training_data: TrainingData, frozen_split: Split | None = None) -> Split:
+    """The split of `training_data` (by tree hash, or `frozen_split` reapplied) when each of its parts holds a tree;
+    otherwise a TrainingError with the trees in each part and the task's `min_trees`. Cheap (hashes of tree ids),
+    so `farm train` calls it before Ray starts."""
+    task_spec = get_task(task)
+    split = training_data.split(frozen=frozen_split)
+    counts = {part: len(split.parts[part]) for part in ("train", "val", "test")}
+    if all(counts.values()):
+        return split
+    trees = len(training_data.keys)
+    raise TrainingError(
+        f"{', '.join(map(str, training_data.paths))}: the split by tree puts {counts['train']} of the "
+        f"{trees} usable tree{'' if trees == 1 else 's'} in train, {counts['val']} in validation and "
+        f"{counts['test']} in test, and every part needs one: generate more trees (from {task_spec.min_trees} "
+        f"trees the shipped spec {task_spec.spec_path.name} fills every part; docs/training.md)")
+
+
 def train(task: str | Task, data: str | Sequence[str], *, settings: TrainSettings | None = None,
           run_dir: str | Path, workers: int = 1, gpus: int = 0, frozen_split: Split | None = None,
           warm_start: str | Path | None = None, codec: ParameterCodec | None = None, progress: bool = False,
@@ -285,17 +303,10 @@ def train(task: str | Task, data: str | Sequence[str], *, settings: TrainSetting
         raise SettingsError(f"workers = {workers}, gpus = {gpus} is invalid: allowed workers >= 1, gpus >= 0")
     started = time.perf_counter()
     training_data = open_data(task_spec, data)
-    split = training_data.split(frozen=frozen_split)
-    if not split.parts["train"]:
-        raise TrainingError(f"no training trees in {', '.join(map(str, training_data.paths))}: the dataset holds "
-                            f"{len(training_data.keys)} usable trees, none in the training part; generate more "
-                            f"trees ({task_spec.spec_path})")
+    split = checked_split(task_spec, training_data, frozen_split)
     train_set = TaskDataset(training_data, split, "train", augment=True, seed=settings.seed)
     val_set = TaskDataset(training_data, split, "val")
     test_set = TaskDataset(training_data, split, "test")
-    if len(val_set) == 0 or len(test_set) == 0:
-        raise TrainingError(f"the split leaves {len(val_set)} validation and {len(test_set)} test views: give "
-                            f"more trees (at least about 20) so every part has some")
     if task_spec.network == "sketchnet" and codec is None:
         trees = {key: training_data.params_of(key) for key in split.parts["train"]}
         codec = ParameterCodec.fit(list(trees.values()))

@@ -1,6 +1,6 @@
 """`farm train`, `farm retrain` and `farm models`: the networks trained on the farm's datasets, and their registry.
 
-  farm train TASK --data DIR [DIR...] [--models URI] [--epochs N] [--workers N] [--gpus N] [--address ADDR]
+  farm train TASK --data DIR [DIR...] [--models URI] [--epochs N] [--workers N] [--gpus N] [--address ADDR] [--force]
   farm train TASK --print-data-spec        the job spec that makes TASK's training data (for `farm generate`)
   farm retrain TASK --data DIR [DIR...] [--models URI] [--report DIR]
   farm models list|show NAME [--models URI]
@@ -9,8 +9,10 @@ TASK is a task of trainers.tasks.TASKS. --data takes dataset folders, or folders
 subfolders are datasets (so a retrain picks up the folders added since). --models is the model registry: a folder
 (default `registry/`, an embedded MLflow SQLite store) or an MLflow tracking URI. A training run lives in
 --run-dir (default `runs/TASK-<digest of data and settings>`): the same command after a crash resumes from its
-last checkpoint. The first version of a model becomes its champion; `farm retrain` promotes a challenger only if
-it beats the champion on the champion's frozen held-out split, and writes retrain-report.md and .json.
+last checkpoint. The first version of a model becomes its champion unless it scores worse than its baseline
+(then a warning says so; --force makes it champion); `farm retrain` promotes a challenger only if it beats the
+champion on the champion's frozen held-out split, and writes retrain-report.md and .json. `farm models` only
+reads: without --models it lists registry/ (if there is one) and the shipped default models in models/.
 """
 from __future__ import annotations
 
@@ -43,6 +45,8 @@ def register(subparsers) -> None:
     _task_arguments(train)
     train.add_argument("--print-data-spec", action="store_true",
                        help="print the job spec that makes this task's training data and exit")
+    train.add_argument("--force", action="store_true",
+                       help="make a first version champion even when it scores worse than its baseline")
     train.set_defaults(run=run_train)
 
     retrain = subparsers.add_parser("retrain", help="train a challenger; promote it only if it beats the champion",
@@ -138,33 +142,42 @@ def run_train(args: argparse.Namespace) -> int:
     from trainers.data import open_data
     from trainers.models import register_result
     from trainers.registry import open_registry
-    from trainers.training import train
+    from trainers.training import checked_split, train
 
     settings = _settings(args)
-    # Before Ray starts: a registry that cannot be opened or data that cannot train this task fail at once.
+    # Before Ray starts: a registry that cannot be opened or data that cannot train this task (too few trees to
+    # put one in each part of the split) fail at once.
+    checked_split(args.task, open_data(args.task, folders))
     registry = open_registry(args.models)
-    open_data(args.task, folders)
     run_dir = _run_dir(args, folders, settings, "train")
     with ray_connection(args.address, args.workers, log_to_driver=False):
         result = train(args.task, folders, settings=settings, run_dir=run_dir, workers=args.workers,
                        gpus=args.gpus, progress=not args.quiet)
-    version = register_result(registry, result, code_version=code_version())
+    version = register_result(registry, result, code_version=code_version(), force=args.force)
     _print_result(args.task, result, version, registry)
     return 0
 
 
 def _print_result(task: str, result, version, registry) -> None:
+    from trainers.model_tables import below_baseline
+    from trainers.models import counted
+
     network = result.network
     rows = [[key, f"{result.test_metrics[key]:.4g}", f"{result.baseline_metrics.get(key, float('nan')):.4g}"]
             for key in sorted(result.test_metrics)]
     resumed = "" if result.resumed_from_epoch is None else f", resumed after epoch {result.resumed_from_epoch}"
-    print(f"{task}: {result.epochs} epochs, {result.steps} steps in {result.seconds:.0f} s{resumed}; "
-          f"{result.summary['trees']['train']} training trees ({result.summary['rejected']} rejected by "
-          f"reviewers); run folder {result.run_dir}")
+    print(f"{task}: {counted(result.epochs, 'epoch')}, {counted(result.steps, 'step')} in {result.seconds:.0f} s"
+          f"{resumed}; {counted(result.summary['trees']['train'], 'training tree')} "
+          f"({result.summary['rejected']} rejected by reviewers); run folder {result.run_dir}")
     print(format_table(["held-out metric", "model", "mean baseline"], rows))
     aliases = ", ".join(version.aliases) or "no alias"
     print(f"registered {version.name} v{version.version} ({aliases}) in {registry.label}; decided by "
           f"{network.primary} ({'higher' if network.higher_is_better else 'lower'} is better)")
+    worse = below_baseline(version)
+    if worse:
+        first = version.version == 1 and not version.is_champion
+        print(f"warning: {worse}" + (f"; not made champion (a first version must beat its baseline): train "
+                                     f"longer or on more data, or pass --force" if first else ""), file=sys.stderr)
 
 
 def run_retrain(args: argparse.Namespace) -> int:
@@ -176,13 +189,16 @@ def run_retrain(args: argparse.Namespace) -> int:
     from trainers.models import retrain
     from trainers.networks import TrainSettings
     from trainers.registry import open_registry
+    from trainers.training import checked_split
 
+    training_data = open_data(args.task, folders)
     registry = open_registry(args.models)
-    open_data(args.task, folders)
     settings = None
     if any(getattr(args, key) is not None for key in ("epochs", "batch_size", "width", "time_budget")):
         settings = _settings(args, TrainSettings().to_dict())
     champion = registry.champion(args.task)
+    if champion is None:  # a first version splits the data itself (a challenger reapplies the champion's split)
+        checked_split(args.task, training_data)
     kind = f"retrain-v{champion.version}" if champion is not None else "retrain-new"
     run_dir = _run_dir(args, folders, settings or TrainSettings(seed=args.seed), kind)
     with ray_connection(args.address, args.workers, log_to_driver=False):
@@ -190,20 +206,43 @@ def run_retrain(args: argparse.Namespace) -> int:
                           gpus=args.gpus, code_version=code_version(), progress=not args.quiet,
                           report_dir=args.report)
     report = Path(args.report) if args.report else run_dir
+    kept = "champion kept" if outcome.champion_version is not None else "not made champion"
     print(f"{args.task}: challenger v{outcome.challenger_version} "
-          f"{'promoted to champion' if outcome.promoted else 'registered, champion kept'}: {outcome.reason}")
+          f"{'promoted to champion' if outcome.promoted else f'registered, {kept}'}: {outcome.reason}")
     print(f"report: {report / 'retrain-report.md'}")
     return 0
 
 
 def run_models(args: argparse.Namespace) -> int:
-    from trainers.registry import format_model_versions, format_models_table, open_registry
+    """List or show models, reading only: a registry folder that does not hold one is never created."""
+    from trainers.model_tables import format_model_versions, format_models_table, format_shipped_model
+    from trainers.models import DEFAULT_MODELS, holds_shipped_models, shipped_models
+    from trainers.registry import DATABASE_FILE, DEFAULT_FOLDER, open_registry
 
-    registry = open_registry(args.models)
-    if args.action == "list":
-        print(format_models_table(registry))
-        return 0
-    if not args.name:
+    if args.action == "show" and not args.name:
         raise CommandLineError("farm models show needs a model name: farm models show NAME (see farm models list)")
-    print(format_model_versions(registry, args.name))
+    shipped_folder = DEFAULT_MODELS if args.models is None else Path(args.models)
+    shipped = []
+    if args.models is None or holds_shipped_models(args.models):
+        shipped = shipped_models(shipped_folder)
+    registry = None
+    if args.models is not None and not shipped:
+        registry = open_registry(args.models, create=False)  # one line, exit 2, when there is none
+    elif args.models is None and (Path(DEFAULT_FOLDER) / DATABASE_FILE).exists():
+        registry = open_registry(None, create=False)
+    if args.action == "list":
+        print(format_models_table(registry, shipped, shipped_from=str(shipped_folder)))
+        if registry is None and args.models is None:
+            print(f"(no model registry in {DEFAULT_FOLDER}/ here: `farm train` makes one)")
+        return 0
+    if registry is not None and args.name in registry.names():
+        print(format_model_versions(registry, args.name))
+        return 0
+    found = next((v for v in shipped if v.name == args.name), None)
+    if found is None:
+        if registry is not None:
+            registry.versions(args.name)  # raises a RegistryError naming the models the registry holds
+        known = ", ".join(v.name for v in shipped) or "none"
+        raise CommandLineError(f"no model {args.name!r} in {shipped_folder}: it ships {known}")
+    print(format_shipped_model(found, str(shipped_folder)))
     return 0

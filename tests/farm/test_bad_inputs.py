@@ -69,6 +69,9 @@ BAD_INPUTS = [
     # {readonly} is a folder no one may write in
     (["generate", "--out", "{readonly}", "--trees", "2", "--quiet"], "cannot write {readonly}/_job.json: "),
     (["library", "--out", "{readonly}", "--quiet"], "cannot write {readonly}/library.json: "),
+    # listing models only reads: a folder that holds no registry is not made one
+    (["models", "list", "--models", "{tmp}/in"], "holds no model registry"),
+    (["models", "show", "sketchnet", "--models", "{tmp}/registry"], "holds no model registry"),
 ]
 # What a line must not show of another library's wording: pyarrow's detail and our temporary file names.
 FOREIGN_WORDING = ("Detail: [errno", ".tmp-")

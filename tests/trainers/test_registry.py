@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from trainers.registry import (ARTIFACT_FOLDER, CHAMPION, DATABASE_FILE, LATEST, ModelVersion, RegistryError,
-                               format_model_versions, format_models_table, open_registry)
+from trainers.model_tables import format_model_versions, format_models_table
+from trainers.registry import ARTIFACT_FOLDER, CHAMPION, DATABASE_FILE, LATEST, ModelVersion, RegistryError, open_registry
 
 ROOT = Path(__file__).resolve().parents[2]
 

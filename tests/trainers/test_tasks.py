@@ -13,7 +13,10 @@ import torch
 from benchmarks import bench_train
 from farm.cli import build_parser
 from farm.cli import main as farm_main
+from farm.jobs import load_spec
+from farm.tree_chain import tree_id
 from trainers import models as trained_models
+from trainers.data import Split
 from trainers.registry import open_registry
 from trainers.tasks import TASKS, Task, TrainingDataError, get_task
 
@@ -67,10 +70,10 @@ def test_farm_train_trains_it_registers_its_model_and_farm_models_lists_it(throw
     registry = tmp_path / "registry"
     code = farm_main(["train", throwaway.name, "--data", str(training_datasets["pix2pix-trunk"]), "--epochs", "1",
                       "--width", "4", "--batch-size", "8", "--models", str(registry), "--quiet",
-                      "--run-dir", str(tmp_path / "run")])
+                      "--run-dir", str(tmp_path / "run"), "--force"])  # champion even below the baseline
     out = capsys.readouterr().out
     assert code == 0
-    assert out.startswith("throwaway-depth: 1 epochs") and "depth_error" in out
+    assert out.startswith("throwaway-depth: 1 epoch, ") and "depth_error" in out
     assert "registered throwaway-depth-model v1 (champion, latest)" in out
     assert json.loads((tmp_path / "run" / "settings.json").read_text())["task"] == throwaway.name
 
@@ -98,3 +101,19 @@ def test_bench_train_lists_it_and_trains_it_on_its_recipe(throwaway, training_da
     [report] = json.loads((tmp_path / "work" / "bench_train.json").read_text())
     assert report["task"] == throwaway.name and report["epochs"] == throwaway.recipe["epochs"]
     assert np.isfinite(report["test"]["depth_error"])
+
+
+@pytest.mark.parametrize("task", list(TASKS))
+def test_min_trees_is_where_the_shipped_spec_first_fills_every_part_of_the_split(task):
+    """`Task.min_trees` is right: the shipped spec with that many trees, and with each larger count (checked to a
+    few hundred trees), puts a tree in train, validation and test; with one tree fewer it does not."""
+    shipped = load_spec(TASKS[task].spec_path)
+
+    def fills_every_part(trees: int) -> bool:
+        spec = shipped.with_trees(trees)
+        split = Split.by_hash([(spec.digest(), tree_id(spec.name, i)) for i in range(trees)])
+        return all(split.parts[part] for part in ("train", "val", "test"))
+
+    least = TASKS[task].min_trees
+    assert not fills_every_part(least - 1)
+    assert all(fills_every_part(n) for n in range(least, least + 200))

@@ -14,10 +14,12 @@ import numpy as np
 import pytest
 import torch
 
+from farm import pipeline
 from farm.cli import main as farm_main
 from trainers import models as trained_models
 from trainers.curves import read_metrics_csv
 from trainers.networks import SettingsError, TrainSettings, schedule_factor
+from trainers.model_tables import below_baseline
 from trainers.registry import RegistryError, open_registry
 from trainers.tasks import TASKS
 from trainers.training import TrainingError, train
@@ -42,10 +44,13 @@ def test_farm_train_trains_registers_and_lists(training_datasets, tmp_path, caps
     registry = tmp_path / "registry"
     code = farm_main(["train", "pix2pix-trunk", "--data", str(training_datasets["pix2pix-trunk"]), "--epochs", "1",
                       "--width", "4", "--batch-size", "8", "--models", str(registry), "--quiet",
-                      "--run-dir", str(tmp_path / "run")])
+                      "--run-dir", str(tmp_path / "run"), "--force"])
     run = capsys.readouterr()
     assert code == 0, run.err[-3000:]
+    # --force: champion even if one tiny epoch scores worse than the baseline, which a warning line then says
     assert "registered pix2pix-trunk v1 (champion, latest)" in run.out
+    if below_baseline(open_registry(registry).version("pix2pix-trunk", 1)):
+        assert "warning: pix2pix-trunk v1 is worse than its baseline: depth_error" in run.err
     assert "depth_error" in run.out
     rows = read_metrics_csv(tmp_path / "run" / "metrics.csv")
     assert [r["epoch"] for r in rows] == [0] and all(np.isfinite(r["val_depth_error"]) for r in rows)
@@ -94,7 +99,9 @@ def test_print_data_spec_is_the_shipped_spec():
     (["train", "pix2pix-trunk"], "--data"),
     (["train", "pix2pix-trunk", "--data", "{trunk}", "--models", "{file}/registry"], "registry"),
     (["train", "pix2pix-trunk", "--data", "{trunk}", "--epochs", "0"], "epochs"),
-    (["models", "show", "nope", "--models", "{registry}"], "nope"),
+    (["models", "show", "nope", "--models", "{registry}"], "holds no model registry"),
+    (["models", "list", "--models", "{empty}"], "holds no model registry"),
+    (["train", "sketchnet", "--data", "{sketchnet}"], "0 in validation and 0 in test"),
 ])
 def test_bad_input_is_one_line_and_exit_2(training_datasets, tmp_path, args, fragment, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
@@ -113,6 +120,22 @@ def test_bad_input_is_one_line_and_exit_2(training_datasets, tmp_path, args, fra
     assert code == 2, stderr[-2000:]
     assert len(lines) == 1 and lines[0].startswith("farm: error:") and fragment in lines[0], stderr
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+def test_too_few_trees_are_refused_before_ray_starts_with_the_trees_of_each_part(training_datasets, tmp_path,
+                                                                                 capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+
+    def no_ray(*args, **kwargs):
+        raise AssertionError("Ray was started for data too small to train on")
+
+    monkeypatch.setattr(pipeline, "ray_connection", no_ray)
+    assert farm_main(["train", "sketchnet", "--data", str(training_datasets["sketchnet"]), "--quiet"]) == 2
+    line = capsys.readouterr().err.strip()
+    # The tiny dataset's 4 trees all hash into train; the line says so, and how many trees the shipped spec needs.
+    assert "puts 4 of the 4 usable trees in train, 0 in validation and 0 in test" in line
+    assert f"from {TASKS['sketchnet'].min_trees} trees" in line and "\n" not in line
+    assert list(tmp_path.iterdir()) == []  # no run folder, no registry
 
 
 # ------------------------------------------------------------------------------------------ resume
@@ -167,7 +190,7 @@ def test_retrain_promotes_a_better_challenger_and_keeps_the_champion_against_a_w
     registry = open_registry(tmp_path / "registry")
     data = [str(training_datasets["pix2pix-trunk"])]
     settings = TrainSettings(epochs=1, **TINY["pix2pix-trunk"])
-    champion = trained_models.register_result(registry, trunk_run, code_version="test")
+    champion = trained_models.register_result(registry, trunk_run, code_version="test", force=True)
     assert champion.is_champion and champion.version == 1
     primary = trunk_run.network.primary
     unbeatable = 1e9 if trunk_run.network.higher_is_better else -1e9
