@@ -35,7 +35,7 @@ def register(subparsers) -> None:
                         help=f"comma-separated, of {', '.join(METHODS)} (default {DEFAULT_METHODS})")
     parser.add_argument("--models", help="model registry URI or folder (default: the shipped models/)")
     parser.add_argument("--out", help="the report folder (a rerun resumes it)")
-    parser.add_argument("--trees", type=int, help="at most N held-out trees per dataset (spread evenly)")
+    parser.add_argument("--trees", type=int, help="at most N held-out trees per dataset, picked across its species")
     parser.add_argument("--part", default="test", help="the split part: test (default), val, or all")
     parser.add_argument("--inputs", help="a folder of real clouds and sketches (docs/evaluation.md)")
     add_ray_options(parser, workers_help="trees evaluated at once (default: the CPUs)")

@@ -1,12 +1,14 @@
 """`farm validate DIR`: check a dataset's part files against the manifest (presence, size, sha256, schema, rows).
 
-Prints each damaged file with what is wrong and exits 1; prints a one-line summary and exits 0 when all is well;
-a folder with no manifest is not a dataset: one line, exit 2.
+Every `validate` (this one and `farm library validate`) answers the same way (docs/cli.md): damage found is a
+`damaged: PATH: what` line per file and a summary on stderr, exit 1 (`report_damage`); all well is one
+`DIR: ok, ...` line, exit 0; a folder that is not what the command checks is bad input: `farm: error:`, exit 2.
 """
 from __future__ import annotations
 
 import argparse
 import sys
+from typing import Sequence
 
 from farm.table import counted
 
@@ -20,6 +22,15 @@ def register(subparsers) -> None:
     parser.set_defaults(run=run)
 
 
+def report_damage(folder: str, problems: Sequence[object], remedy: str) -> int:
+    """Print what a `validate` found damaged (one `damaged:` line per problem, then a summary saying how to
+    repair it) on stderr; returns the exit status, 1."""
+    for problem in problems:
+        print(f"damaged: {problem}", file=sys.stderr)
+    print(f"{folder}: {counted(len(problems), 'damaged file')}; {remedy}", file=sys.stderr)
+    return 1
+
+
 def run(args: argparse.Namespace) -> int:
     from farm.dataset import read_manifest
     from farm.dataset.manifest import validate_dataset
@@ -29,12 +40,8 @@ def run(args: argparse.Namespace) -> int:
     if not location.exists("manifest.json"):  # not a dataset at all (status 2), rather than a damaged one (1)
         read_manifest(location)
     problems = validate_dataset(args.dir)
-    for problem in problems:
-        print(f"damaged: {problem}", file=sys.stderr)
     if problems:
-        print(f"{args.dir}: {counted(len(problems), 'damaged file')}; `farm generate` with the same spec "
-              f"regenerates them", file=sys.stderr)
-        return 1
+        return report_damage(args.dir, problems, "`farm generate` with the same spec regenerates them")
     manifest = read_manifest(args.dir)
     counts = manifest["counts"]
     print(f"{args.dir}: ok, {counted(2 * len(manifest['shards']), 'part file')} match the manifest "

@@ -2,13 +2,15 @@
 
 Plan: for each dataset, its trees in the trainers' held-out part (`trainers.data.split_part`, the one split rule:
 a hash of the spec digest and tree id; `part="all"` takes every tree, for a dataset no model trained on), capped at
-`trees` per dataset (spread evenly over the held-out list); for each method the dataset serves (its rig and outputs
-hold the method's `Needs`), one unit per tree. A method a dataset cannot serve is skipped with a line saying why.
+`trees` per dataset and picked across its species (`pick_across_species`); for each method the dataset serves
+(its rig and outputs hold the method's `Needs`), one unit per tree. A method a dataset cannot serve is skipped with
+a line saying why.
 
-Report folder (docs/evaluation.md): `evaluation.json` (the job: datasets, methods, settings; written first, a rerun
-with another job is refused), `rows/METHOD/KEY.parquet` (one finished unit; written last and atomically, so a
-killed job resumes without repeating finished trees), `panels/METHOD/KEY.png` (input, reconstruction and ground
-truth), then `metrics.parquet` (every row), `sweep.parquet`, `summary.md` and the PNG plots (`farm.evaluate.report`).
+Report folder (docs/evaluation.md): `evaluation.json` (the job: datasets, methods, settings, how trees are picked;
+written first, a rerun with another job is refused), `rows/METHOD/KEY.parquet` (one finished unit; written last
+and atomically, so a killed job resumes without repeating finished trees), `panels/METHOD/KEY.png` (input,
+reconstruction and ground truth), then `metrics.parquet` (every row), `sweep.parquet`, `summary.md` and the PNG
+plots (`farm.evaluate.report`).
 A method that fails on a tree records the error in its row (status "failed", or "error" with the traceback for a
 bug) and the job goes on.
 """
@@ -43,7 +45,11 @@ from .units import (FORMAT, ID_COLUMNS, JOB_FILE, METRICS_FILE, PANELS, PARTS, R
 
 __all__ = ["EvaluationError", "Unit", "DatasetInfo", "EvaluationPlan", "plan_evaluation", "run_evaluation",
            "JOB_FILE", "ROWS", "PANELS", "METRICS_FILE", "PARTS", "read_rows", "serves", "ID_COLUMNS",
-           "load_tree", "evaluation_data_spec"]
+           "load_tree", "evaluation_data_spec", "pick_across_species", "TREE_PICK"]
+
+# How `--trees N` picks a dataset's trees, recorded in evaluation.json: a report folder whose trees were picked
+# another way (spread evenly over the list, before issue 48) is not resumed with these picks mixed in.
+TREE_PICK = "across species"
 
 @dataclass(frozen=True)
 class DatasetInfo:
@@ -53,6 +59,7 @@ class DatasetInfo:
     rig: str
     outputs: tuple[str, ...]
     held_out: tuple[str, ...]  # tree ids, plan order
+    held_out_species: tuple[str, ...] = ()  # the species of each held-out tree
 
 
 @dataclass
@@ -62,6 +69,7 @@ class EvaluationPlan:
     units: list[Unit]
     skipped: list[str] = field(default_factory=list)
     record: dict = field(default_factory=dict)
+    picked: dict[str, dict[str, int]] = field(default_factory=dict)  # dataset path -> species -> trees picked
 
 
 def _view_names(rig: str) -> dict[str, list[str]]:
@@ -102,19 +110,41 @@ def _open_dataset(path: str, part: str) -> DatasetInfo:
         manifest = read_manifest(path)
     except DatasetError as error:
         raise EvaluationError(f"--data {path}: {error}") from None
-    trees = read_columns(path, "trees", ["tree_id", "index", "error"]).to_pylist()
-    ids = [(r["index"], r["tree_id"]) for r in trees if r["error"] is None]
+    trees = read_columns(path, "trees", ["tree_id", "index", "species", "error"]).to_pylist()
+    ids = [(r["index"], r["tree_id"], r["species"]) for r in trees if r["error"] is None]
     digest = manifest["spec_digest"]
-    kept = [tree for _, tree in sorted(ids) if part == "all" or split_part((digest, tree)) == part]
+    kept = [(tree, name) for _, tree, name in sorted(ids) if part == "all" or split_part((digest, tree)) == part]
     render = manifest["job"].get("render", {})
     return DatasetInfo(str(path), digest, manifest["job"].get("name", Path(path).name), render.get("rig", ""),
-                       tuple(render.get("outputs", ())), tuple(kept))
+                       tuple(render.get("outputs", ())), tuple(t for t, _ in kept), tuple(n for _, n in kept))
 
 
-def _spread(items: Sequence, n: int | None) -> list:
-    if n is None or n >= len(items):
+def _spread(items: Sequence, n: int) -> list:
+    if n >= len(items):
         return list(items)
     return [items[int(i)] for i in np.round(np.linspace(0, len(items) - 1, n))]
+
+
+def pick_across_species(trees: Sequence[str], species_of_trees: Sequence[str], n: int | None) -> list[str]:
+    """At most `n` of `trees` (in their order), as many of each species as the others where a species has that
+    many: a round over the species (the larger groups first, then by name) takes one tree each until `n` are
+    taken, and each species' trees are spread evenly over its own list. A dataset's species are interleaved, so
+    spreading over the whole list can fall on one or two species."""
+    if n is None or n >= len(trees):
+        return list(trees)
+    positions: dict[str, list[int]] = {}
+    for position, name in enumerate(species_of_trees):
+        positions.setdefault(name, []).append(position)
+    order = sorted(positions, key=lambda name: (-len(positions[name]), name))
+    quota = dict.fromkeys(order, 0)
+    left = n
+    while left:
+        for name in order:
+            if left and quota[name] < len(positions[name]):
+                quota[name] += 1
+                left -= 1
+    chosen = sorted(p for name in order for p in _spread(positions[name], quota[name]))
+    return [trees[p] for p in chosen]
 
 
 def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int | None = None, part: str = "test",
@@ -134,13 +164,17 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
     if not data and inputs is None:
         raise EvaluationError("nothing to evaluate: pass --data DIR [DIR...] and/or --inputs DIR")
     datasets = [_open_dataset(path, part) for path in data]
-    units, skipped = [], []
+    units, skipped, picked = [], [], {}
     for info in datasets:
         if not info.held_out:
             raise EvaluationError(f"--data {info.path} has no {'usable' if part == 'all' else part + ' (held-out)'} "
                                   f"trees: allowed a dataset with at least one"
                                   f"{'' if part == 'all' else ' (or --part all for a dataset no model trained on)'}")
-        chosen = _spread(info.held_out, trees)
+        chosen = pick_across_species(info.held_out, info.held_out_species, trees)
+        species_of = dict(zip(info.held_out, info.held_out_species))
+        picked[info.path] = {}
+        for tree in chosen:
+            picked[info.path][species_of[tree]] = picked[info.path].get(species_of[tree], 0) + 1
         for method in methods:
             pairs, why = serves(method, info.rig, info.outputs)
             if pairs is None:
@@ -154,11 +188,11 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
         skipped += input_skipped
     if not units:
         raise EvaluationError("nothing to evaluate: " + ("; ".join(skipped) if skipped else "no trees"))
-    record = {"format": FORMAT, "methods": methods, "part": part, "trees": trees, "inputs": inputs,
+    record = {"format": FORMAT, "methods": methods, "part": part, "trees": trees, "pick": TREE_PICK, "inputs": inputs,
               "models": models, "settings": asdict(settings),
               "datasets": [{"path": d.path, "spec_digest": d.spec_digest, "name": d.name, "rig": d.rig}
                            for d in datasets]}
-    return EvaluationPlan(datasets, methods, units, skipped, record)
+    return EvaluationPlan(datasets, methods, units, skipped, record, picked)
 
 
 def _stage_column(stage: str) -> str:
@@ -211,6 +245,12 @@ def _check_report_dir(report: Path, record: dict) -> None:
             old = json.loads(job.read_text())
         except ValueError:
             old = None
+        if isinstance(old, dict) and "pick" not in old and {**old, "pick": record["pick"]} == record:
+            if record["trees"] is not None:
+                raise EvaluationError(f"--out {report} holds this evaluation with its trees picked another way (an "
+                                      f"older treefarm spread --trees {record['trees']} over the list; now "
+                                      f"{TREE_PICK}): allowed a new folder")
+            return  # without --trees every tree is taken: how they are picked makes no difference
         if old != record:
             raise EvaluationError(f"--out {report} holds another evaluation ({JOB_FILE} differs: other datasets, "
                                   "methods or settings): allowed a new folder, or this job's own folder to resume")

@@ -1,6 +1,7 @@
-"""The evaluation report: summary.md (method x metric, median and interquartile range, the papers' figures beside
-ours, the models' registered scores, the machine and versions) and the PNG plots (metric distributions per method
-and per species, a gallery of the best, median and worst trees per method, the rotation sweep).
+"""The evaluation report: summary.md (the trees per species; per metric and method, median and interquartile
+range; the papers' figures, the models' registered scores, the machine and versions) and the PNG plots (metric
+distributions per method and per species, a gallery of the best, median and worst trees per method, the rotation
+sweep).
 
 Plots are drawn with matplotlib's Agg backend, metadata stripped, so the same rows give the same bytes.
 """
@@ -8,6 +9,7 @@ from __future__ import annotations
 
 import json
 import platform
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -103,49 +105,90 @@ def _versions() -> list[str]:
     return out
 
 
+SUMMARY_WIDTH = 100  # summary.md reads in a terminal: no line wider than this (a path longer than it is kept whole)
+
+
 def _cell(stats: dict | None) -> str:
     if stats is None:
         return "-"
-    return f"{stats['median']:.3f} [{stats['q25']:.3f}, {stats['q75']:.3f}] (n={stats['n']})"
+    return f"{stats['median']:.3f} [{stats['q25']:.3f}, {stats['q75']:.3f}]"
+
+
+def _wrapped(text: str, indent: str = "") -> list[str]:
+    """A paragraph or list item as lines of at most SUMMARY_WIDTH (the continuation indented by `indent`)."""
+    return textwrap.wrap(text, SUMMARY_WIDTH, subsequent_indent=indent, break_long_words=False,
+                         break_on_hyphens=False)
+
+
+def _source_label(source: str, part: str) -> str:
+    """What a row's source means in the summary: under `--part all` a dataset's trees are not held out."""
+    if source == "held-out":
+        return "all trees" if part == "all" else f"{part} part"
+    return "real inputs" if source == "input" else source
+
+
+def _trees_line(plan, info) -> str:
+    picked = plan.picked.get(info.path, {})
+    taken = sum(picked.values())
+    what = "trees" if plan.record["part"] == "all" else f"held-out trees ({plan.record['part']} part)"
+    by_species = ", ".join(f"{name} {count}" for name, count in sorted(picked.items()))
+    return (f"- {info.path} ({info.name}): {taken} of {len(info.held_out)} {what}, {len(picked)} species: "
+            f"{by_species}")
 
 
 def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, table: dict) -> str:
     from reconstruct.scoring import METRICS
 
-    lines = ["# Evaluation", "",
-             f"Datasets: {', '.join(f'{d.path} ({d.name}, {len(d.held_out)} held-out trees)' for d in plan.datasets) or 'none'}"
-             + (f"; real inputs: {plan.record['inputs']}" if plan.record.get("inputs") else "") + ".",
-             f"Methods: {', '.join(plan.methods)}; trees: the trainers' {plan.record['part']} part"
-             + (f", at most {plan.record['trees']} per dataset" if plan.record.get("trees") else "") + ".", ""]
+    part = plan.record["part"]
+    which = "every tree (--part all)" if part == "all" else f"the trainers' {part} part (held out)"
+    cap = (f", at most {plan.record['trees']} per dataset, picked across its species" if plan.record.get("trees")
+           else "")
+    trees = f"; trees: {which}{cap}" if plan.datasets else ""
+    lines = ["# Evaluation", "", *_wrapped(f"Methods: {', '.join(plan.methods)}{trees}."), ""]
+    if plan.datasets:
+        lines += ["Datasets:", ""]
+        for info in plan.datasets:
+            lines += _wrapped(_trees_line(plan, info), "  ")
+        lines.append("")
+    if plan.record.get("inputs"):
+        lines += [*_wrapped(f"Real inputs: {plan.record['inputs']}."), ""]
     for line in plan.skipped:
-        lines.append(f"- {line}")
+        lines += _wrapped(f"- {line}", "  ")
     if plan.skipped:
         lines.append("")
     keys = list(table)
-    header = ["metric", *[f"{m} ({s}, {table[(m, s)]['counts']['ok']} ok)" for m, s in keys], "paper"]
-    body = []
+    lines += [*_wrapped("Trees per method: " + "; ".join(
+        f"{m} ({_source_label(s, part)}) {table[(m, s)]['counts']['ok']} ok" for m, s in keys) + "."), ""]
+    # One row per (metric, method), not a column per method: the table stays narrow however many methods ran.
+    body, papers = [], []
     for metric in metric_columns(rows):
-        cells = [_cell(table[key]["metrics"].get(metric)) for key in keys]
-        if all(c == "-" for c in cells):
+        found = [(key, table[key]["metrics"][metric]) for key in keys if metric in table[key]["metrics"]]
+        if not found:
             continue
         info = METRICS.get(metric)
         label = info.label if info else metric
-        better = "" if info is None else (" (higher better)" if info.higher_is_better else " (lower better)")
-        methods_with = {m for m, s in keys if metric in table[(m, s)]["metrics"]}
-        paper = info.paper if info and (not info.paper_method or info.paper_method in methods_with) else ""
-        body.append([f"{label}{better}", *cells, paper])
+        better = "" if info is None else ("higher" if info.higher_is_better else "lower")
+        for position, ((method, source), stats) in enumerate(found):
+            body.append([label if position == 0 else "", better if position == 0 else "",
+                         method if source == "held-out" else f"{method} ({_source_label(source, part)})",
+                         _cell(stats), stats["n"]])
+        methods_with = {m for (m, _), _ in found}
+        if info and info.paper and (not info.paper_method or info.paper_method in methods_with):
+            papers.append(f"- {label}{f' ({info.paper_method})' if info.paper_method else ''}: {info.paper}")
     values = np.zeros(0) if sweep is None else sweep["unit_cube_hausdorff"].to_numpy(dtype=float)
     if np.isfinite(values).any():
         median, q25, q75 = _quartiles(values[np.isfinite(values)])
-        body.append([f"{METRICS['rotation_sweep_unit_cube_hausdorff'].label} (lower better)",
-                     *[f"{median:.3f} [{q25:.3f}, {q75:.3f}] ({len(values)} views)" if m == "params" else "-"
-                       for m, _ in keys], METRICS["rotation_sweep_unit_cube_hausdorff"].paper])
+        sweep_info = METRICS["rotation_sweep_unit_cube_hausdorff"]
+        body.append([sweep_info.label, "lower", "params", f"{median:.3f} [{q25:.3f}, {q75:.3f}]", len(values)])
+        papers.append(f"- {sweep_info.label} (params, n = views): {sweep_info.paper}")
     lines += ["## Metrics (median [q25, q75] over the trees that finished)", "", "```",
-              format_table(header, body), "```", ""]
+              format_table(["metric", "better", "method", "median [q25, q75]", "n"], body), "```", ""]
+    if papers:
+        lines += ["The papers' figures:", "", *papers, ""]
     stage_rows = []
-    for key in keys:
-        for stage, seconds in table[key]["seconds"].items():
-            stage_rows.append([f"{key[0]} ({key[1]})", stage, f"{seconds:.2f}"])
+    for method, source in keys:
+        for stage, seconds in table[(method, source)]["seconds"].items():
+            stage_rows.append([f"{method} ({_source_label(source, part)})", stage, f"{seconds:.2f}"])
     lines += ["## Stage seconds (median per tree)", "", "```", format_table(["method", "stage", "s"], stage_rows),
               "```", ""]
     failures = rows[rows["status"] != "ok"]
@@ -153,20 +196,23 @@ def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, tabl
         lines += ["## Failures", ""]
         for _, row in failures.iterrows():
             first = str(row["error"]).strip().splitlines()
-            lines.append(f"- {row['method']} {row['tree_id']} ({row['status']}): {first[-1] if first else ''}")
+            lines += _wrapped(f"- {row['method']} {row['tree_id']} ({row['status']}): {first[-1] if first else ''}",
+                              "  ")
         lines.append("")
     lines += ["## Models", ""]
     for task, source in sources.items():
         scores = registered_scores(task, models)
         figures = ", ".join(f"{k} {v:.3f}" for k, v in scores.items()) or "no held-out figures recorded"
-        lines.append(f"- {task}: {source}; when registered, on its held-out split: {figures}")
+        lines += _wrapped(f"- {task}: {source}; when registered, on its own test split: {figures}", "  ")
     if not sources:
         lines.append("- none (no method of this evaluation uses a trained network)")
-    lines += ["", "## Made with", "",
-              f"- machine: {platform.node()}, {platform.machine()}, {platform.processor() or 'cpu'}, "
-              f"Python {platform.python_version()}, {platform.platform()}",
-              f"- treefarm {code_version()}; {', '.join(_versions())}",
-              f"- settings: {json.dumps(plan.record['settings'], sort_keys=True)}", ""]
+    lines += ["", "## Made with", ""]
+    for item in (f"- machine: {platform.node()}, {platform.machine()}, {platform.processor() or 'cpu'}, "
+                 f"Python {platform.python_version()}, {platform.platform()}",
+                 f"- treefarm {code_version()}; {', '.join(_versions())}",
+                 f"- settings: {json.dumps(plan.record['settings'], sort_keys=True)}"):
+        lines += _wrapped(item, "  ")
+    lines.append("")
     return "\n".join(lines)
 
 

@@ -8,12 +8,12 @@ Modules, from the bottom up: `spec` (LibrarySpec), `lod_fit` and `asset` (one as
 """
 from __future__ import annotations
 
-from .catalog import quality_shortfalls, validate_library, write_catalog
+from .catalog import validate_library, write_catalog
 from .glb_scene import load_glb_scene
 from .job import add_asset, run_library
 from .records import LibraryError, read_library_spec
 from .spec import LibrarySpec, LibrarySpecError, default_library_spec, load_library_spec, parse_library_spec
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
-           "run_library", "add_asset", "write_catalog", "validate_library", "quality_shortfalls", "LibraryError",
+           "run_library", "add_asset", "write_catalog", "validate_library", "LibraryError",
            "read_library_spec", "load_glb_scene"]

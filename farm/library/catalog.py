@@ -19,16 +19,16 @@ from ..tree_chain import to_json
 from .blender_catalog import DEFAULT_CATALOG, write_blender_library
 from .previews import gallery_html
 from .quality import stored_floors
-from .records import (BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
-                      library_asset_ids, read_library_spec)
+from .records import (BLENDER_FAILED, BLENDER_PENDING, LibraryError, asset_record_path, library_asset_ids,
+                      read_library_spec)
 from .spec import LibrarySpec
 from .wind_viewer import write_wind_viewer
 
-__all__ = ["catalog_rows", "write_catalog", "refresh_catalog_tables", "validate_library", "quality_shortfalls",
-           "CATALOG_COLUMNS",
+__all__ = ["catalog_rows", "write_catalog", "refresh_catalog_tables", "validate_library", "CATALOG_COLUMNS",
            "IOU_TARGET"]
 
-# Silhouette IoU against LOD0 every level should reach at its switch size (issue 11's target).
+# Issue 11's silhouette IoU target at every switch size, kept for the benchmarks that set levels beside it. It was
+# restated: `farm library validate` judges each level against its half-pixel floor (farm.library.quality).
 IOU_TARGET = 0.9
 
 CATALOG_COLUMNS = ("id", "species", "generator", "seed", "params_json", "height_m", "crown_radius_m",
@@ -133,15 +133,14 @@ def refresh_catalog_tables(path: str) -> None:
 
 
 def validate_library(path: str) -> list[Problem]:
-    """Problems of a library folder: not a library, missing catalog, missing or changed asset files, unreadable
-    GLBs, failed FBX exports. An empty list means every catalogued file is present with its recorded checksum."""
+    """Problems of a finished library folder: missing or changed asset files, unreadable GLBs, failed FBX exports.
+    An empty list means every catalogued file is present with its recorded checksum. LibraryError when the folder
+    is not a library (no library.json) or its job has not finished (no catalog.json): bad input, not damage."""
     location = Location.resolve(path)
-    try:
-        read_library_spec(location)
-    except LibraryError as exc:
-        return [Problem(location.path(LIBRARY_RECORD), str(exc))]
+    read_library_spec(location)
     if not location.exists("catalog.json"):
-        return [Problem(location.path("catalog.json"), "missing (the job has not finished: run it again)")]
+        raise LibraryError(f"{location.uri} holds no catalog.json: its library job has not finished (run it again "
+                           "to finish it)")
     problems = []
     for row in json.loads(location.read_bytes("catalog.json")):
         record_path = asset_record_path(row["id"])
@@ -161,19 +160,4 @@ def validate_library(path: str) -> list[Problem]:
                     read_glb_chunks(data)
                 except GlbError as exc:
                     problems.append(Problem(location.path(relative), f"unreadable GLB: {exc}"))
-    return problems
-
-
-def quality_shortfalls(path: str, target: float = IOU_TARGET) -> list[Problem]:
-    """One Problem per asset level whose worst silhouette IoU (of the 8 azimuths) is below `target`, naming
-    the asset, the level, its switch size and the figure. Reads catalog.json of a library folder."""
-    location = Location.resolve(path)
-    if not location.exists("catalog.json"):
-        return []
-    problems = []
-    for row in json.loads(location.read_bytes("catalog.json")):
-        for name, px, iou in zip(row["level_names"], row["switch_px"], row["iou_min"]):
-            if iou < target:
-                problems.append(Problem(location.path(asset_record_path(row["id"])),
-                                        f"{name} at {px} px: silhouette IoU {iou:.3f} is below the target {target}"))
     return problems

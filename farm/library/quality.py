@@ -32,7 +32,7 @@ from .asset import build_asset, leaf_fractions
 from .records import read_library_spec
 
 __all__ = ["SHIFT_PX", "FLOOR_MARGIN", "LevelFloor", "level_floors", "asset_floors", "library_floors",
-           "floors_record_path", "store_floors", "stored_floors"]
+           "floors_record_path", "store_floors", "stored_floors", "CatalogQuality", "catalog_quality"]
 
 SHIFT_PX = 0.5
 FLOOR_MARGIN = 0.02
@@ -55,6 +55,40 @@ class LevelFloor:
     @property
     def meets(self) -> bool:
         return self.iou >= self.floor - FLOOR_MARGIN
+
+
+@dataclass(frozen=True)
+class CatalogQuality:
+    """What a library's catalog says of its levels: how many assets and levels after LOD0 it lists, and each level
+    whose half-pixel floor `farm library validate --quality` measured."""
+
+    assets: int
+    levels: int
+    measured: tuple[LevelFloor, ...]
+
+    def summary(self) -> str:
+        """One clause for validate's line: the measured levels within the margin of their floors, or what to run."""
+        if not self.measured:
+            return (f"the half-pixel floors of its {self.levels} levels are not measured (`--quality` measures "
+                    "them)")
+        unmeasured = self.levels - len(self.measured)
+        return (f"{sum(f.meets for f in self.measured)} of {len(self.measured)} levels within {FLOOR_MARGIN} of "
+                f"their half-pixel floor" + (f" ({unmeasured} not measured)" if unmeasured else ""))
+
+
+def catalog_quality(path: str) -> CatalogQuality:
+    """The levels of a finished library folder judged against the floors stored in its catalog.json (`iou_floor`:
+    null until measured); reads nothing else and renders nothing."""
+    location = Location.resolve(path)
+    rows = json.loads(location.read_bytes("catalog.json"))
+    levels, measured = 0, []
+    for row in rows:
+        floors = row.get("iou_floor") or [None] * len(row["level_names"])
+        for name, px, iou, floor in list(zip(row["level_names"], row["switch_px"], row["iou_min"], floors))[1:]:
+            levels += 1
+            if floor is not None:
+                measured.append(LevelFloor(row["id"], name, int(px), float(iou), float(floor)))
+    return CatalogQuality(len(rows), levels, tuple(measured))
 
 
 def level_floors(renderer, cover, points, switch_px: int, turns_deg: Sequence[float] = ()) -> tuple[float, ...]:

@@ -55,6 +55,11 @@ BAD_INPUTS = [
     (["inspect", "{damaged}"], "part-"),
     (["review", "{damaged}", "--port", "0", "--db", "{tmp}/reviews.sqlite"], "part-"),
     (["validate", "{tmp}"], "no manifest.json"),
+    (["library", "validate", "{tmp}"], "not an asset library"),  # exit 2 as `farm validate`, not 1 (damage)
+    (["library", "validate", "{data}"], "not an asset library"),
+    (["export", "{data}", "--format", "stl", "--out", "{tmp}/meshes"], "--format 'stl'"),
+    (["export", "{data}", "--out", "{tmp}/meshes", "--to", "{tmp}/other"], "--to"),
+    (["export", "{data}"], "--out FOLDER is required"),
     (["review", "{data}", "--port", "99999"], "--port 99999"),
     (["review", "export", "{data}", "--db", "{tmp}/in"], "--db"),
     (["generate", "--trees", "0", "--out", "{tmp}/job", "--quiet"], "trees"),

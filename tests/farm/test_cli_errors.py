@@ -26,7 +26,7 @@ def stderr_lines(capsys) -> list[str]:
     (["status", "{tmp}"], "holds no treefarm job"),
     (["status", "nosuchfs://bucket/data"], "not a path or a file system URI"),
     (["inspect", "{tmp}"], "no manifest.json"),
-    (["export", "{tmp}", "--format", "stl", "--to", "{tmp}/out"], "allowed glb, obj"),
+    (["export", "{tmp}", "--format", "stl", "--out", "{tmp}/out"], "allowed glb, obj"),
     (["render", "--species", "maple", "--size", "4", "--out", "{tmp}/views"], "--size 4 is out of range"),
     (["library", "validate"], "needs the library folder"),
     (["generate", "{tmp}/absent.yaml", "--out", "{tmp}/out"], "absent.yaml"),

@@ -16,7 +16,7 @@ from PIL import Image
 
 import species
 from farm.cli import main
-from farm.evaluate.job import ROWS, evaluation_data_spec, plan_evaluation, serves
+from farm.evaluate.job import ROWS, TREE_PICK, evaluation_data_spec, pick_across_species, plan_evaluation, serves
 from farm.evaluate.methods import EvalSettings
 from farm.evaluate.inputs import input_units, outline_iou
 from farm.jobs import parse_spec
@@ -73,9 +73,9 @@ def test_every_method_produces_rows_and_the_summary_has_every_method_and_metric(
     assert (rows["seconds_unit"] > 0).all() and rows["seconds_total"].notna().any()
     assert json.loads(params.loc["maple", "models"])["sketchnet"].startswith("shipped default")
 
-    summary = (report / "summary.md").read_text()
+    summary = " ".join((report / "summary.md").read_text().split())
     for method in METHODS:
-        assert f"{method} (held-out, 3 ok)" in summary
+        assert f"{method} (all trees) 3 ok" in summary
     for metric in [m for m in METRICS if m in rows and rows[m].notna().any()]:
         assert METRICS[metric].label in summary, metric
     for figure in ("0.041", "0.032", "0.098", "~0.03 (TSN, 72 views"):  # the papers' figures beside ours
@@ -93,9 +93,20 @@ def test_every_method_produces_rows_and_the_summary_has_every_method_and_metric(
             assert image.width >= 3 * 192  # input, reconstruction, ground truth
 
 
+def test_the_summary_fits_100_columns_and_says_held_out_only_of_held_out_trees(report):
+    summary = (report / "summary.md").read_text()
+    assert max(len(line) for line in summary.splitlines()) <= 100
+    assert "held-out" not in summary.lower() and "held out" not in summary.lower()  # --part all: every tree
+    assert "3 of 3 trees, 3 species: cherry 1, maple 1, sc_round_maple 1" in " ".join(summary.split())
+
+
 def test_a_rerun_resumes_without_repeating_finished_trees(eval_data, report, tmp_path, capsys):
     copy = tmp_path / "report"
     shutil.copytree(report, copy)
+    # A folder from before trees were picked across species: without --trees every tree is taken, so it resumes.
+    job = json.loads((copy / "evaluation.json").read_text())
+    assert job.pop("pick") == TREE_PICK
+    (copy / "evaluation.json").write_text(json.dumps(job))
     removed = copy / ROWS / "cloud"
     victim = sorted(removed.glob("*.parquet"))[0]
     kept = {p: p.stat().st_mtime_ns for p in (copy / ROWS).glob("*/*.parquet") if p != victim}
@@ -122,8 +133,43 @@ def test_the_held_out_trees_are_the_trainers_test_split(eval_data):
         with pytest.raises(Exception, match="has no test \\(held-out\\) trees"):
             plan_evaluation([str(eval_data)], ["cloud"], part="test")
     plan = plan_evaluation([str(eval_data)], ["cloud", "params"], part="all", trees=2)
-    assert [(u.method, u.tree_id) for u in plan.units] == [("cloud", ids[0]), ("cloud", ids[2]),
-                                                          ("params", ids[0]), ("params", ids[2])]
+    species_of = {r["tree_id"]: r["species"]
+                  for r in pq.read_table(eval_data / "trees", columns=["tree_id", "species"]).to_pylist()}
+    chosen = [u.tree_id for u in plan.units if u.method == "cloud"]
+    assert [u.tree_id for u in plan.units if u.method == "params"] == chosen == sorted(chosen)
+    assert len({species_of[t] for t in chosen}) == 2  # two trees, two species
+    assert plan.picked == {str(eval_data): {species_of[t]: 1 for t in chosen}}
+
+
+def test_trees_are_picked_across_species_of_an_interleaved_dataset():
+    # Eight species interleaved as a job plans them, three trees each: spreading 4 picks evenly over the list fell
+    # on two species (issue 48); picked across species, 4 trees are 4 species and 8 are all 8.
+    names = [f"species_{k}" for k in range(8)]
+    trees = [f"tree-{i:02d}" for i in range(24)]
+    species_of = dict(zip(trees, [names[i % 8] for i in range(24)]))
+    for n in (4, 8, 11):
+        chosen = pick_across_species(trees, [species_of[t] for t in trees], n)
+        assert len(chosen) == n and chosen == sorted(chosen)
+        counts = [sum(species_of[t] == name for t in chosen) for name in names]
+        assert sum(c > 0 for c in counts) == min(n, 8) and max(counts) - min(counts) <= 1
+    uneven = ["a"] * 6 + ["b"]  # a species with one tree gives its one; the rest go to the other, spread out
+    assert pick_across_species(list("0123456"), uneven, 3) == ["0", "5", "6"]
+    assert pick_across_species(trees, [species_of[t] for t in trees], None) == trees
+
+
+def test_a_report_of_trees_picked_the_old_way_is_not_resumed_with_new_picks(eval_data, tmp_path, capsys):
+    out = tmp_path / "report"
+    plan = plan_evaluation([str(eval_data)], ["cloud"], part="all", trees=2,
+                           settings=EvalSettings(surface_samples=2000))  # FAST's
+    old = {k: v for k, v in plan.record.items() if k != "pick"}
+    out.mkdir()
+    (out / "evaluation.json").write_text(json.dumps(old, indent=1, sort_keys=True))
+    capsys.readouterr()
+    assert main(["evaluate", "--data", str(eval_data), "--part", "all", "--methods", "cloud", "--trees", "2",
+                 "--out", str(out), *FAST]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("farm: error: ") and "picked another way" in err and len(err.splitlines()) == 1
+    assert sorted(p.name for p in out.iterdir()) == ["evaluation.json"]
 
 
 def test_a_method_a_dataset_cannot_serve_is_skipped_with_the_reason():
@@ -172,8 +218,8 @@ def test_real_inputs_are_scored_and_a_failing_one_is_recorded_while_the_job_goes
     assert 0 < cherry["param_score"] <= 100 and np.isnan(cherry["silhouette_iou_input"])
     unlabelled = rows.loc["unlabelled.png"]
     assert 0.3 < unlabelled["silhouette_iou_input"] <= 1 and np.isnan(unlabelled["param_score"])
-    summary = (out / "summary.md").read_text()
-    assert "cloud (input, 1 ok)" in summary and "## Failures" in summary and "broken.xyz" in summary
+    summary = " ".join((out / "summary.md").read_text().split())
+    assert "cloud (real inputs) 1 ok" in summary and "## Failures" in summary and "broken.xyz" in summary
 
 
 def test_drawings_with_an_alpha_channel_are_scored_like_the_same_drawing_on_paper(inputs, tmp_path):

@@ -164,27 +164,41 @@ def test_the_inspect_contact_sheet_shows_the_silhouette_background_black_not_red
     assert columns == 2
 
 
-def test_export_glb_writes_the_stored_mesh_of_every_tree(reference, tmp_path):
+def test_export_writes_the_stored_glb_of_every_tree_by_default_named_with_its_species(reference, tmp_path,
+                                                                                     capsys):
     import trimesh
 
-    assert farm_main(["export", str(reference[0]), "--format", "glb", "--to", str(tmp_path), "--quiet"]) == 0
-    files = sorted(tmp_path.glob("*.glb"))
-    assert [f.stem for f in files] == [f"tiny-{i:08d}" for i in range(8)]
-    assert len(trimesh.load(files[0], force="scene").geometry) >= 1
+    out = tmp_path / "glb"
+    assert farm_main(["export", str(reference[0]), "--out", str(out), "--quiet"]) == 0  # GLB unless told
+    trees = dataset.to_pandas(str(reference[0]), columns=["tree_id", "species", "glb"])
+    assert sorted(f.name for f in out.glob("*.glb")) == sorted(f"{row.species}-{row.tree_id}.glb"
+                                                             for row in trees.itertuples())
+    for row in trees.itertuples():
+        assert (out / f"{row.species}-{row.tree_id}.glb").read_bytes() == row.glb
+    assert len(trimesh.load(sorted(out.glob("*.glb"))[0], force="scene").geometry) >= 1
+    size = sum(f.stat().st_size for f in out.glob("*.glb"))
+    assert capsys.readouterr().out.strip().splitlines() == [
+        f"{out}: 8 trees as glb (0 failed to generate, not exported), {size / 1e6:.1f} MB"]
 
 
 def test_export_obj_rebuilds_each_tree_from_its_parameters(reference, tmp_path):
-    assert farm_main(["export", str(reference[0]), "--format", "obj", "--to", str(tmp_path), "--quiet"]) == 0
+    assert farm_main(["export", str(reference[0]), "--format", "obj", "--out", str(tmp_path), "--quiet"]) == 0
     objs = sorted(tmp_path.glob("*/*.obj"))
     assert len(objs) == 8
-    trees = dataset.to_pandas(str(reference[0]), columns=["tree_id", "bark_triangles", "leaf_triangles"])
-    faces = {row.tree_id: row.bark_triangles + row.leaf_triangles for row in trees.itertuples()}
+    trees = dataset.to_pandas(str(reference[0]), columns=["tree_id", "species", "bark_triangles", "leaf_triangles"])
+    faces = {f"{row.species}-{row.tree_id}": row.bark_triangles + row.leaf_triangles for row in trees.itertuples()}
     for obj in objs:
         assert sum(line.startswith("f ") for line in obj.read_text().splitlines()) == faces[obj.parent.name]
 
 
+def test_export_still_reads_the_deprecated_to_and_says_so(reference, tmp_path, capsys):
+    assert farm_main(["export", str(reference[0]), "--to", str(tmp_path), "--quiet"]) == 0
+    assert len(list(tmp_path.glob("*.glb"))) == 8
+    assert capsys.readouterr().err.strip() == "warning: --to is deprecated: use --out"
+
+
 def test_export_rejects_an_unknown_format(reference, tmp_path, capsys):
-    assert farm_main(["export", str(reference[0]), "--format", "fbx", "--to", str(tmp_path)]) == 2
+    assert farm_main(["export", str(reference[0]), "--format", "fbx", "--out", str(tmp_path)]) == 2
     assert "allowed glb, obj" in capsys.readouterr().err
 
 

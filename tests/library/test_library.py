@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -265,8 +266,6 @@ def test_same_spec_gives_byte_identical_assets_after_a_killed_driver(library, sp
 
 
 def test_add_builds_one_more_asset_into_the_catalog(library, tmp_path):
-    import shutil
-
     copy = tmp_path / "copy"
     shutil.copytree(library, copy)
     assert farm_main(["library", "add", str(copy), "--species", "sc_dome_shrub", "--seed", "7"]) == 0
@@ -293,8 +292,38 @@ def test_bad_spec_gives_one_line_error_and_writes_nothing(tmp_path, capsys, chan
 def test_a_folder_that_is_not_a_library_is_refused(tmp_path, capsys):
     assert farm_main(["library", "add", str(tmp_path), "--species", "maple", "--seed", "1"]) == 2
     assert "not an asset library" in capsys.readouterr().err
-    assert farm_main(["library", "validate", str(tmp_path)]) == 1
+    # validate's convention (docs/cli.md): a folder that is not what it checks is bad input, as for `farm validate`
+    assert farm_main(["library", "validate", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("farm: error: ") and "not an asset library" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_validate_of_a_sound_library_says_ok_and_judges_levels_by_their_floors(library, capsys):
+    capsys.readouterr()
+    assert farm_main(["library", "validate", str(library)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "" and len(captured.out.strip().splitlines()) == 1
+    line = captured.out.strip()
+    assert line.startswith(f"{library}: ok, the files of its 3 assets match")
+    assert "half-pixel floor" in line and "below target" not in line and "0.9" not in line
+
+
+def test_damage_is_named_file_by_file_and_exits_1_as_farm_validate_does(library, tmp_path, capsys):
+    copy = tmp_path / "library"
+    shutil.copytree(library, copy)
+    glb = sorted(copy.glob("assets/*/*.glb"))[0]
+    glb.write_bytes(glb.read_bytes()[:100])
+    (copy / "catalog.json").rename(tmp_path / "catalog.json")
+    capsys.readouterr()
+    assert farm_main(["library", "validate", str(copy)]) == 2  # no catalog: the job never finished
+    assert capsys.readouterr().err.startswith("farm: error: ")
+    (tmp_path / "catalog.json").rename(copy / "catalog.json")
+    assert farm_main(["library", "validate", str(copy)]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert captured.out == "" and err[0] == f"damaged: {glb}: sha256 differs from asset.json (changed or damaged)"
+    assert len(err) == 2 and err[1].startswith(f"{copy}: 1 damaged file; ") and "farm: " not in captured.err
 
 
 def test_validate_quality_reports_every_level_beside_its_half_pixel_floor(library, capsys):

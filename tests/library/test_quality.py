@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from farm.library.asset import build_asset, leaf_alphas
-from farm.library.catalog import IOU_TARGET, quality_shortfalls
+from farm.library.catalog import IOU_TARGET
 from farm.library.gltf_asset import asset_to_glb, glb_size
+from farm.library.quality import FLOOR_MARGIN, catalog_quality
 from farm.library.spec import parse_library_spec
 from farm.tree_chain import tree_seed
 from species.timing import StageTimer
@@ -191,12 +192,19 @@ def test_every_level_carries_eight_iou_figures_in_range(sapling):
         assert len(level.iou) == 8 and all(0.0 <= v <= 1.0 for v in level.iou)
 
 
-def test_validate_names_each_level_below_the_iou_target(tmp_path):
-    rows = [{"id": "a", "level_names": ["LOD0", "LOD1", "IMPOSTOR"], "switch_px": [0, 512, 64],
-             "iou_min": [1.0, 0.95, 0.5]}]
+def test_validate_judges_each_level_by_its_stored_half_pixel_floor(tmp_path):
+    rows = [{"id": "a", "level_names": ["LOD0", "LOD1", "LOD2", "IMPOSTOR"], "switch_px": [0, 512, 128, 64],
+             "iou_min": [1.0, 0.85, 0.5, 0.7], "iou_floor": [None, 0.86, 0.9, None]},
+            {"id": "b", "level_names": ["LOD0", "LOD1"], "switch_px": [0, 512], "iou_min": [1.0, 0.8]}]
     (tmp_path / "catalog.json").write_text(json.dumps(rows))
-    problems = quality_shortfalls(str(tmp_path))
-    assert len(problems) == 1 and "IMPOSTOR" in str(problems[0]) and "0.500" in str(problems[0])
+    quality = catalog_quality(str(tmp_path))
+    assert (quality.assets, quality.levels) == (2, 4)
+    assert [(f.asset, f.level, f.meets) for f in quality.measured] == [("a", "LOD1", True), ("a", "LOD2", False)]
+    assert quality.summary() == f"1 of 2 levels within {FLOOR_MARGIN} of their half-pixel floor (2 not measured)"
+    for row in rows:
+        row["iou_floor"] = None
+    (tmp_path / "catalog.json").write_text(json.dumps(rows))
+    assert "not measured" in catalog_quality(str(tmp_path)).summary()  # never judged against the old 0.9
 
 
 @pytest.mark.parametrize("name", ["sc_broad_oak", "sc_weeping_willow"])
