@@ -195,7 +195,7 @@ def run(args: argparse.Namespace) -> int:
             mesh = _named(mesh, stem)
             files = write_tree(mesh, folder / f"{stem}.{fmt}", fmt)
             rows.append(_row(stem, params, skeleton, mesh, seconds, files[0]))
-    print(format_table(["tree", "species", "height_m", "crown_m", "vertices", "faces", "seconds", "file"], rows))
+    print(format_table(["tree", "species", "height_m", "crown_radius_m", "vertices", "faces", "seconds", "file"], rows))
     return 0
 
 

@@ -23,7 +23,8 @@ def test_tree_from_dictionaries_writes_one_file_per_dictionary(tmp_path, capsys)
     assert main(["tree", "--params", *files, "--out", str(tmp_path / "trees")]) == 0
     assert sorted(p.name for p in (tmp_path / "trees").iterdir()) == ["0_acer_2.glb", "3_palm_3.glb"]
     table = capsys.readouterr().out
-    assert "height_m" in table and "3_palm_3" in table
+    header = table.splitlines()[0].split()
+    assert header[2:4] == ["height_m", "crown_radius_m"] and "3_palm_3" in table  # the crown column is a radius
 
 
 def test_tree_as_obj_writes_obj_mtl_and_textures(tmp_path):
