@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import os
 import sys
 import traceback
@@ -37,10 +38,19 @@ EXIT_INTERRUPTED = 130
 BUG_REPORT = "farm: internal error (a bug): please report it with the traceback above"
 
 
+def _version() -> str:
+    """The installed treefarm's version; a source tree run without installing says so."""
+    try:
+        return importlib.metadata.version("treefarm")
+    except importlib.metadata.PackageNotFoundError:
+        return "(not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="farm", description="treefarm: procedural trees and training data")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of every error, a user error's too (before the command)")
+    parser.add_argument("--version", action="version", version=f"farm (treefarm) {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:

@@ -24,19 +24,13 @@ import pycolmap
 from renderers.camera import Camera, CameraError
 from species.timing import StageTimer
 
-from .clouds import CloudError
+from .photo_folder import IMAGE_SUFFIXES, MIN_PHOTOS, PhotoError, photo_names
 
 __all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras",
            "align_to_cameras", "IMAGE_SUFFIXES", "MIN_PHOTOS"]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
-MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
 MATCHERS = ("auto", "exhaustive", "sequential")
 POSES = ("auto", "known", "estimate")
-
-
-class PhotoError(CloudError):
-    """A photo folder that SfM cannot turn into points; the message names the value and what is allowed."""
 
 
 @dataclass(frozen=True)
@@ -146,19 +140,6 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoi
     rotations = sfm.camera_rotations @ rotation.T
     return (SfmPoints(move(sfm.points), sfm.colours, sfm.track_length, sfm.registered, sfm.n_photos, "aligned",
                       sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings), residual)
-
-
-def photo_names(folder: str | Path) -> list[str]:
-    """The sorted names of the photos directly in `folder`; PhotoError for a missing folder or too few photos."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise PhotoError(f"{folder} is not a folder: allowed a folder of photos ({', '.join(IMAGE_SUFFIXES)})")
-    names = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
-                   and not p.stem.endswith(("_depth", "_mask")))
-    if len(names) < MIN_PHOTOS:
-        raise PhotoError(f"{folder} holds {len(names)} photo(s): allowed at least {MIN_PHOTOS} "
-                         f"({', '.join(IMAGE_SUFFIXES)})")
-    return names
 
 
 def known_cameras(folder: str | Path, names: list[str]) -> dict[str, Camera] | None:

@@ -51,7 +51,7 @@ def _is_cloud(path: Path) -> bool:
 
 
 def _is_photo_folder(path: Path) -> bool:
-    from reconstruct.sfm import IMAGE_SUFFIXES
+    from reconstruct.photo_folder import IMAGE_SUFFIXES
 
     return path.is_dir() and any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
 
@@ -126,7 +126,7 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
     entry = METHODS[method]
     result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem))
     with user_path(out, "write"):
-        result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
+        result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv, timings=True)
     points = result.scan.cloud.points
     if report is not None:
         from reconstruct.report import cloud_drawing, write_report
@@ -144,6 +144,12 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
             "_cloud": points}
 
 
+def print_stages(timings: dict[str, float]) -> None:
+    """--verbose: each stage's seconds, one a line, under the summary line's command."""
+    for stage, seconds in timings.items():
+        print(f"  {stage:<28} {seconds:7.2f} s")
+
+
 def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".glb":
@@ -156,11 +162,11 @@ def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
                           Path(args.qsm_csv) if args.qsm_csv else None, Path(args.report) if args.report else None)
     for warning in row["message"].split("; ") if row["message"] else []:
         print(f"warning: {warning}", file=sys.stderr)
-    stages = ", ".join(f"{k} {v:.2f}" for k, v in row["_timings"].items())
+    if args.verbose:
+        print_stages(row["_timings"])
     dbh = "n/a" if row["dbh_m"] is None else f"{row['dbh_m']:.3f} m"
-    print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, woody volume "
-          f"{row['total_volume_m3']:.4f} m3, {row['branches']} branches, {row['faces']} faces -> {out} "
-          f"({row['seconds']:.2f} s; {stages})")
+    print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, "
+          f"volume {row['total_volume_m3']:.3f} m3, {row['branches']} branches -> {out} ({row['seconds']:.2f} s)")
     return 0
 
 
