@@ -6,13 +6,14 @@ Each case runs in a fresh interpreter (`python -c`), as a user's `farm ...` does
 """
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from farm.cli import build_parser
+from farm.cli import build_parser, main
 
 REPO = Path(__file__).resolve().parents[2]
 TREE1 = REPO.parent / "shared" / "data" / "pointclouds" / "tree1.xyz"
@@ -54,9 +55,13 @@ def test_every_commands_help_imports_no_heavy_library(tmp_path):
         assert status == 0 and not imported, (command, imported)
 
 
-def test_version_imports_no_heavy_library(tmp_path):
+def test_version_imports_no_heavy_library_and_says_the_version(tmp_path, capsys):
     status, imported = _imported(["--version"], tmp_path)
     assert status == 0 and not imported, imported
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert re.fullmatch(r"farm \(treefarm\) (\d+\.\d+\S*|\(not installed\))\n", capsys.readouterr().out)
 
 
 # (argv, the libraries it may import besides none of RUNTIMES): a cheap real run or a bad argument of each command
