@@ -8,9 +8,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PIL import Image, UnidentifiedImageError
+
 from .clouds import CloudError
 
-__all__ = ["PhotoError", "IMAGE_SUFFIXES", "MIN_PHOTOS", "photo_names"]
+__all__ = ["PhotoError", "IMAGE_SUFFIXES", "MIN_PHOTOS", "photo_names", "check_readable"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
@@ -31,3 +33,15 @@ def photo_names(folder: str | Path) -> list[str]:
         raise PhotoError(f"{folder} holds {len(names)} photo(s): allowed at least {MIN_PHOTOS} "
                          f"({', '.join(IMAGE_SUFFIXES)})")
     return names
+
+
+def check_readable(folder: str | Path, names: list[str]) -> None:
+    """PhotoError naming the first of `names` that is not an image a reader can open (its header only is read),
+    so a broken file is refused before SfM spends its time on the others."""
+    for name in names:
+        try:
+            with Image.open(Path(folder) / name) as image:
+                image.size
+        except (OSError, UnidentifiedImageError, ValueError) as error:
+            raise PhotoError(f"{Path(folder) / name} cannot be read as an image ({error}): allowed photos "
+                             f"({', '.join(IMAGE_SUFFIXES)})") from None
