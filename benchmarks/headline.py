@@ -50,6 +50,7 @@ HEADLINE = (
     HeadlineRun("train_throughput", "bench_train", ("--skip-quality", "--tasks", "pix2pix-silhouette",
                                                     "--throughput-seconds", "15", "--generate", "40",
                                                     "--data-root", "out/bench-train-data")),
+    HeadlineRun("startup", "bench_startup", ("--repeats", "3")),
 )
 
 

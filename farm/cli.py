@@ -37,10 +37,29 @@ EXIT_INTERRUPTED = 130
 BUG_REPORT = "farm: internal error (a bug): please report it with the traceback above"
 
 
+class _VersionAction(argparse.Action):
+    """--version: the installed treefarm's version, looked up only when asked (start-up time: importlib.metadata
+    reads the installed distributions)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest, nargs=0, default=default, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        import importlib.metadata  # here: see the class docstring
+
+        try:
+            version = importlib.metadata.version("treefarm")
+        except importlib.metadata.PackageNotFoundError:
+            version = "(not installed)"  # a source tree run without installing
+        print(f"farm (treefarm) {version}")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="farm", description="treefarm: procedural trees and training data")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of every error, a user error's too (before the command)")
+    parser.add_argument("--version", action=_VersionAction, help="print the installed treefarm's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:

@@ -40,7 +40,8 @@ def scaled_to_height(params: dict, height: float) -> tuple[dict, Skeleton, TreeM
 def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None) -> Reconstruction:
     """Read a Sapling dictionary from `sketch` and grow it: the `Reconstruction` (method "params") of the dictionary
     the network read, its skeleton and mesh; timings "network", "grow_mesh", "total"; maps "input" (the network's
-    input).
+    input) and "species" (the species the network read, its confidence on [0, 1]: the softmax probability of that
+    species among those training held).
 
     sketch : (H, W) grey, (H, W, 3) or (H, W, 4) image, dark strokes on light paper, any size.
     models : a registry URI or folder (its champion), or None for the shipped default; net : a loaded predictor.
@@ -52,7 +53,9 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
     timer = StageTimer()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)
-    params, prepared = net.predict_view(image, seed=int(seed))
+    outputs, prepared = net.outputs_view(image)
+    params = net.codec.decode_arrays(dict(outputs), seed=int(seed))[0]
+    confidence = float(net.codec.species_confidence(dict(outputs))[0])
     timer.lap("network")
     if height is None:
         skeleton, mesh = species.rebuild(params)
@@ -60,4 +63,5 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
         params, skeleton, mesh = scaled_to_height(params, float(height))
     timer.lap("grow_mesh")
     timings = {**timer.seconds, "total": sum(timer.seconds.values())}
-    return Reconstruction("params", skeleton, mesh, params, timings, {"input": prepared.image[0]})
+    return Reconstruction("params", skeleton, mesh, params, timings,
+                          {"input": prepared.image[0], "species": (params["species"], confidence)})

@@ -32,7 +32,7 @@ from species.timing import StageTimer
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
 from .result import Reconstruction
-from .sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
+from .sfm import PhotoError, Progress, SfmPoints, no_progress, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
 
 __all__ = ["from_photos", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
@@ -246,13 +246,16 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
 
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
-                workdir: str | Path | None = None) -> Reconstruction:
+                workdir: str | Path | None = None, log: str | Path | None = None,
+                progress: Progress | None = None) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
     height   : the tree's height in metres; needed when the folder has no cameras.json (the scale is unknown).
     settings : pycolmap's (`SfmSettings`); poses "estimate" with a cameras.json aligns the estimated model onto it.
     frame, completion, seed, name : as `from_cloud`. workdir : keeps COLMAP's database and model there.
+    log, progress : where COLMAP's log goes, and who is told each stage's progress (`sfm_points`); after SfM's
+               stages comes "tree": the isolation, then the skeleton and the mesh.
     The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
     Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
     """
@@ -266,8 +269,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         raise PhotoError(f"{folder} has no cameras.json listing every photo, so the photos' scale is unknown: "
                          "allowed a tree height in metres (--height M, or height= in Python) to scale the tree by")
     timer = StageTimer()
-    sfm = sfm_points(folder, settings, workdir=workdir)
+    sfm = sfm_points(folder, settings, workdir=workdir, log=log, progress=progress)
     timer.lap("sfm")
+    progress = progress or no_progress
+    progress("tree", 0, 2)
     warnings: list[str] = []
     residual = None
     if sfm.poses == "estimated":
@@ -284,8 +289,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     if missed:
         warnings.append(f"{missed} of {sfm.n_photos} photos were not registered")
     timer.lap("isolate")
+    progress("tree", 1, 2)
     cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
+    progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,
               "scale_factor": tree.scale, "points": tree.counts}

@@ -79,7 +79,8 @@ class RunOptions:
     brush      : two-view's stroke kind; None tells it from the drawings.
     up, frame, completion : cloud and photos (`reconstruct.from_cloud`); poses, threads : photos' SfM
                  (`reconstruct.sfm.SfmSettings`); workdir : photos: where COLMAP's files are kept (None: a
-                 temporary folder).
+                 temporary folder); log : photos: the file COLMAP's log goes to (None: the terminal);
+                 progress : photos: told each stage's progress (`reconstruct.sfm.Progress`).
     name       : the mesh's name (cloud, photos).
     """
 
@@ -97,6 +98,8 @@ class RunOptions:
     threads: int = 0
     name: str = "tree"
     workdir: Any = None
+    log: Any = None
+    progress: Callable[[str, int, int], None] | None = None
 
 
 @dataclass(frozen=True)
@@ -167,7 +170,8 @@ def _run_photos(inputs, options: RunOptions):
 
     settings = SfmSettings(poses=options.poses, threads=options.threads, seed=options.seed)
     return from_photos(inputs["photos"], height=options.height, frame=options.frame, completion=options.completion,
-                       seed=options.seed, settings=settings, name=options.name, workdir=options.workdir)
+                       seed=options.seed, settings=settings, name=options.name, workdir=options.workdir,
+                       log=options.log, progress=options.progress)
 
 
 METHODS: dict[str, Method] = {

@@ -105,17 +105,22 @@ class Reconstruction:
                              "base_in_scan_m": [float(v) for v in scan.transform[:3, 3]],
                              "measures": scan.measures}}
 
-    def glb(self) -> bytes:
-        """The mesh as GLB in the scan's frame, with `extras` on its root node."""
+    def glb(self, *, timings: bool = False) -> bytes:
+        """The mesh as GLB in the scan's frame, with `extras` on its root node; with `timings`, the stage timings
+        too (`timings_s`, seconds), which differ from run to run, so the same inputs no longer give the same bytes."""
         scan = self._scan()
-        return self.mesh.to_glb(transform=None if scan.frame == "base" else scan.transform, extras=self.extras)
+        extras = self.extras
+        if timings:
+            extras["treefarm"]["timings_s"] = {stage: round(float(s), 3) for stage, s in self.timings.items()}
+        return self.mesh.to_glb(transform=None if scan.frame == "base" else scan.transform, extras=extras)
 
     def write(self, out: str | Path, *, skeleton_ply: str | Path | None = None,
-              qsm_csv: str | Path | None = None) -> None:
-        """The GLB at `out`, and the measured skeleton's PLY and branch table when asked; each file is written
-        whole to a temporary name first, so a failure leaves no half file."""
+              qsm_csv: str | Path | None = None, timings: bool = False) -> None:
+        """The GLB at `out` (with the stage timings in its extras when `timings`, see `glb`), and the measured
+        skeleton's PLY and branch table when asked; each file is written whole to a temporary name first, so a
+        failure leaves no half file."""
         scan = self._scan()
-        jobs = [(Path(out), lambda p: p.write_bytes(self.glb()))]
+        jobs = [(Path(out), lambda p: p.write_bytes(self.glb(timings=timings)))]
         if skeleton_ply is not None:
             if scan.frame == "base":
                 jobs.append((Path(skeleton_ply), lambda p: write_skeleton_ply(scan.measured, p)))

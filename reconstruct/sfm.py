@@ -14,9 +14,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import sys
 import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 import pycolmap
@@ -24,19 +28,18 @@ import pycolmap
 from renderers.camera import Camera, CameraError
 from species.timing import StageTimer
 
-from .clouds import CloudError
+from .photo_folder import IMAGE_SUFFIXES, MIN_PHOTOS, PhotoError, check_readable, photo_names
 
 __all__ = ["PhotoError", "SfmSettings", "SfmPoints", "sfm_points", "photo_names", "known_cameras",
-           "align_to_cameras", "IMAGE_SUFFIXES", "MIN_PHOTOS"]
+           "align_to_cameras", "IMAGE_SUFFIXES", "MIN_PHOTOS", "Progress", "no_progress"]
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
-MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
+# progress(stage, done, total): SfM's stages in order, "features" and "matching" (photos), then "mapping" (photos
+# registered, over every attempt) or "triangulation"; `from_photos` adds "tree" (isolation, skeleton, mesh).
+Progress = Callable[[str, int, int], None]
+MIN_KEYPOINTS = 15      # COLMAP's least inlier matches of a verified pair (min_num_inliers): fewer link nothing
+
 MATCHERS = ("auto", "exhaustive", "sequential")
 POSES = ("auto", "known", "estimate")
-
-
-class PhotoError(CloudError):
-    """A photo folder that SfM cannot turn into points; the message names the value and what is allowed."""
 
 
 @dataclass(frozen=True)
@@ -148,19 +151,6 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoi
                       sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings), residual)
 
 
-def photo_names(folder: str | Path) -> list[str]:
-    """The sorted names of the photos directly in `folder`; PhotoError for a missing folder or too few photos."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise PhotoError(f"{folder} is not a folder: allowed a folder of photos ({', '.join(IMAGE_SUFFIXES)})")
-    names = sorted(p.name for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES
-                   and not p.stem.endswith(("_depth", "_mask")))
-    if len(names) < MIN_PHOTOS:
-        raise PhotoError(f"{folder} holds {len(names)} photo(s): allowed at least {MIN_PHOTOS} "
-                         f"({', '.join(IMAGE_SUFFIXES)})")
-    return names
-
-
 def known_cameras(folder: str | Path, names: list[str]) -> dict[str, Camera] | None:
     """`cameras.json`'s camera for every photo, or None when the file is absent or misses a photo; PhotoError when
     it exists but is not our convention, cannot be read, or holds an orthographic view."""
@@ -193,31 +183,98 @@ def _pinhole_params(camera: Camera) -> tuple[float, float, float, float]:
     return float(K[0, 0]), float(K[1, 1]), float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5
 
 
-def sfm_points(folder: str | Path, settings: SfmSettings | None = None, *, workdir: str | Path | None = None
-               ) -> SfmPoints:
+def sfm_points(folder: str | Path, settings: SfmSettings | None = None, *, workdir: str | Path | None = None,
+               log: str | Path | None = None, progress: Progress | None = None) -> SfmPoints:
     """The points SfM triangulates from the photos in `folder` (see the module docstring).
 
-    workdir : where COLMAP's database and model go (kept); by default a temporary folder, removed after.
-    Raises PhotoError for a missing folder, too few photos, a bad cameras.json, or a model that registers fewer
-    than `settings.min_registered` of the photos.
+    workdir  : where COLMAP's database and model go (kept); by default a temporary folder, removed after.
+    log      : a file COLMAP's log is appended to (it writes on the process's stdout and stderr, which are sent
+               there while it runs); None leaves it on them.
+    progress : told each stage's progress (`Progress`).
+    Raises PhotoError for a missing folder, too few photos, one that cannot be read, a bad cameras.json, too few
+    photos with features or linked by matching (said before the next stage starts), or a model that registers
+    fewer than `settings.min_registered` of the photos.
     """
     settings = SfmSettings() if settings is None else settings
     names = photo_names(folder)
+    check_readable(folder, names)
     cameras = known_cameras(folder, names) if settings.poses != "estimate" else None
     if settings.poses == "known" and cameras is None:
         raise PhotoError(f"poses 'known' needs {Path(folder) / 'cameras.json'} listing every photo: allowed "
                          "poses 'estimate' or 'auto' without it")
-    if workdir is None:
-        with tempfile.TemporaryDirectory(prefix="treefarm-sfm-") as tmp:
-            return _run(Path(folder), names, cameras, settings, Path(tmp))
-    workdir = Path(workdir)
-    workdir.mkdir(parents=True, exist_ok=True)
-    return _run(Path(folder), names, cameras, settings, workdir)
+    progress = progress or no_progress
+    with _output_to(log):
+        if workdir is None:
+            with tempfile.TemporaryDirectory(prefix="treefarm-sfm-") as tmp:
+                return _run(Path(folder), names, cameras, settings, Path(tmp), progress)
+        workdir = Path(workdir)
+        workdir.mkdir(parents=True, exist_ok=True)
+        return _run(Path(folder), names, cameras, settings, workdir, progress)
+
+
+def no_progress(stage: str, done: int, total: int) -> None:
+    """A `Progress` that is told nothing worth showing (no progress asked for)."""
+
+
+@contextmanager
+def _output_to(log: str | Path | None) -> Iterator[None]:
+    """The process's stdout and stderr (file descriptors 1 and 2, where COLMAP's glog and prints go) appended to
+    `log` for the block, then restored; nothing changes with None."""
+    if log is None:
+        yield
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    try:
+        with open(log, "ab") as handle:
+            os.dup2(handle.fileno(), 1)
+            os.dup2(handle.fileno(), 2)
+            try:
+                yield
+            finally:
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os.dup2(saved[0], 1)
+                os.dup2(saved[1], 2)
+    finally:
+        os.close(saved[0])
+        os.close(saved[1])
+
+
+def _needed(settings: SfmSettings, n_photos: int) -> int:
+    """The photos a model must hold (`settings.min_registered` of them, at least MIN_PHOTOS)."""
+    return max(MIN_PHOTOS, math.ceil(settings.min_registered * n_photos))
+
+
+def _with_features(database: Path) -> int:
+    """How many photos in the database have at least MIN_KEYPOINTS features."""
+    db = pycolmap.Database.open(database)
+    try:
+        return sum(db.num_keypoints_for_image(image.image_id) >= MIN_KEYPOINTS for image in db.read_all_images())
+    finally:
+        db.close()
+
+
+def _linked(database: Path) -> int:
+    """How many photos matching linked to another (a verified pair with at least MIN_KEYPOINTS inlier matches)."""
+    db = pycolmap.Database.open(database)
+    try:
+        pair_ids, geometries = db.read_two_view_geometries()
+    finally:
+        db.close()
+    photos = set()
+    for pair_id, geometry in zip(pair_ids, geometries):
+        if len(geometry.inlier_matches) >= MIN_KEYPOINTS:
+            photos.update(pycolmap.pair_id_to_image_pair(pair_id))
+    return len(photos)
 
 
 def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, settings: SfmSettings,
-         work: Path) -> SfmPoints:
+         work: Path, progress: Progress) -> SfmPoints:
     timer = StageTimer()
+    needed = _needed(settings, len(names))
+    advice = "take more photos with more overlap (about 10 degrees apart round the tree), or give cameras.json"
     pycolmap.set_random_seed(int(settings.seed))
     database = work / "database.db"
     database.unlink(missing_ok=True)
@@ -238,11 +295,19 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     extraction.max_image_size = int(settings.max_image_size)
     extraction.sift.max_num_features = int(settings.max_features)
     extraction.sift.peak_threshold = float(settings.peak_threshold)
+    progress("features", 0, len(names))
     pycolmap.extract_features(database, folder, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=extraction, device=pycolmap.Device.cpu)
+    progress("features", len(names), len(names))
+    featured = _with_features(database)
+    if featured < needed:
+        raise PhotoError(f"{folder}: {featured} of {len(names)} photos have {MIN_KEYPOINTS} features or more: "
+                         f"allowed at least {needed} ({settings.min_registered:.0%}); photos of the tree in focus, "
+                         "with texture (not blank, blurred or overexposed)")
     if cameras is not None and mode == pycolmap.CameraMode.PER_IMAGE:
         _set_known_intrinsics(database, cameras)
     timer.lap("features")
+    progress("matching", 0, len(names))
     matching = pycolmap.FeatureMatchingOptions()
     matching.num_threads = threads
     matching.guided_matching = bool(settings.guided)
@@ -256,6 +321,11 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
         pairing.overlap = int(settings.overlap)
         pycolmap.match_sequential(database, matching_options=matching, pairing_options=pairing,
                                   device=pycolmap.Device.cpu)
+    linked = _linked(database)
+    progress("matching", len(names), len(names))
+    if linked < needed:
+        raise PhotoError(f"{folder}: matching linked {linked} of {len(names)} photos: allowed at least {needed} "
+                         f"({settings.min_registered:.0%}); {advice}")
     timer.lap("matching")
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = threads
@@ -263,28 +333,39 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     model_dir = work / "model"
     model_dir.mkdir(exist_ok=True)
     if cameras is not None:
+        progress("triangulation", 0, 1)
         model = pycolmap.triangulate_points(_posed_reconstruction(database, cameras), database, folder,
                                             model_dir, options=options)
+        progress("triangulation", 1, 1)
         poses = "known"
     else:
         candidates = []
-        for attempt in range(int(settings.mapping_attempts)):
+        attempts = int(settings.mapping_attempts)
+        registered = [0]  # photos registered so far, over the attempts
+
+        def registered_one() -> None:
+            registered[0] += 1
+            progress("mapping", registered[0], attempts * len(names))
+
+        for attempt in range(attempts):
+            registered[0] = attempt * len(names)
+            progress("mapping", registered[0], attempts * len(names))
             seed = int(settings.seed) + attempt
             pycolmap.set_random_seed(seed)
             options.random_seed = seed
             attempt_dir = model_dir / f"attempt_{attempt}"
             attempt_dir.mkdir(exist_ok=True)
-            candidates += pycolmap.incremental_mapping(database, folder, attempt_dir, options=options).values()
+            candidates += pycolmap.incremental_mapping(database, folder, attempt_dir, options=options,
+                                                       next_image_callback=registered_one).values()
+        progress("mapping", attempts * len(names), attempts * len(names))
         model = max(candidates, key=lambda m: (m.num_reg_images(), m.num_points3D()), default=None)
         poses = "estimated"
     timer.lap("mapping" if poses == "estimated" else "triangulation")
     registered = 0 if model is None else model.num_reg_images()
-    needed = max(MIN_PHOTOS, math.ceil(settings.min_registered * len(names)))
     if registered < needed or model.num_points3D() == 0:
         raise PhotoError(f"{folder}: SfM registered {registered} of {len(names)} photos"
                          f"{'' if model is None else f' with {model.num_points3D()} points'}: allowed at least "
-                         f"{needed} ({settings.min_registered:.0%}); take more photos with more overlap "
-                         f"(about 10 degrees apart round the tree), or give cameras.json")
+                         f"{needed} ({settings.min_registered:.0%}); {advice}")
     points = list(model.points3D.values())
     images = sorted((model.image(i) for i in model.reg_image_ids()), key=lambda image: image.name)
     return SfmPoints(points=np.array([p.xyz for p in points], np.float64).reshape(-1, 3),

@@ -158,11 +158,16 @@ class Predictor:
         """`predict` with the network's input (`trainers.preprocess.Prepared`: the image and the crop of `image`
         it was cut from), so a depth map can be placed back on the drawing, or beside another network's of the
         same drawing, and the input shown without preprocessing the drawing again."""
-        prepared = prepare(image, self.input_kind, self.input_size)
-        outputs = self.model.run(prepared.image[None])
+        outputs, prepared = self.outputs_view(image)
         if self.codec is None:
             return np.asarray(outputs)[0], prepared
         return self.codec.decode_arrays(dict(outputs), seed=seed)[0], prepared
+
+    def outputs_view(self, image):
+        """The network's raw outputs for `image` (a batch of one; TreeSketchNet's by head name, for the codec's
+        `decode_arrays` and `species_confidence`) and its input (`trainers.preprocess.Prepared`)."""
+        prepared = prepare(image, self.input_kind, self.input_size)
+        return self.model.run(prepared.image[None]), prepared
 
     def __repr__(self) -> str:
         return f"Predictor({self.task}, {self.source})"

@@ -320,6 +320,17 @@ class ParameterCodec:
         """`decode` of a batch of outputs: torch tensors or numpy arrays with a leading batch axis."""
         return self.decode_arrays({name: _numpy(value) for name, value in outputs.items()}, seed)
 
+    def species_confidence(self, outputs: Mapping[str, np.ndarray]) -> np.ndarray:
+        """(B,) float64 on [0, 1]: the softmax probability of the species `decode_arrays` reads, over the species
+        training held (the others cannot be read)."""
+        scores = _held_scores(outputs[SPECIES_HEAD], self._class_counts[SPECIES_HEAD])
+        best = scores.max(axis=1)
+        read = np.isfinite(best)  # else no finite score: the pick is `_argmax`'s most frequent class, a guess
+        total = np.exp(scores[read] - best[read, None]).sum(axis=1)
+        confidence = np.zeros(len(best))
+        confidence[read] = 1.0 / total
+        return confidence
+
     def decode_arrays(self, outputs: Mapping[str, np.ndarray], seed: int = 0) -> list[dict]:
         """Dictionaries from (B, width) numpy outputs: values un-normalised, clamped to their training range
         (NaN read as 0, infinities as huge) and integers rounded; each class head's most likely class among those
@@ -500,12 +511,17 @@ def species_fixed_values(name: str) -> dict:
             for key in SPECIES_KEYS if key in fixed}
 
 
+def _held_scores(logits: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """(B, classes) float64: the logits with NaN lowest and the classes training never held (when it held any)
+    at -inf."""
+    scores = np.nan_to_num(np.asarray(logits, np.float64), nan=-np.inf, posinf=np.finfo(np.float64).max)
+    return np.where(counts > 0, scores, -np.inf) if counts.any() else scores
+
+
 def _argmax(logits: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """(B,) int: the class of highest logit among those training held (all, if it held none), NaN lowest.
     A class no training tree had cannot be learned, and some never grow (shapeS 8 needs a custom profile)."""
-    scores = np.nan_to_num(np.asarray(logits, np.float64), nan=-np.inf, posinf=np.finfo(np.float64).max)
-    if counts.any():
-        scores = np.where(counts > 0, scores, -np.inf)
+    scores = _held_scores(logits, counts)
     best = np.argmax(scores, axis=1)
     # A row of only -inf scores argmaxes to class 0, which training may not hold: take its most frequent class.
     return np.where(np.isfinite(scores.max(axis=1)), best, int(np.argmax(counts)))

@@ -74,6 +74,7 @@ def register(subparsers) -> None:
     parser.add_argument("--params-out", help="write the parameter dictionary here (params method)")
     parser.add_argument("--format", choices=("glb", "obj"), default=None, help="default: from --out's suffix")
     parser.add_argument("--report", help="write a PNG: input, maps, skeleton and result side by side")
+    parser.add_argument("--verbose", action="store_true", help="print each stage's seconds")
     parser.add_argument("--out", required=True,
                         help="the tree file (FILE.glb, or FILE.obj with its MTL), or a folder for a batch")
     reconstruct_cloud.add_arguments(parser)
@@ -168,9 +169,6 @@ def _models(args):
 
 
 def run(args: argparse.Namespace) -> int:
-    from farm.dataset import read_image  # here, not at the top: the dataset format's readers (start-up time)
-    from species.meshing import write_tree
-
     check_workers(args.workers)
     clouds = reconstruct_cloud.cloud_inputs(args)
     if clouds is not None:
@@ -183,6 +181,10 @@ def run(args: argparse.Namespace) -> int:
     out, fmt = _output(args)
     if args.seed < 0:
         raise CommandLineError(f"--seed {args.seed} is invalid: allowed an integer >= 0")
+    # Here, after the arguments are checked: the dataset format's readers and the meshing (start-up time).
+    from farm.dataset import read_image
+    from species.meshing import write_tree
+
     started = time.perf_counter()
     models = _models(args)
     positional = iter(args.inputs)
@@ -198,14 +200,18 @@ def run(args: argparse.Namespace) -> int:
             Path(args.params_out).parent.mkdir(parents=True, exist_ok=True)
             Path(args.params_out).write_text(json.dumps(result.params, indent=1, sort_keys=True) + "\n")
     files = write_tree(mesh, out, fmt)
+    read = result.maps.get("species")  # (name, confidence) where the method reads the species
+    species_read = f"species {read[0]} (confidence {read[1]:.2f})" if read else ""
     if args.report:
         from reconstruct.report import write_report
 
         with user_path(args.report, "write"):
-            write_report(args.report, panels, result.skeleton, mesh, title=f"{method.name}: {Path(out).name}")
+            write_report(args.report, panels, result.skeleton, mesh,
+                         title=f"{method.name}: {Path(out).name}" + (f", {species_read}" if read else ""))
+    if args.verbose:
+        reconstruct_cloud.print_stages(result.timings)
     skeleton = result.skeleton
-    stages = ", ".join(f"{k} {v:.2f}" for k, v in result.timings.items() if k != "total")
-    print(f"{method.name}: {skeleton.n_nodes} nodes, height {skeleton.height:.2f} m, crown "
-          f"{skeleton.crown_radius:.2f} m, {mesh.n_faces} faces -> {files[0]} "
-          f"({time.perf_counter() - started:.2f} s; {stages})")
+    print(f"{method.name}: {species_read + ', ' if read else ''}{skeleton.n_nodes} nodes, height "
+          f"{skeleton.height:.2f} m, crown {skeleton.crown_radius:.2f} m, {mesh.n_faces} faces -> {files[0]} "
+          f"({time.perf_counter() - started:.2f} s)")
     return 0

@@ -6,12 +6,14 @@
 
 The method is inferred when omitted: cloud files -> cloud; a folder of images -> photos; a folder of cloud files or
 of photo folders -> a batch of those. A batch runs one Ray task per tree; a tree that fails is reported in the
-summary and the others still finish (exit status 2 if any failed).
+summary and the others still finish (exit status 2 if any failed). Photos: COLMAP's log goes to NAME.sfm.log beside
+each GLB (the summary line names it), and a single run shows a progress bar per stage.
 """
 from __future__ import annotations
 
 import argparse
 import csv
+import os
 import sys
 import time
 import traceback
@@ -51,7 +53,7 @@ def _is_cloud(path: Path) -> bool:
 
 
 def _is_photo_folder(path: Path) -> bool:
-    from reconstruct.sfm import IMAGE_SUFFIXES
+    from reconstruct.photo_folder import IMAGE_SUFFIXES
 
     return path.is_dir() and any(p.suffix.lower() in IMAGE_SUFFIXES for p in path.iterdir() if p.is_file())
 
@@ -119,12 +121,23 @@ def _options(args: argparse.Namespace, batch: bool = False) -> RunOptions:
                       poses=args.poses, threads=1 if batch else 0)
 
 
+def log_path(method: str, out: Path) -> Path | None:
+    """Where a method that reads photos sends COLMAP's log: NAME.sfm.log beside the GLB; None for the others."""
+    return out.with_suffix(".sfm.log") if METHODS[method].reads[0].kind == "photos" else None
+
+
 def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, skeleton_ply: Path | None = None,
                     qsm_csv: Path | None = None, report: Path | None = None) -> dict:
-    """Reconstruct one tree and write its files; returns its summary row (TreefarmErrors propagate)."""
+    """Reconstruct one tree and write its files (COLMAP's log at `log_path`); returns its summary row
+    (TreefarmErrors propagate)."""
     started = time.perf_counter()
     entry = METHODS[method]
-    result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem))
+    log = log_path(method, out)
+    if log is not None:
+        with user_path(log, "write"):
+            log.parent.mkdir(parents=True, exist_ok=True)
+            log.write_bytes(b"")
+    result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem, log=log))
     with user_path(out, "write"):
         result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
     points = result.scan.cloud.points
@@ -144,6 +157,12 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
             "_cloud": points}
 
 
+def print_stages(timings: dict[str, float]) -> None:
+    """--verbose: each stage's seconds, one a line, under the summary line's command."""
+    for stage, seconds in timings.items():
+        print(f"  {stage:<28} {seconds:7.2f} s")
+
+
 def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
     out = Path(args.out)
     if out.suffix.lower() != ".glb":
@@ -151,17 +170,58 @@ def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
                                "frame and the measures in its extras), or a folder for a batch")
     if args.format not in (None, "glb"):
         raise CommandLineError(f"--format {args.format}: --method {method} writes glb only")
-    row = reconstruct_one(method, source, out, _options(args),
-                          Path(args.skeleton_ply) if args.skeleton_ply else None,
-                          Path(args.qsm_csv) if args.qsm_csv else None, Path(args.report) if args.report else None)
+    log = log_path(method, out)
+    bars = StageBars()
+    try:
+        row = reconstruct_one(method, source, out, replace(_options(args), progress=bars),
+                              Path(args.skeleton_ply) if args.skeleton_ply else None,
+                              Path(args.qsm_csv) if args.qsm_csv else None, Path(args.report) if args.report else None)
+    except TreefarmError:
+        if log is not None:  # a refused input writes nothing; the error line says what COLMAP could not do
+            log.unlink(missing_ok=True)
+        raise
+    finally:
+        bars.close()
     for warning in row["message"].split("; ") if row["message"] else []:
         print(f"warning: {warning}", file=sys.stderr)
-    stages = ", ".join(f"{k} {v:.2f}" for k, v in row["_timings"].items())
+    if args.verbose:
+        print_stages(row["_timings"])
     dbh = "n/a" if row["dbh_m"] is None else f"{row['dbh_m']:.3f} m"
-    print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, woody volume "
-          f"{row['total_volume_m3']:.4f} m3, {row['branches']} branches, {row['faces']} faces -> {out} "
-          f"({row['seconds']:.2f} s; {stages})")
+    print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, "
+          f"volume {row['total_volume_m3']:.3f} m3, {row['branches']} branches -> {out} ({row['seconds']:.2f} s"
+          f"{f'; log {log}' if log is not None else ''})")
     return 0
+
+
+class StageBars:
+    """A `reconstruct.sfm.Progress` drawn as one progress bar per stage, on the terminal's stderr as it was when
+    made: COLMAP's output is sent to its log while it runs, the bars are not. No bars where stderr is no terminal."""
+
+    def __init__(self) -> None:
+        self._terminal = os.fdopen(os.dup(2), "w")
+        self._bar = None
+        self._stage = None
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        from tqdm import tqdm  # here: only a run with progress draws bars (start-up time)
+
+        if stage != self._stage:
+            self._close_bar()
+            self._stage = stage
+            self._bar = tqdm(total=total, desc=stage, unit="step" if stage == "tree" else "photo",
+                             file=self._terminal, disable=None)
+        self._bar.total = total
+        self._bar.n = done
+        self._bar.refresh()
+
+    def _close_bar(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+
+    def close(self) -> None:
+        self._close_bar()
+        self._terminal.close()
 
 
 def _batch_task(method: str, source: str, out: str, options: RunOptions, extras: bool) -> dict:
@@ -239,7 +299,8 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
         if row["status"] == "error":
             print(f"error in {row['input']}:\n{row['message']}", file=sys.stderr)
     ok = sum(r["status"] == "ok" for r in rows)
-    print(f"{ok} of {len(rows)} trees -> {out_dir} (summary.csv, contact_sheet.png)")
+    logs = ", NAME.sfm.log (COLMAP's)" if log_path(method, out_dir / "NAME.glb") else ""
+    print(f"{ok} of {len(rows)} trees -> {out_dir} (summary.csv, contact_sheet.png{logs})")
     if any(r["status"] == "error" for r in rows):
         return 1
     return 0 if ok == len(rows) else 2

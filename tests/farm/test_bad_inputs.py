@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from farm.cli import main
 from farm.pipeline import run_job
@@ -77,6 +78,10 @@ BAD_INPUTS = [
     # listing models only reads: a folder that holds no registry is not made one
     (["models", "list", "--models", "{tmp}/in"], "holds no model registry"),
     (["models", "show", "sketchnet", "--models", "{tmp}/registry"], "holds no model registry"),
+    # photos SfM cannot use are refused at the first stage that can tell: reading, features, matching
+    (["reconstruct", "{tmp}/photos/broken", "--height", "3", "--out", "{tmp}/tree.glb"], "cannot be read as an image"),
+    (["reconstruct", "{tmp}/photos/blank", "--height", "3", "--out", "{tmp}/tree.glb"], "0 of 4 photos have 15 features"),
+    (["reconstruct", "{tmp}/photos/noise", "--height", "3", "--out", "{tmp}/tree.glb"], "matching linked 0 of 4 photos"),
 ]
 # What a line must not show of another library's wording: pyarrow's detail and our temporary file names.
 FOREIGN_WORDING = ("Detail: [errno", ".tmp-")
@@ -92,6 +97,19 @@ def _files(folder: Path) -> set[str]:
     return {str(p.relative_to(folder)) for p in folder.rglob("*")}
 
 
+def _photo_folders(folder: Path) -> None:
+    """Four photos each that SfM cannot use: blank (no features), noise (features that match nothing), and one
+    file that is not an image beside three blank ones (broken)."""
+    for name in ("broken", "blank", "noise"):
+        (folder / name).mkdir(parents=True)
+    for k in range(4):
+        Image.fromarray(np.full((64, 64, 3), 128, np.uint8)).save(folder / "blank" / f"grey_{k}.png")
+        noise = np.random.default_rng(k).integers(0, 256, (200, 200, 3), dtype=np.uint8)
+        Image.fromarray(noise).save(folder / "noise" / f"noise_{k}.png")
+        (folder / "broken" / f"photo_{k}.png").write_bytes(b"not a picture" if k == 2 else
+                                                           (folder / "blank" / f"grey_{k}.png").read_bytes())
+
+
 def _prepare(tmp: Path, data: Path, argv: list[str]) -> list[str]:
     inputs = tmp / "in"
     (inputs / "other").mkdir(parents=True)
@@ -104,6 +122,8 @@ def _prepare(tmp: Path, data: Path, argv: list[str]) -> list[str]:
         (inputs / name).write_text(json.dumps(params))
     (inputs / "unknown_only.py").write_text(repr({"lenght": 3, "windSpeed": 2.0}))
     (inputs / "old_bad.py").write_text(repr({"startCurv": 0.0, "levels": "three"}))
+    if any("{tmp}/photos" in word for word in argv):
+        _photo_folders(tmp / "photos")
     if "{damaged}" in argv:
         _truncate_a_part(data)
     return [w.format(tmp=tmp, good=good, good_name=good.name, data=data, damaged=data, readonly=tmp / "readonly")

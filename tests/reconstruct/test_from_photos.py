@@ -118,6 +118,28 @@ def test_cli_refuses_an_unscaled_folder_before_sfm(bare_photos, tmp_path):
     assert wrong.returncode == 2 and "a folder of photos" in wrong.stderr
 
 
+def test_cli_keeps_colmaps_log_out_of_the_terminal_and_names_its_file(photos, tmp_path):
+    out = tmp_path / "tree.glb"
+    done = subprocess.run(FARM + [str(photos.cameras_json.parent), "--out", str(out), "--no-complete"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert [line for line in done.stderr.splitlines() if not line.startswith("warning: ")] == [], done.stderr[-3000:]
+    log = tmp_path / "tree.sfm.log"
+    assert done.stdout.count("\n") == 1 and done.stdout.rstrip().endswith(f"; log {log})"), done.stdout
+    assert "Feature extraction" in log.read_text()  # COLMAP's own log, whole, in the file
+
+
+def test_progress_is_told_each_stage_in_order(photos):
+    told = []
+    from_photos(photos.cameras_json.parent, settings=SfmSettings(threads=1), completion=False,
+                progress=lambda stage, done, total: told.append((stage, done, total)))
+    stages = list(dict.fromkeys(stage for stage, _, _ in told))
+    assert stages == ["features", "matching", "triangulation", "tree"]
+    for stage in stages:
+        counts = [(done, total) for name, done, total in told if name == stage]
+        assert counts[0][0] == 0 and counts[-1][0] == counts[-1][1] > 0  # each from none to all
+
+
 def test_bad_arguments_are_one_line(photos, tmp_path):
     folder = photos.cameras_json.parent
     with pytest.raises(PhotoError, match="frame 'world' is not known"):
@@ -147,5 +169,5 @@ def test_cli_batch_of_photo_folders_reports_the_blank_one_and_finishes_the_other
     # both scaled to the height the command gave (cameras.json's metres give way, with a warning if far off)
     # (the skeleton ends under the sparse top points, short of the given height)
     assert float(rows["phone"]["height_m"]) == pytest.approx(4.3, rel=0.2)
-    assert rows["blank"]["status"] == "failed" and "registered 0 of 4 photos" in rows["blank"]["message"]
+    assert rows["blank"]["status"] == "failed" and "0 of 4 photos have 15 features" in rows["blank"]["message"]
     assert not (out / "blank.glb").exists() and (out / "contact_sheet.png").is_file()

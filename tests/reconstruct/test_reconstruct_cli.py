@@ -18,6 +18,8 @@ from renderers import ViewRenderer
 from reconstruct import InputImageError, from_params
 from reconstruct.from_sketch import SketchError
 from reconstruct.networks import sketch_maps
+from species.meshing.gltf import read_glb_json
+from test_cloud_skeleton import TREE1
 from trainers.preprocess import prepare
 
 
@@ -91,10 +93,12 @@ def test_params_method_writes_a_valid_glb_and_a_dictionary_farm_tree_rebuilds(dr
     out, dictionary, report = tmp_path / "tree.glb", tmp_path / "tree.json", tmp_path / "report.png"
     assert main(["reconstruct", str(drawings["tsn"]), "--out", str(out), "--params-out", str(dictionary),
                  "--report", str(report)]) == 0
-    assert "params:" in capsys.readouterr().out
+    line = capsys.readouterr().out
     assert_valid_glb(out.read_bytes(), tmp_path)
     params = json.loads(dictionary.read_text())
     assert params["species"] in [p.name for p in species.list_presets()]
+    read = re.search(r"^params: species (\S+) \(confidence ([0-9.]+)\), ", line)  # which species it read, how sure
+    assert read and read.group(1) == params["species"] and 0 < float(read.group(2)) <= 1, line
     assert main(["tree", "--params", str(dictionary), "--out", str(tmp_path / "again")]) == 0
     assert (tmp_path / "again" / "tree.glb").read_bytes() == out.read_bytes()
     width, height = Image.open(report).size
@@ -172,8 +176,25 @@ def test_the_api_returns_skeleton_mesh_and_report(drawings):
     result = from_params(image, seed=3)
     assert result.params["seed"] == 3 and result.skeleton.n_nodes > 10 and result.mesh.n_faces > 0
     assert set(result.timings) == {"network", "grow_mesh", "total"} and result.maps["input"].shape == (224, 224)
+    name, confidence = result.maps["species"]
+    assert name == result.params["species"] and 0.0 < confidence <= 1.0
     with pytest.raises(InputImageError, match=r"\(10, 10, 2\)"):
         from_params(np.zeros((10, 10, 2), np.uint8))
+
+
+@pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
+def test_cloud_summary_is_one_short_line_and_the_timings_go_to_verbose_not_the_glb(tmp_path, capsys):
+    out = tmp_path / "tree1.glb"
+    assert main(["reconstruct", str(TREE1), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 1 and len(printed[0]) - len(str(out)) <= 100, printed
+    assert "skeleton" not in printed[0]
+    first = out.read_bytes()
+    root = next(node for node in read_glb_json(first)["nodes"] if "extras" in node)
+    assert "timings_s" not in root["extras"]["treefarm"]  # seconds differ run to run; the file must not
+    assert main(["reconstruct", str(TREE1), "--out", str(out), "--verbose"]) == 0
+    stages = capsys.readouterr().out.splitlines()[:-1]
+    assert {"read", "mesh"} <= {line.split()[0] for line in stages} and out.read_bytes() == first
 
 
 def test_bad_input_is_one_line_and_writes_nothing(drawings, tmp_path, capsys):

@@ -70,11 +70,15 @@ def test_renderer_depth_and_mask_files_are_not_photos(photos):
     assert names == sorted(p.name for p in photos.images)
 
 
-def test_blank_photos_register_nothing_and_say_so(tmp_path):
+def test_blank_photos_are_refused_after_the_features_and_colmaps_log_goes_to_its_file(tmp_path, capfd):
     for k in range(4):
         Image.fromarray(np.full((64, 64, 3), 128, np.uint8)).save(tmp_path / f"grey_{k}.png")
-    with pytest.raises(PhotoError, match=r"registered 0 of 4 photos.*allowed at least 3"):
-        sfm_points(tmp_path, SfmSettings(threads=1))
+    log = tmp_path / "sfm.log"
+    with pytest.raises(PhotoError, match=r"0 of 4 photos have 15 features or more: allowed at least 3"):
+        sfm_points(tmp_path, SfmSettings(threads=1), log=log)
+    assert "Feature extraction" in log.read_text()  # COLMAP's log, in the file
+    printed = capfd.readouterr()
+    assert "Feature extraction" not in printed.err + printed.out  # and not on the terminal
 
 
 def test_folder_errors_name_the_folder_and_what_is_allowed(tmp_path):

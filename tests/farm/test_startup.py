@@ -1,0 +1,101 @@
+"""What each `farm` command imports on its cheap paths: `--help` and a bad argument import none of the heavy
+libraries, and no command imports torch, Ray or pycolmap before it needs them (issue 48, point 13).
+
+Each case runs in a fresh interpreter (`python -c`), as a user's `farm ...` does, and reads `sys.modules` after
+`farm.cli.main` returns. The start-up times are measured in benchmarks/bench_startup.py, not asserted here.
+"""
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from farm.cli import build_parser, main
+
+REPO = Path(__file__).resolve().parents[2]
+TREE1 = REPO.parent / "shared" / "data" / "pointclouds" / "tree1.xyz"
+
+# Imported only by the commands that run them, and only once their arguments are checked.
+RUNTIMES = ("torch", "ray", "pycolmap", "onnxruntime", "mlflow", "pyrender", "OpenGL", "bpy", "matplotlib")
+# The parser (every command's --help) imports none of these either.
+LIBRARIES = RUNTIMES + ("scipy", "cv2", "pandas", "pyarrow", "trimesh", "laspy", "yaml", "tqdm")
+
+_PROBE = """
+import sys
+from farm.cli import main
+try:
+    status = main(sys.argv[2:])
+except SystemExit as exit:
+    status = exit.code
+print(status)
+print(" ".join(sorted(name for name in sys.argv[1].split(",") if name in sys.modules)))
+"""
+
+
+def _imported(argv: list[str], cwd: Path) -> tuple[int, set[str]]:
+    """(exit status, which of LIBRARIES are in sys.modules) after `farm ARGV` in a fresh interpreter."""
+    done = subprocess.run([sys.executable, "-c", _PROBE, ",".join(LIBRARIES), *argv], capture_output=True,
+                          text=True, cwd=cwd, timeout=120, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"})
+    lines = done.stdout.splitlines()
+    assert len(lines) >= 2, done.stderr
+    return int(lines[-2]), set(lines[-1].split())
+
+
+def _commands() -> list[str]:
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    return sorted(sub.choices)
+
+
+def test_every_commands_help_imports_no_heavy_library(tmp_path):
+    for command in _commands():
+        status, imported = _imported([command, "--help"], tmp_path)
+        assert status == 0 and not imported, (command, imported)
+
+
+def test_version_imports_no_heavy_library_and_says_the_version(tmp_path, capsys):
+    status, imported = _imported(["--version"], tmp_path)
+    assert status == 0 and not imported, imported
+    with pytest.raises(SystemExit) as exit:
+        main(["--version"])
+    assert exit.value.code == 0
+    assert re.fullmatch(r"farm \(treefarm\) (\d+\.\d+\S*|\(not installed\))\n", capsys.readouterr().out)
+
+
+# (argv, the libraries it may import besides none of RUNTIMES): a cheap real run or a bad argument of each command
+CHEAP_RUNS = [
+    (["species"], {"scipy"}),  # the one real run: it lists the presets
+    (["tree", "--species", "maple", "--seed", "-3", "--out", "{tmp}/m.glb"], {"cv2"}),
+    (["render", "--species", "maple", "--seed", "-1", "--out", "{tmp}/views"], {"cv2"}),
+    (["generate", "--trees", "0", "--out", "{tmp}/job", "--quiet"], {"scipy", "cv2", "yaml"}),
+    (["status", "{tmp}/none"], {"pyarrow"}),
+    (["validate", "{tmp}/none"], {"pyarrow"}),
+    (["inspect", "{tmp}/none"], {"cv2", "pandas", "pyarrow"}),
+    (["review", "{tmp}/none", "--port", "99999"], {"cv2"}),
+    (["library", "--out", "{tmp}/library", "--quiet", "--workers", "0"], {"scipy", "cv2", "yaml"}),
+    (["train", "sketchnet", "--data", "{tmp}/none", "--workers", "0"], {"pyarrow"}),
+    (["evaluate", "--data", "{tmp}/none", "--out", "{tmp}/report", "--workers", "0"], {"cv2"}),
+    # reconstruct checks its arguments before it imports anything heavy
+    (["reconstruct", "{tmp}/none.xyz", "--out", "{tmp}/tree.glb"], set()),
+    (["reconstruct", "{tmp}/none.png", "--out", "{tmp}/tree.glb"], set()),
+    (["reconstruct", "{tmp}/none.png", "--out", "{tmp}/tree.txt"], set()),
+    (["reconstruct", "{tmp}/photos", "--method", "photos", "--out", "{tmp}/tree.glb", "--height", "-1"], set()),
+]
+
+
+@pytest.mark.parametrize("argv, allowed", CHEAP_RUNS, ids=[" ".join(argv[:2]) for argv, _ in CHEAP_RUNS])
+def test_a_cheap_run_imports_no_runtime_it_does_not_need(argv, allowed, tmp_path):
+    (tmp_path / "photos").mkdir()
+    (tmp_path / "photos" / "a.png").write_bytes(b"")
+    status, imported = _imported([word.format(tmp=tmp_path) for word in argv], tmp_path)
+    assert status == (0 if argv == ["species"] else 2), status  # the others are refused: one line, exit 2
+    assert imported <= set(allowed), imported - set(allowed)
+
+
+@pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
+def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
+    status, imported = _imported(["reconstruct", str(TREE1), "--out", str(tmp_path / "tree.glb")], tmp_path)
+    assert status == 0
+    assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
