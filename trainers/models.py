@@ -215,7 +215,7 @@ def load(name: str, models: str | Path | Registry | None = None, version: int | 
             raise ModelFilesError(f"no default {task.name} model is shipped in {DEFAULT_MODELS}; train one "
                                   f"(farm train {task.name}) and pass --models")
         return predictor_from_folder(folder, task.name, source=f"shipped default {folder}")
-    registry = models if isinstance(models, Registry) else open_registry(models)
+    registry = models if isinstance(models, Registry) else open_registry(models, create=False)
     if version is None:
         chosen = registry.champion(task.model_name) or registry.latest(task.model_name)
         if chosen is None:

@@ -165,7 +165,7 @@ def _models(args):
     from trainers.registry import check_registry_exists, open_registry
 
     check_registry_exists(args.models)
-    return open_registry(args.models)
+    return open_registry(args.models, create=False)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -86,7 +86,7 @@ def registered_scores(task: str, models: str | None) -> dict[str, float]:
         path = DEFAULT_MODELS / task / "metrics_report.json"
         test = json.loads(path.read_text()).get("test", {}) if path.exists() else {}
     else:
-        registry = open_registry(models)
+        registry = open_registry(models, create=False)
         name = get_task(task).model_name
         found = registry.champion(name) or registry.latest(name)
         test = dict(found.metrics) if found is not None else {}
