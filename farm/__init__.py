@@ -7,7 +7,8 @@ Entry points (each imported on first use, see below):
 - asset libraries: `load_library_spec(path)`, `LibrarySpec`, `run_library(spec, out)`, `validate_library(folder)`,
   `add_asset(folder, species, seed)` (`farm.library`);
 - evaluation: `plan_evaluation(...)`, `run_evaluation(plan, out)`, `compare_reports(a, b)` (`farm.evaluate`);
-- review: `ReviewServer`, `export_reviews(dataset, store)` (`farm.review`).
+- review: `ReviewServer`, `export_reviews(dataset, store)` (`farm.review`);
+- a dataset's table as Ray Data: `to_ray(path, table)` (`farm.ray_data`).
 Subpackages: `farm.dataset` (the dataset format, a floor of its own that `trainers` and `reconstruct` read),
 `farm.commands` and `farm.cli` (the command line: `farm.cli.main`).
 """
@@ -27,6 +28,7 @@ _HOMES = {
     "EvaluationError": "farm.evaluate", "plan_evaluation": "farm.evaluate", "run_evaluation": "farm.evaluate",
     "compare_reports": "farm.evaluate",
     "ReviewServer": "farm.review", "ReviewError": "farm.review", "export_reviews": "farm.review",
+    "to_ray": "farm.ray_data",
 }
 
 __all__ = list(_HOMES)

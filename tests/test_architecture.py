@@ -34,8 +34,8 @@ MAY_IMPORT = {
 # Besides the standard library, what `species` may import: nothing knows of Ray, Parquet, torch or a renderer.
 SPECIES_THIRD_PARTY = {"numpy", "scipy", "trimesh", "PIL", "cv2"}
 # Besides the standard library, what the dataset format may import: arrays, Parquet, images, and the libraries its
-# readers hand a table to (each imported where that reader is used).
-FORMAT_THIRD_PARTY = {"numpy", "pyarrow", "PIL", "cv2", "duckdb", "ray", "datasets", "torch"}
+# readers hand a table to (each imported where that reader is used). Not Ray: its reader is `farm.ray_data`.
+FORMAT_THIRD_PARTY = {"numpy", "pyarrow", "PIL", "cv2", "duckdb", "datasets", "torch"}
 THIRD_PARTY = {"species": SPECIES_THIRD_PARTY, "farm-format": FORMAT_THIRD_PARTY}
 
 
@@ -210,6 +210,7 @@ def _imports(relative: str, text: str, known: set[str] = frozenset()) -> list[Im
     ("species/geometry/frames.py", "from pyrender import Mesh\n"),
     ("species/__init__.py", "import bpy\n"),
     ("farm/dataset/readers.py", "import trimesh\n"),
+    ("farm/dataset/readers.py", "def to_ray():\n    import ray.data\n"),
     ("farm/dataset/schema.py", "from renderers import OUTPUTS\n"),
     ("renderers/views.py", "from ..farm.jobs import JobSpec\n"),
     ("benchmarks/bench_mesh.py", "from tests.species.test_mesh import random_tree\n"),

@@ -12,7 +12,7 @@ from __future__ import annotations
 from .format_json import parse_format_json, read_format_json
 from .image_files import IMAGE_SUFFIXES, read_image
 from .readers import (duckdb_connect, open, open_part, part_files, read_columns, read_manifest, read_part,
-                      stored_float_outputs, to_huggingface, to_pandas, to_ray)
+                      stored_float_outputs, to_huggingface, to_pandas)
 from .schema import (DATASET_FORMAT, SCHEMA_VERSION, SKELETON_COLUMNS, TABLES, DatasetError, float_outputs_of,
                      output_columns, part_name, reading_part, serialize_table, skeleton_from_row, trees_schema,
                      views_schema)
@@ -22,7 +22,7 @@ __all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "Da
            "trees_schema", "views_schema", "float_outputs_of", "output_columns", "skeleton_from_row", "part_name",
            "serialize_table", "read_manifest", "part_files", "read_columns", "read_part", "open_part",
            "stored_float_outputs", "open", "to_pandas",
-           "duckdb_connect", "to_ray", "to_huggingface", "parse_format_json", "read_format_json", "Location",
+           "duckdb_connect", "to_huggingface", "parse_format_json", "read_format_json", "Location",
            "read_image", "IMAGE_SUFFIXES", "ViewsDataset"]
 
 

@@ -11,7 +11,7 @@ from .schema import (DATASET_FORMAT, TABLES, DatasetError, float_outputs_of, rea
 from .storage import Location
 
 __all__ = ["read_manifest", "part_files", "read_columns", "read_part", "open_part", "stored_float_outputs", "open",
-           "to_pandas", "duckdb_connect", "to_ray", "to_huggingface"]
+           "to_pandas", "duckdb_connect", "to_huggingface"]
 
 
 def read_manifest(path: str | Location) -> dict:
@@ -111,14 +111,6 @@ def duckdb_connect(path: str):
     for table in TABLES:
         connection.register(table, open(path, table))
     return connection
-
-
-def to_ray(path: str, table: str = "views"):
-    """One table as a `ray.data.Dataset` (rows in part order); call after `ray.init()` or let Ray start one."""
-    import ray.data
-
-    location, files = part_files(path, table)
-    return ray.data.read_parquet(files, filesystem=location.filesystem)
 
 
 def to_huggingface(path: str, table: str = "views", cache_dir: str | None = None, decode_images: bool = True):

@@ -8,6 +8,7 @@ import pytest
 
 import farm.dataset as dataset
 from farm.pipeline import run_job
+from farm.ray_data import to_ray
 from farm_standins import SIZE, StandinChain, standin_spec
 
 
@@ -45,7 +46,7 @@ def test_duckdb_joins_trees_and_views(standin_dataset):
 
 def test_ray_data_reads_every_view(standin_dataset, ray_session):
     _, path = standin_dataset
-    views = dataset.to_ray(path, "views")
+    views = to_ray(path, "views")
     assert views.count() == 10
     assert set(views.take(1)[0]) >= {"tree_id", "camera_json", "depth", "depth_scale"}
 
