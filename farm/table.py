@@ -1,9 +1,10 @@
-"""Plain-text tables and counts for the command line: left-aligned text, right-aligned numbers, "1 shard"."""
+"""Plain-text tables, counts and lists for the command line: left-aligned text, right-aligned numbers, "1 shard",
+"a, b and c"."""
 from __future__ import annotations
 
 from typing import Sequence
 
-__all__ = ["format_table", "counted"]
+__all__ = ["format_table", "counted", "listed"]
 
 
 def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
@@ -21,3 +22,9 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> st
 def counted(n: int, noun: str, plural: str | None = None) -> str:
     """`n` and its noun, singular for one: counted(1, "shard") is "1 shard", counted(4, "shard") "4 shards"."""
     return f"{n} {noun if n == 1 else plural or noun + 's'}"
+
+
+def listed(words, conjunction: str = "and") -> str:
+    """Words as a phrase: "a", "a and b", "a, b and c" (or "or" as the `conjunction`)."""
+    words = list(words)
+    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} {conjunction} {words[-1]}"

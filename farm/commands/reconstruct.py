@@ -30,15 +30,10 @@ from species.errors import user_path
 
 from farm.commands import CommandLineError, reconstruct_cloud
 from farm.commands.ray_options import check_workers
+from farm.table import listed
 
 # The RunOptions fields a drawing method may read that a flag of this command sets.
 OPTION_FLAGS = {"photo": "--photo", "species": "--species"}
-
-
-def _joined(words) -> str:
-    """"a", "a and b", "a, b and c"."""
-    words = list(words)
-    return words[0] if len(words) == 1 else f"{', '.join(words[:-1])} and {words[-1]}"
 
 
 def _drawing_methods() -> list[Method]:
@@ -115,7 +110,7 @@ def _method(args: argparse.Namespace) -> Method:
                                            ("--workers", args.workers), ("--address", args.address)) if value]
     if cloud_only or args.up != "z" or args.frame != "base":
         scans = [m.name for m in METHODS.values() if m.reads[0].kind != "image"]
-        raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are {_joined(scans)} options, not "
+        raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are {listed(scans)} options, not "
                                f"{method.name}'s")
     flagged = [item for item in method.reads if item.flag]
     n_inputs = len(method.reads) - len(flagged)
@@ -138,11 +133,11 @@ def _method(args: argparse.Namespace) -> Method:
     for other in _drawing_methods():
         if other is not method and set(_given(args, other)) - own:
             options = [OPTION_FLAGS[o] for o in other.options if o in OPTION_FLAGS]
-            raise CommandLineError(f"{_joined(_input_flags(other) + options)} are {other.name} options, not "
+            raise CommandLineError(f"{listed(_input_flags(other) + options)} are {other.name} options, not "
                                    f"{method.name}'s")
     if not method.rebuilds and args.params_out:
         rebuilding = [m.name for m in METHODS.values() if m.rebuilds]
-        raise CommandLineError(f"--params-out writes the {_joined(rebuilding)} method's dictionary; --method "
+        raise CommandLineError(f"--params-out writes the {listed(rebuilding)} method's dictionary; --method "
                                f"{method.name} has none")
     return method
 

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options, check_workers
-from farm.table import format_table
+from farm.table import format_table, listed
 from trainers.tasks import TASKS, get_task, print_data_spec
 
 # What a command runs is imported inside its functions: `farm --help` loads every command module, and training,
@@ -33,9 +33,7 @@ from trainers.tasks import TASKS, get_task, print_data_spec
 
 def _description() -> str:
     """The module docstring with the registry's task names where it says where they come from."""
-    names = list(TASKS)
-    listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
-    return __doc__.replace("a task of trainers.tasks.TASKS", listed)
+    return __doc__.replace("a task of trainers.tasks.TASKS", listed(TASKS, "or"))
 
 
 def register(subparsers) -> None:

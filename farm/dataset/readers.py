@@ -77,9 +77,13 @@ def open_part(location: Location, file: str):
 def stored_float_outputs(path: str | Location) -> frozenset[str]:
     """The outputs a dataset stores as float maps: those its views part files store with `<name>_scale` and
     `<name>_offset` columns (read from the first part's schema; none for a dataset without parts)."""
+    return _float_outputs_in(*part_files(path, "views"))
+
+
+def _float_outputs_in(location: Location, files: Sequence[str]) -> frozenset[str]:
+    """`stored_float_outputs` of views part files already listed (the manifest read once)."""
     import pyarrow.parquet as pq
 
-    location, files = part_files(path, "views")
     if not files:
         return frozenset()
     with reading_part(files[0]):
@@ -94,7 +98,7 @@ def open(path: str, table: str = "trees"):  # noqa: A001 - the reader's natural 
     if table == "trees":
         schema = trees_schema()
     else:
-        schema = views_schema(read_manifest(location)["job"]["render"]["outputs"], stored_float_outputs(location))
+        schema = views_schema(read_manifest(location)["job"]["render"]["outputs"], _float_outputs_in(location, files))
     return ds.dataset(files, schema=schema, format="parquet", filesystem=location.filesystem)
 
 

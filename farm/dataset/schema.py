@@ -14,7 +14,6 @@ import numpy as np
 from species.errors import TreefarmError
 from species.skeleton import Skeleton, SkeletonError
 
-
 __all__ = ["DATASET_FORMAT", "SCHEMA_VERSION", "TABLES", "SKELETON_COLUMNS", "DatasetError", "reading_part",
            "trees_schema", "views_schema", "float_outputs_of", "output_columns", "skeleton_from_row", "part_name",
            "serialize_table"]
