@@ -14,6 +14,7 @@ from species.timing import StageTimer
 from species.tree_mesh import TreeMesh
 
 from ._sketch_arrays import check_height
+from .fitting import DEFAULT_FIT_EVALS, FIT_SIZE, check_fit_evals, drawing_outline, fit_params
 from .networks import as_image, predictor
 from .result import Reconstruction
 
@@ -37,19 +38,25 @@ def scaled_to_height(params: dict, height: float) -> tuple[dict, Skeleton, TreeM
     return params, skeleton, mesh
 
 
-def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None) -> Reconstruction:
-    """Read a Sapling dictionary from `sketch` and grow it: the `Reconstruction` (method "params") of the dictionary
-    the network read, its skeleton and mesh; timings "network", "grow_mesh", "total"; maps "input" (the network's
-    input) and "species" (the species the network read, its confidence on [0, 1]: the softmax probability of that
-    species among those training held).
+def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float | None = None,
+                fit_evals: int = DEFAULT_FIT_EVALS, renderer=None) -> Reconstruction:
+    """Read a Sapling dictionary from `sketch`, fit it to the drawing and grow it: the `Reconstruction` (method
+    "params") of the dictionary, its skeleton and mesh; timings "network", "fit" (with fitting), "grow_mesh",
+    "total"; maps "input" (the network's input), "species" (the species grown, its confidence on [0, 1]: the
+    network's softmax probability of that species among those training held) and, with fitting, "fit" (a
+    `reconstruct.fitting.FitRecord`: the outlines and scores of the first guess and the fit, the species tried).
 
     sketch : (H, W) grey, (H, W, 3) or (H, W, 4) image, dark strokes on light paper, any size.
     models : a registry URI or folder (its champion), or None for the shipped default; net : a loaded predictor.
     seed   : the dictionary's `seed` (Weber-Penn's split and variation draws), so one sketch can give variants.
     height : metres; the dictionary's scale is set so the tree is this tall (`scaled_to_height`). A sketch is
              drawn at no scale, so without it the size is the network's guess from the tree's species and shape.
+    fit_evals : candidate trees the fit may grow and redraw (`reconstruct.fitting.fit_params`); 0 grows the
+             network's guess as it is.
+    renderer : a `renderers.ViewRenderer` to redraw candidates with (one is made when fitting without it).
     """
     check_height(height, "the network's guess")
+    fit_evals = check_fit_evals(fit_evals)
     timer = StageTimer()
     image = as_image(sketch, "sketch")
     net = net or predictor("sketchnet", models)
@@ -57,6 +64,12 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
     params = net.codec.decode_arrays(dict(outputs), seed=int(seed))[0]
     confidence = float(net.codec.species_confidence(dict(outputs))[0])
     timer.lap("network")
+    maps = {"input": prepared.image[0]}
+    if fit_evals:
+        fit = _fitted(net.codec, dict(outputs), image, fit_evals, int(seed), renderer)
+        params, maps["fit"] = fit.params, fit.record
+        confidence = fit.record.species_scores[params["species"]][1]
+        timer.lap("fit")
     if height is None:
         skeleton, mesh = species.rebuild(params)
     else:
@@ -64,4 +77,20 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
     timer.lap("grow_mesh")
     timings = {**timer.seconds, "total": sum(timer.seconds.values())}
     return Reconstruction("params", skeleton, mesh, params, timings,
-                          {"input": prepared.image[0], "species": (params["species"], confidence)})
+                          {**maps, "species": (params["species"], confidence)})
+
+
+def _fitted(codec, outputs: dict, image, evals: int, seed: int, renderer):
+    """`fit_params` on the drawing's outline, with `renderer` (or a new one) at the fit's size."""
+    from renderers import ViewRenderer
+
+    target = drawing_outline(image)
+    own = renderer is None
+    renderer = ViewRenderer(FIT_SIZE) if own else renderer
+    size, renderer.size = renderer.size, FIT_SIZE
+    try:
+        return fit_params(codec, outputs, target, evals, seed, renderer)
+    finally:
+        renderer.size = size
+        if own:
+            renderer.close()

@@ -23,11 +23,16 @@ if TYPE_CHECKING:  # the result's module imports scipy (see the module docstring
     from .result import Reconstruction
 
 __all__ = ["METHODS", "Method", "Input", "Rendered", "RunOptions", "MethodError", "INPUT_KINDS", "get_method",
-           "methods_table"]
+           "methods_table", "DEFAULT_FIT_EVALS"]
 
 # What a method can read, by kind: (one, several) as messages name them.
 INPUT_KINDS = {"image": ("an image file", "image files"), "cloud": ("a point cloud", "cloud files"),
                "photos": ("a folder of photos", "photo folders")}
+
+
+# Candidate trees a drawing method's fit grows and redraws by default (`reconstruct.fitting`): about 4 s on one
+# core here (docs/reconstruct.md, Fitting to the drawing).
+DEFAULT_FIT_EVALS = 32
 
 
 class MethodError(TreefarmError):
@@ -82,6 +87,8 @@ class RunOptions:
                  temporary folder); log : photos: the file COLMAP's log goes to (None: the terminal);
                  progress : photos: told each stage's progress (`reconstruct.sfm.Progress`).
     name       : the mesh's name (cloud, photos).
+    fit_evals  : the drawing methods' fit to their input (`reconstruct.fitting`): candidate trees grown and redrawn;
+                 0 keeps the method's first guess.
     """
 
     seed: int = 0
@@ -100,6 +107,7 @@ class RunOptions:
     workdir: Any = None
     log: Any = None
     progress: Callable[[str, int, int], None] | None = None
+    fit_evals: int = DEFAULT_FIT_EVALS
 
 
 @dataclass(frozen=True)
@@ -137,7 +145,7 @@ def _run_params(inputs, options: RunOptions):
     from .from_params import from_params  # imported when run (module docstring)
 
     return from_params(inputs["sketch"], models=options.models, net=options.nets.get("sketchnet"), seed=options.seed,
-                       height=options.height)
+                       height=options.height, fit_evals=options.fit_evals)
 
 
 def _run_sketch_depth(inputs, options: RunOptions):
@@ -178,7 +186,7 @@ METHODS: dict[str, Method] = {
     "params": Method(
         "params", (Input("sketch", "image", "a sketch, black strokes on white",
                          rendered=Rendered("tsn4", "front", "sketch_tsn")),),
-        _run_params, models=("sketchnet",), panels=(("input", "input"),), rebuilds=True,
+        _run_params, models=("sketchnet",), options=("fit_evals",), panels=(("input", "input"),), rebuilds=True,
         summary="TreeSketchNet predicts a Sapling dictionary; the Weber-Penn generator grows it",
         source="seed 004"),
     "sketch-depth": Method(

@@ -31,7 +31,7 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-__all__ = ["KINDS", "MARGIN", "MIN_STROKE_PX", "SPECK_SHARE", "Crop", "Prepared", "PreprocessError", "preprocess",
+__all__ = ["ink_mask", "KINDS", "MARGIN", "MIN_STROKE_PX", "SPECK_SHARE", "Crop", "Prepared", "PreprocessError", "preprocess",
            "prepare", "apply_crop", "paper_image"]
 
 KINDS = {"sketch": 1, "strokes": 3}
@@ -166,6 +166,12 @@ def _ink_mask(ink: np.ndarray) -> np.ndarray:
     if not kept.any():
         raise PreprocessError("the image is blank: no stroke is darker than half way from paper to ink")
     return kept
+
+
+def ink_mask(image, kind: str = "sketch") -> np.ndarray:
+    """(H, W) bool: where `image` is inked, as `prepare` finds it (paper level from the border, ink level
+    stretched, dust removed), at the image's own size; PreprocessError for a blank image."""
+    return _ink_mask(paper_image(image, kind))
 
 
 def _crop_of(mask: np.ndarray) -> Crop:

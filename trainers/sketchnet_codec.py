@@ -331,6 +331,30 @@ class ParameterCodec:
         confidence[read] = 1.0 / total
         return confidence
 
+    def species_ranking(self, outputs: Mapping[str, np.ndarray]) -> list[tuple[str, float]]:
+        """The species training held, most likely first, with their softmax probabilities, for the first sample of
+        `outputs` (what `species_confidence` gives the first of)."""
+        scores = _held_scores(outputs[SPECIES_HEAD], self._class_counts[SPECIES_HEAD])[0]
+        held = np.flatnonzero(np.isfinite(scores))
+        if held.size == 0:
+            return [(self.species[int(_argmax(outputs[SPECIES_HEAD][:1], self._class_counts[SPECIES_HEAD])[0])], 0.0)]
+        weights = np.exp(scores[held] - scores[held].max())
+        order = np.argsort(-scores[held], kind="stable")
+        return [(self.species[int(held[i])], float(weights[i] / weights.sum())) for i in order]
+
+    def with_species(self, outputs: Mapping[str, np.ndarray], name: str) -> dict[str, np.ndarray]:
+        """A copy of `outputs` whose species head reads `name` (a species training held), all else alike."""
+        index = self.species.index(name)
+        logits = np.array(outputs[SPECIES_HEAD], np.float64, copy=True)
+        finite = logits[np.isfinite(logits)]
+        logits[:, index] = (finite.max() if finite.size else 0.0) + 1.0
+        return {**outputs, SPECIES_HEAD: logits}
+
+    def normalised_range(self, head: str) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) (n,) of a regression head's outputs: the values `decode_arrays` keeps unclamped."""
+        stats = self._stats[head]
+        return (stats.low - stats.offset) / stats.scale, (stats.high - stats.offset) / stats.scale
+
     def decode_arrays(self, outputs: Mapping[str, np.ndarray], seed: int = 0) -> list[dict]:
         """Dictionaries from (B, width) numpy outputs: values un-normalised, clamped to their training range
         (NaN read as 0, infinities as huge) and integers rounded; each class head's most likely class among those

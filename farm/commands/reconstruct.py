@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reconstruct.methods import INPUT_KINDS, METHODS, Method, RunOptions
+from reconstruct.methods import DEFAULT_FIT_EVALS, INPUT_KINDS, METHODS, Method, RunOptions
 from species.errors import user_path
 
 from farm.commands import CommandLineError, reconstruct_cloud
@@ -65,6 +65,9 @@ def register(subparsers) -> None:
                              "default sc_round_maple")
     parser.add_argument("--height", type=float, help="tree height in metres (default: the method's)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the growth draws (default 0)")
+    parser.add_argument("--fit-evals", type=int, default=None, metavar="N",
+                        help="candidate trees the fit to the drawing grows and redraws (default "
+                             f"{DEFAULT_FIT_EVALS}, about 4 s; 0: the method's first guess as it is)")
     parser.add_argument("--models", help="model registry URI or folder (default: the shipped models/)")
     parser.add_argument("--params-out", help="write the parameter dictionary here (params method)")
     parser.add_argument("--format", choices=("glb", "obj"), default=None, help="default: from --out's suffix")
@@ -135,6 +138,9 @@ def _method(args: argparse.Namespace) -> Method:
             options = [OPTION_FLAGS[o] for o in other.options if o in OPTION_FLAGS]
             raise CommandLineError(f"{listed(_input_flags(other) + options)} are {other.name} options, not "
                                    f"{method.name}'s")
+    if args.fit_evals is not None and "fit_evals" not in method.options:
+        fitting = [m.name for m in METHODS.values() if "fit_evals" in m.options]
+        raise CommandLineError(f"--fit-evals is an option of {listed(fitting)}, not {method.name}'s")
     if not method.rebuilds and args.params_out:
         rebuilding = [m.name for m in METHODS.values() if m.rebuilds]
         raise CommandLineError(f"--params-out writes the {listed(rebuilding)} method's dictionary; --method "
@@ -167,6 +173,9 @@ def run(args: argparse.Namespace) -> int:
     check_workers(args.workers)
     clouds = reconstruct_cloud.cloud_inputs(args)
     if clouds is not None:
+        if args.fit_evals is not None:
+            raise CommandLineError("--fit-evals fits a drawing method's tree to its drawing; a point cloud's tree "
+                                   "is measured from its points")
         if args.height is not None and not (np.isfinite(args.height) and args.height > 0):
             raise CommandLineError(f"--height {args.height} is invalid: allowed a number of metres > 0")
         if args.seed < 0:
@@ -176,6 +185,9 @@ def run(args: argparse.Namespace) -> int:
     out, fmt = _output(args)
     if args.seed < 0:
         raise CommandLineError(f"--seed {args.seed} is invalid: allowed an integer >= 0")
+    if args.fit_evals is not None and args.fit_evals < 0:
+        raise CommandLineError(f"--fit-evals {args.fit_evals} is invalid: allowed an integer >= 0 (0 turns "
+                               "fitting off)")
     # Here, after the arguments are checked: the dataset format's readers and the meshing (start-up time).
     from farm.dataset import read_image
     from species.meshing import write_tree
@@ -185,10 +197,15 @@ def run(args: argparse.Namespace) -> int:
     positional = iter(args.inputs)
     inputs = {item.name: read_image(getattr(args, item.name) if item.flag else next(positional))
               for item in method.reads}
+    fit_evals = DEFAULT_FIT_EVALS if args.fit_evals is None else args.fit_evals
     result = method.run(inputs, RunOptions(seed=args.seed, height=args.height, models=models, species=args.species,
-                                           photo=args.photo))
+                                           photo=args.photo, fit_evals=fit_evals))
     shown = {**inputs, **result.maps}  # a panel names a map of the result, or else an input
     panels = [(label, shown[name]) for label, name in method.report_panels]
+    fit = result.maps.get("fit")  # a reconstruct.fitting.FitRecord where the method fitted its tree
+    if fit is not None:
+        panels += [(f"first guess: outline IoU {fit.first_score:.2f}", fit.overlay(fitted=False)),
+                   (f"fitted: outline IoU {fit.score:.2f}", fit.overlay(fitted=True))]
     mesh = replace(result.mesh, name=out.stem)
     if args.params_out:
         with user_path(args.params_out, "write"):
@@ -205,8 +222,17 @@ def run(args: argparse.Namespace) -> int:
                          title=f"{method.name}: {Path(out).name}" + (f", {species_read}" if read else ""))
     if args.verbose:
         reconstruct_cloud.print_stages(result.timings)
+        if fit is not None:
+            print("  fit: outline IoU after N evaluations: " + _by_evaluations(fit.trace.best))
     skeleton = result.skeleton
-    print(f"{method.name}: {species_read + ', ' if read else ''}{skeleton.n_nodes} nodes, height "
+    fitted = f"outline IoU {fit.first_score:.2f} -> {fit.score:.2f}, " if fit is not None else ""
+    print(f"{method.name}: {species_read + ', ' if read else ''}{fitted}{skeleton.n_nodes} nodes, height "
           f"{skeleton.height:.2f} m, crown {skeleton.crown_radius:.2f} m, {mesh.n_faces} faces -> {files[0]} "
           f"({time.perf_counter() - started:.2f} s)")
     return 0
+
+
+def _by_evaluations(best: list[float]) -> str:
+    """The best score after 1, 2, 4, ... evaluations and after the last: what a larger or smaller budget buys."""
+    marks = sorted({min(2**k, len(best)) for k in range(len(best).bit_length() + 1)})
+    return ", ".join(f"{n}: {best[n - 1]:.2f}" for n in marks)

@@ -1,0 +1,286 @@
+"""Fitting a reconstruction to its drawing (analysis by synthesis): redraw candidate trees in the drawing's view,
+compare outlines, and search for the candidate that matches best within a budget of candidate evaluations.
+
+The parts every sketch method shares:
+- `outline(mask)`: a drawing's ink or a render's coverage as a filled outline: cut to its bounding box, scaled
+  to OUTLINE_HEIGHT pixels tall (a drawing has no scale), pen gaps closed and enclosed paper filled, so a contour
+  drawing (a cloud on a stick) and a rendered crown of leaves become the same kind of shape.
+- `outline_iou(a, b)`: two outlines on one canvas, centred on one vertical axis (a tree's), intersection over union.
+- `drawing_outline(image)`: the outline of a drawing as `trainers.preprocess` finds its ink (paper, pen and scan
+  levels evened out, dust removed).
+- `search(score, x0, evals, rng)`: CMA-ES (the `cma` package) over a box [0, 1]^n, maximising `score`, starting
+  at x0 (the method's first guess), which is always evaluated first: the result is never worse than the guess.
+  The budget is a number of evaluations, not seconds, so a seed and a budget give the same result on any machine.
+
+`fit_params` is the params method's search (the Weber-Penn dictionary around TreeSketchNet's guess).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from species.errors import TreefarmError
+
+from .methods import DEFAULT_FIT_EVALS
+
+__all__ = ["OUTLINE_HEIGHT", "DEFAULT_FIT_EVALS", "FitError", "FitTrace", "outline", "outline_iou",
+           "drawing_outline", "search", "check_fit_evals", "render_outline", "FitRecord", "ParamsFit", "fit_params",
+           "PARAMS_FIT_SLOTS"]
+
+OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall
+OUTLINE_CLOSING = 5    # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
+FIT_SIZE = 96          # candidates are rendered this many pixels square
+
+
+class FitError(TreefarmError):
+    """A fitting budget that is not a count of evaluations."""
+
+
+def check_fit_evals(evals) -> int:
+    """The budget as an int, or a FitError naming it and what is allowed."""
+    if isinstance(evals, bool) or not isinstance(evals, (int, np.integer)) or evals < 0:
+        raise FitError(f"--fit-evals {evals!r} is invalid: allowed an integer >= 0 (0 turns fitting off)")
+    return int(evals)
+
+
+# ------------------------------------------------------------------------------------------------ outlines
+def outline(mask: np.ndarray) -> np.ndarray:
+    """(OUTLINE_HEIGHT, W) bool filled outline of a (H, W) mask (module docstring); (0, 0) for an empty mask."""
+    mask = np.asarray(mask, bool)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return np.zeros((0, 0), bool)
+    box = mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].astype(np.uint8) * 255
+    width = max(1, int(round(box.shape[1] * OUTLINE_HEIGHT / box.shape[0])))
+    # Area averaging keeps a thin pen line when a large drawing shrinks; any ink in a cell counts.
+    scaled = cv2.resize(box, (width, OUTLINE_HEIGHT), interpolation=cv2.INTER_AREA) > 0
+    pad = OUTLINE_CLOSING + 1
+    padded = np.pad(scaled, pad)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * OUTLINE_CLOSING + 1,) * 2)
+    closed = cv2.morphologyEx(padded.astype(np.uint8), cv2.MORPH_CLOSE, kernel) > 0
+    return ndimage.binary_fill_holes(closed)[pad:-pad, pad:-pad]
+
+
+def outline_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """IoU of two outlines (`outline`) placed on one canvas, each centred on its vertical axis; 0 if one is empty."""
+    if a.size == 0 or b.size == 0:
+        return 0.0
+    width = max(a.shape[1], b.shape[1])
+    placed = [np.pad(m, ((0, 0), ((width - m.shape[1]) // 2, width - m.shape[1] - (width - m.shape[1]) // 2)))
+              for m in (a, b)]
+    union = np.logical_or(*placed).sum()
+    return float(np.logical_and(*placed).sum() / union) if union else 0.0
+
+
+def drawing_outline(image: np.ndarray, kind: str = "sketch") -> np.ndarray:
+    """The filled outline of a drawing's ink (`trainers.preprocess.ink_mask`: dark strokes on light paper or
+    light on dark, colour strokes with kind "strokes"); PreprocessError for a blank image."""
+    from trainers.preprocess import ink_mask
+
+    return outline(ink_mask(image, kind))
+
+
+def render_outline(renderer, mesh, camera) -> np.ndarray:
+    """The filled outline of a tree's coverage in one camera; empty for a tree with no triangles."""
+    if mesh.n_faces == 0:
+        return np.zeros((0, 0), bool)
+    return outline(renderer.silhouette_masks(mesh, [camera])[0])
+
+
+# ------------------------------------------------------------------------------------------------ the search
+@dataclass
+class FitTrace:
+    """A search's record: every evaluation's score in order, and the best so far after each (what the report
+    and `--verbose` show against the budget)."""
+
+    scores: list[float] = field(default_factory=list)
+
+    @property
+    def best(self) -> list[float]:
+        return np.maximum.accumulate(self.scores).tolist() if self.scores else []
+
+    @property
+    def evals(self) -> int:
+        return len(self.scores)
+
+    def add(self, score: float) -> float:
+        self.scores.append(float(score))
+        return float(score)
+
+
+def search(score: Callable[[np.ndarray], float], x0: np.ndarray, evals: int, rng: np.random.Generator,
+           x0_score: float | None = None, sigma: float = 0.15, popsize: int = 6) -> tuple[np.ndarray, float]:
+    """(best x, its score) after at most `evals` calls of `score` (higher is better) on [0, 1]^n, starting at x0
+    (scored first, unless its score is given as `x0_score`), so the answer is never worse than x0. CMA-ES draws its
+    samples from `rng` only: the same rng state gives the same calls."""
+    import cma
+
+    x0 = np.clip(np.asarray(x0, np.float64), 0.0, 1.0)
+    left = evals
+    if x0_score is None:
+        if left <= 0:
+            raise FitError("a search needs at least one evaluation to score its start")
+        x0_score, left = float(score(x0)), left - 1
+    best_x, best = x0, float(x0_score)
+    if left <= 0 or x0.size == 0:
+        return best_x, best
+    options = {"bounds": [0.0, 1.0], "popsize": popsize, "verbose": -9, "seed": np.nan,
+               "randn": lambda *shape: rng.standard_normal(shape), "CMA_diagonal": True,
+               "tolx": 0.0, "tolfun": 0.0, "tolfunhist": 0.0, "tolflatfitness": 10**6, "tolstagnation": 10**6}
+    es = cma.CMAEvolutionStrategy(x0.tolist(), sigma, options)
+    while left > 0:
+        candidates = es.ask()
+        scores = []
+        for x in candidates[:left]:
+            scores.append(float(score(np.asarray(x, np.float64))))
+            if scores[-1] > best:
+                best_x, best = np.asarray(x, np.float64), scores[-1]
+        left -= len(scores)
+        if len(scores) < len(candidates):
+            break
+        es.tell(candidates, [-v for v in scores])
+    return best_x, best
+
+
+# ------------------------------------------------------------------------------------------------ params
+# The Weber-Penn outputs the params fit moves (regression head, key, level or None): those that shape the outline
+# seen from the front (crown base, branch lengths and angles, trunk splits, leaf size). The rest keep the guess.
+PARAMS_FIT_SLOTS: tuple[tuple[str, int | None], ...] = (
+    ("baseSize", None), ("length", 1), ("length", 2), ("downAngle", 1), ("downAngle", 2), ("curve", 0),
+    ("curve", 1), ("attractUp", 1), ("segSplits", 0), ("splitAngle", 0), ("leafScale", None), ("branches", 1),
+)
+SPECIES_TRIED = 3   # the network's most likely species, each grown from its guess before the search
+SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the best species
+
+
+@dataclass
+class FitRecord:
+    """What a fit did, for the report and the command line: the drawing's outline, the first guess's and the
+    fitted tree's outlines and scores, every evaluation's score (`trace`) and, for params, the species tried
+    (name -> (outline score of its guess, the network's probability))."""
+
+    target: np.ndarray
+    first_outline: np.ndarray
+    first_score: float
+    outline: np.ndarray
+    score: float
+    trace: FitTrace
+    species_scores: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    def overlay(self, fitted: bool = True) -> np.ndarray:
+        """(OUTLINE_HEIGHT, W, 3) uint8: the drawing's outline in green, the first guess's (or the fitted tree's)
+        in red, where both agree yellow, on black; each centred on the vertical axis as `outline_iou` places it."""
+        shown = self.outline if fitted else self.first_outline
+        masks = [m if m.size else np.zeros((OUTLINE_HEIGHT, 1), bool) for m in (self.target, shown)]
+        width = max(m.shape[1] for m in masks)
+        placed = [np.pad(m, ((0, 0), ((width - m.shape[1]) // 2, width - m.shape[1] - (width - m.shape[1]) // 2)))
+                  for m in masks]
+        picture = np.zeros((OUTLINE_HEIGHT, width, 3), np.uint8)
+        picture[..., 1] = placed[0] * 255
+        picture[..., 0] = placed[1] * 255
+        return picture
+
+
+@dataclass
+class ParamsFit:
+    """The params fit's answer: the dictionary and the record."""
+
+    params: dict
+    record: FitRecord
+
+
+def _slot_columns(codec) -> list[tuple[str, int]]:
+    """(head, column) of each PARAMS_FIT_SLOTS entry in the codec's outputs."""
+    from trainers.sketchnet_codec import HEAD_TABLE, SLOTS
+
+    columns = []
+    for key, level in PARAMS_FIT_SLOTS:
+        head = next(h for h, (_, keys) in HEAD_TABLE.items() if key in keys)
+        column = next(i for i, slot in enumerate(SLOTS[head]) if slot.key == key and slot.level == level)
+        columns.append((head, column))
+    return columns
+
+
+def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, renderer,
+               grow: Callable[[dict], tuple] | None = None) -> ParamsFit:
+    """Search TreeSketchNet's output space around its guess for the dictionary whose tree's front outline matches
+    `target` (`drawing_outline` of the sketch): the guess first, then the network's next species, then decode
+    seeds seed + 1, ..., then CMA-ES over PARAMS_FIT_SLOTS (each within the codec's training range), all within
+    `evals` (>= 1) evaluations. `grow(params) -> (skeleton, mesh)` (default `species.rebuild`)."""
+    import species
+
+    grow = grow or species.rebuild
+    trace = FitTrace()
+    camera_rng = np.random.default_rng(0)
+    outlines: dict[int, np.ndarray] = {}  # evaluation index -> outline, kept for the first and the best
+
+    def evaluate(candidate: dict) -> float:
+        try:
+            _, mesh = grow(candidate)
+        except TreefarmError:
+            shape = np.zeros((0, 0), bool)
+        else:
+            shape = (render_outline(renderer, mesh, renderer.cameras(mesh, "tsn4", camera_rng)[0]) if mesh.n_faces
+                     else np.zeros((0, 0), bool))
+        value = outline_iou(shape, target)
+        if not trace.scores or value > max(trace.scores):
+            outlines[trace.evals] = shape
+        return trace.add(value)
+
+    def decoded(outs: dict, decode_seed: int) -> dict:
+        return codec.decode_arrays(outs, seed=int(decode_seed))[0]
+
+    ranking = codec.species_ranking(outputs)
+    best_outputs, best_seed = outputs, int(seed)
+    best_params = decoded(outputs, seed)
+    first = best = evaluate(best_params)
+    species_scores = {best_params["species"]: (first, dict(ranking).get(best_params["species"], 0.0))}
+    for name, probability in ranking[1:SPECIES_TRIED]:
+        if trace.evals >= evals:
+            break
+        outs = codec.with_species(outputs, name)
+        params = decoded(outs, seed)
+        value = evaluate(params)
+        species_scores[name] = (value, probability)
+        if value > best:
+            best, best_outputs, best_params = value, outs, params
+    for offset in range(1, SEEDS_TRIED):
+        if trace.evals >= evals:
+            break
+        params = decoded(best_outputs, seed + offset)
+        value = evaluate(params)
+        if value > best:
+            best, best_seed, best_params = value, seed + offset, params
+    left = evals - trace.evals
+    if left > 0:
+        columns = _slot_columns(codec)
+        ranges = {head: codec.normalised_range(head) for head, _ in columns}
+        low = np.array([ranges[h][0][c] for h, c in columns])
+        high = np.array([ranges[h][1][c] for h, c in columns])
+        span = np.where(high > low, high - low, 1.0)
+        guess = np.array([float(np.asarray(best_outputs[h])[0, c]) for h, c in columns])
+        x0 = np.clip((guess - low) / span, 0.0, 1.0)
+        chosen: dict[bytes, dict] = {}
+
+        def moved(x: np.ndarray) -> dict:
+            outs = {k: np.array(v, copy=True) for k, v in best_outputs.items()}
+            for (head, column), value in zip(columns, low + x * span):
+                outs[head][0, column] = value
+            return outs
+
+        def score(x: np.ndarray) -> float:
+            params = decoded(moved(x), best_seed)
+            value = evaluate(params)
+            chosen[x.tobytes()] = params
+            return value
+
+        x, value = search(score, x0, left, np.random.default_rng(best_seed), x0_score=best)
+        if value > best:
+            best, best_params = value, chosen[x.tobytes()]
+    best_index = int(np.argmax(trace.scores))
+    return ParamsFit(best_params, FitRecord(target, outlines[0], first, outlines[best_index], best, trace,
+                                            species_scores))
