@@ -3,8 +3,9 @@ compare outlines, and search for the candidate that matches best within a budget
 
 The parts every sketch method shares:
 - `outline(mask)`: a drawing's ink or a render's coverage as a filled outline: cut to its bounding box, scaled
-  to OUTLINE_HEIGHT pixels tall (a drawing has no scale), pen gaps closed and enclosed paper filled, so a contour
-  drawing (a cloud on a stick) and a rendered crown of leaves become the same kind of shape.
+  to OUTLINE_HEIGHT pixels tall (a drawing has no scale), pen gaps closed and the paper enclosed by the strokes and
+  the ground filled, so a contour drawing (a cloud on a stick) and a rendered crown of leaves become the same kind
+  of shape.
 - `outline_iou(a, b)`: two outlines on one canvas, centred on one vertical axis (a tree's), intersection over union.
 - `drawing_outline(image)`: the outline of a drawing as `trainers.preprocess` finds its ink (paper, pen and scan
   levels evened out, dust removed).
@@ -28,11 +29,12 @@ from species.errors import TreefarmError
 from .methods import DEFAULT_FIT_EVALS
 
 __all__ = ["OUTLINE_HEIGHT", "DEFAULT_FIT_EVALS", "FitError", "FitTrace", "outline", "outline_iou",
-           "drawing_outline", "search", "check_fit_evals", "render_outline", "FitRecord", "ParamsFit", "fit_params",
+           "drawing_outline", "search", "check_fit_evals", "render_outline", "front_camera", "FitRecord", "ParamsFit", "fit_params",
            "PARAMS_FIT_SLOTS"]
 
 OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall
 OUTLINE_CLOSING = 5    # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
+FOOT_BAND = 0.15      # the lowest share of an outline's height where a row is filled between its outermost strokes
 FIT_SIZE = 96          # candidates are rendered this many pixels square
 
 
@@ -58,11 +60,20 @@ def outline(mask: np.ndarray) -> np.ndarray:
     width = max(1, int(round(box.shape[1] * OUTLINE_HEIGHT / box.shape[0])))
     # Area averaging keeps a thin pen line when a large drawing shrinks; any ink in a cell counts.
     scaled = cv2.resize(box, (width, OUTLINE_HEIGHT), interpolation=cv2.INTER_AREA) > 0
+    # A tree stands on the ground: across the foot band, everything between the outermost strokes of a row is
+    # tree, which closes a trunk drawn as two lines left open at the foot (or ending at different heights).
+    foot = scaled[-max(1, int(round(FOOT_BAND * OUTLINE_HEIGHT))):]
+    left = np.argmax(foot, axis=1)
+    right = foot.shape[1] - 1 - np.argmax(foot[:, ::-1], axis=1)
+    columns = np.arange(foot.shape[1])
+    foot |= (columns >= left[:, None]) & (columns <= right[:, None]) & foot.any(axis=1)[:, None]
+    # Grown by the closing radius, filled, shrunk back: a gap in a contour up to twice the radius is sealed (a
+    # closing alone reopens the gap between two line ends) and the paper it encloses is filled.
     pad = OUTLINE_CLOSING + 1
-    padded = np.pad(scaled, pad)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * OUTLINE_CLOSING + 1,) * 2)
-    closed = cv2.morphologyEx(padded.astype(np.uint8), cv2.MORPH_CLOSE, kernel) > 0
-    return ndimage.binary_fill_holes(closed)[pad:-pad, pad:-pad]
+    grown = cv2.dilate(np.pad(scaled, pad).astype(np.uint8), kernel)
+    filled = ndimage.binary_fill_holes(grown).astype(np.uint8)
+    return cv2.erode(filled, kernel)[pad:-pad, pad:-pad] > 0
 
 
 def outline_iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -82,6 +93,17 @@ def drawing_outline(image: np.ndarray, kind: str = "sketch") -> np.ndarray:
     from trainers.preprocess import ink_mask
 
     return outline(ink_mask(image, kind))
+
+
+def front_camera(tree, size: int = FIT_SIZE):
+    """The `tsn4` front camera (the params drawings' view) framed on the corners of a tree's bounds (a TreeMesh's
+    or a Skeleton's): the outline is cut to its box anyway, and framing on 8 corners instead of every vertex
+    saves most of a candidate's camera time."""
+    from renderers.camera import make_rig
+
+    lo, hi = tree.bounds.astype(np.float64)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    return make_rig("tsn4", corners, size, np.random.default_rng(0))[0]
 
 
 def render_outline(renderer, mesh, camera) -> np.ndarray:
@@ -153,7 +175,7 @@ PARAMS_FIT_SLOTS: tuple[tuple[str, int | None], ...] = (
     ("baseSize", None), ("length", 1), ("length", 2), ("downAngle", 1), ("downAngle", 2), ("curve", 0),
     ("curve", 1), ("attractUp", 1), ("segSplits", 0), ("splitAngle", 0), ("leafScale", None), ("branches", 1),
 )
-SPECIES_TRIED = 3   # the network's most likely species, each grown from its guess before the search
+SPECIES_TRIED = 3   # the network's most likely species, each grown from its guess and from its preset
 SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the best species
 
 
@@ -215,7 +237,6 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
 
     grow = grow or species.rebuild
     trace = FitTrace()
-    camera_rng = np.random.default_rng(0)
     outlines: dict[int, np.ndarray] = {}  # evaluation index -> outline, kept for the first and the best
 
     def evaluate(candidate: dict) -> float:
@@ -224,8 +245,8 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         except TreefarmError:
             shape = np.zeros((0, 0), bool)
         else:
-            shape = (render_outline(renderer, mesh, renderer.cameras(mesh, "tsn4", camera_rng)[0]) if mesh.n_faces
-                     else np.zeros((0, 0), bool))
+            shape = render_outline(renderer, mesh, front_camera(mesh, renderer.size)) if mesh.n_faces else \
+                np.zeros((0, 0), bool)
         value = outline_iou(shape, target)
         if not trace.scores or value > max(trace.scores):
             outlines[trace.evals] = shape
@@ -234,20 +255,26 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     def decoded(outs: dict, decode_seed: int) -> dict:
         return codec.decode_arrays(outs, seed=int(decode_seed))[0]
 
-    ranking = codec.species_ranking(outputs)
-    best_outputs, best_seed = outputs, int(seed)
-    best_params = decoded(outputs, seed)
-    first = best = evaluate(best_params)
-    species_scores = {best_params["species"]: (first, dict(ranking).get(best_params["species"], 0.0))}
-    for name, probability in ranking[1:SPECIES_TRIED]:
-        if trace.evals >= evals:
-            break
-        outs = codec.with_species(outputs, name)
-        params = decoded(outs, seed)
-        value = evaluate(params)
-        species_scores[name] = (value, probability)
-        if value > best:
-            best, best_outputs, best_params = value, outs, params
+    ranking = codec.species_ranking(outputs)[:SPECIES_TRIED]
+    probabilities = dict(ranking)
+    best_outputs, best_seed, best_params, best = outputs, int(seed), None, -1.0
+    species_scores: dict[str, tuple[float, float]] = {}
+    for rank, (name, probability) in enumerate(ranking):
+        # The network's guess read as this species, then the species' own preset: a drawing far from what
+        # training drew is often nearer a preset than the guess.
+        starts = [outputs if rank == 0 else codec.with_species(outputs, name)]
+        starts.append(codec.as_outputs(codec.encode_arrays([species.sample(name, np.random.default_rng(seed))],
+                                                           np.float64)))
+        for outs in starts:
+            if trace.evals >= evals:
+                break
+            params = decoded(outs, seed)
+            value = evaluate(params)
+            species_scores[name] = (max(value, species_scores.get(name, (0.0, 0.0))[0]), probability)
+            if value > best:
+                best, best_outputs, best_params = value, outs, params
+    first = trace.scores[0]
+    species_scores.setdefault(best_params["species"], (best, probabilities.get(best_params["species"], 0.0)))
     for offset in range(1, SEEDS_TRIED):
         if trace.evals >= evals:
             break
