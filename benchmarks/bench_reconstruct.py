@@ -56,7 +56,7 @@ from farm.jobs import load_spec  # noqa: E402
 from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
 from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
-from reconstruct.methods import METHODS, Method, RunOptions  # noqa: E402
+from reconstruct.methods import DEFAULT_FIT_EVALS, METHODS, Method, RunOptions  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
 from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes, network_depth_error  # noqa: E402
 from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402
@@ -119,6 +119,14 @@ def grow_truth(renderer: ViewRenderer, preset: str, seed: int, rig: str, size: i
     skeleton, mesh = species.rebuild(params)
     renderer.size = int(size)
     return Truth(preset, seed, params, skeleton, mesh, renderer.render(mesh, skeleton, rig, outputs, render_rng))
+
+
+FIRST_GUESS = "first guess"
+
+
+def fit_variants(args) -> list[tuple[str, int]]:
+    """(variant, fit budget): the method's first guess (fitting off), then fitted with --fit-evals (if > 0)."""
+    return [(FIRST_GUESS, 0)] + ([(f"fitted, {args.fit_evals} evals", args.fit_evals)] if args.fit_evals else [])
 
 
 def spread(names: list[str], n: int) -> list[str]:
@@ -194,9 +202,11 @@ class Run:
     def add(self, variant: str, row: dict) -> None:
         self.rows.setdefault(variant, []).append(row)
 
-    def time(self, timings: dict) -> None:
+    def time(self, timings: dict, variant: str | None = None) -> None:
+        """Seconds per stage; a variant other than the first fit's (`fit_variants`) keys its stages by name."""
         for stage, seconds in timings.items():
-            self.stages.setdefault(stage, []).append(float(seconds))
+            key = stage if variant in (None, FIRST_GUESS) else f"{stage}, {variant}"
+            self.stages.setdefault(key, []).append(float(seconds))
 
     def fail(self, variant: str, truth: Truth, error: TreefarmError) -> None:
         self.failed.setdefault(variant, []).append(f"{truth.preset} seed {truth.seed}: {error}")
@@ -206,7 +216,8 @@ def run_params(renderer, args, run: Run) -> None:
     net = predictor("sketchnet", args.models)
     spec = load_spec(SPECS["params"])
     presets = spread(list(spec.species), args.trees)
-    predicted, true, baseline = [], [], []
+    predicted: dict[str, list[dict]] = {}
+    true, baseline = [], []
     for i, preset in enumerate(presets):
         truth = grow_truth(renderer, preset, tree_seed(BENCH_SEEDS["params"], i), spec.render.rig, net.input_size,
                            ["sketch_tsn"])
@@ -214,15 +225,17 @@ def run_params(renderer, args, run: Run) -> None:
         scorer = Scorer(renderer, truth, [front.camera], "params", args.surface_samples)
         # Like the other methods, the tree is grown at the true height (a sketch has no scale); the network's
         # own guess of the size is scored on its own row.
-        guessed = reconstruct.from_params(front.images["sketch_tsn"], net=net)
-        result = reconstruct.from_params(front.images["sketch_tsn"], net=net, height=truth.skeleton.height)
-        run.time(result.timings)
-        row = scorer(result.skeleton, result.mesh)
-        row["species accuracy"] = float(result.params.get("species") == truth.params["species"])
-        row["height rel. error, size guessed"] = metrics.height_crown_errors(guessed.skeleton,
-                                                                             truth.skeleton)["height_rel_error"]
-        run.add("network", row)
-        predicted.append(result.params)
+        guessed = reconstruct.from_params(front.images["sketch_tsn"], net=net, fit_evals=0)
+        for variant, evals in fit_variants(args):
+            result = reconstruct.from_params(front.images["sketch_tsn"], net=net, height=truth.skeleton.height,
+                                             fit_evals=evals, renderer=renderer)
+            run.time(result.timings, variant)
+            row = scorer(result.skeleton, result.mesh)
+            row["species accuracy"] = float(result.params.get("species") == truth.params["species"])
+            row["height rel. error, size guessed"] = metrics.height_crown_errors(guessed.skeleton,
+                                                                                 truth.skeleton)["height_rel_error"]
+            run.add(variant, row)
+            predicted.setdefault(variant, []).append(result.params)
         true.append(truth.params)
         b_params, b_skeleton, b_mesh, _ = baseline_tree(truth, BENCH_SEEDS["params"], i, args.trees)
         run.add(BASELINE, {**scorer(b_skeleton, b_mesh), "species accuracy": 1.0,
@@ -233,7 +246,7 @@ def run_params(renderer, args, run: Run) -> None:
             run.sheet.append((f"params {preset}", sheet_cells(renderer, scorer, {"sketch_tsn": front.images["sketch_tsn"]},
                                                               result.skeleton, result.mesh)))
         print(f"  params {i + 1}/{len(presets)} {preset}: {result.timings['total']:.2f} s", flush=True)
-    for variant, guesses in (("network", predicted), (BASELINE, baseline)):
+    for variant, guesses in (*predicted.items(), (BASELINE, baseline)):
         for name, value in metrics.parameter_scores(net.codec, guesses, true).items():
             run.pooled.setdefault(f"{name} (pooled)", {})[variant] = float(value)
     sweep(renderer, net, args, presets, run)
@@ -245,17 +258,19 @@ def sweep(renderer, net, args, presets: list[str], run: Run) -> None:
     per_tree = []
     for i, preset in enumerate(presets[:args.sweep_trees]):
         truth = grow_truth(renderer, preset, tree_seed(BENCH_SEEDS["params"], i), rig, net.input_size, ["sketch_tsn"])
-        distances = [metrics.unit_cube_hausdorff(reconstruct.from_params(v.images["sketch_tsn"], net=net).skeleton,
-                                                 truth.skeleton) for v in truth.views]
+        distances = [metrics.unit_cube_hausdorff(reconstruct.from_params(
+            v.images["sketch_tsn"], net=net, fit_evals=args.fit_evals, renderer=renderer).skeleton, truth.skeleton)
+            for v in truth.views]
         per_tree.append(distances)
         print(f"  sweep {i + 1}/{args.sweep_trees} {preset}: {len(distances)} views, mean {np.mean(distances):.3f}",
               flush=True)
     if per_tree:
         everything = np.concatenate(per_tree)
         for name, value in (("rotation sweep, unit-cube Hausdorff", float(everything.mean())),
+                            ("  median", float(np.median(everything))),
                             ("  worst view", float(everything.max())), ("  best view", float(everything.min())),
                             ("  trees x views", f"{len(per_tree)} x {args.sweep_views} ({rig})")):
-            run.pooled[name] = {"network": value}
+            run.pooled[name] = {fit_variants(args)[-1][0]: value}
 
 
 def run_sketch_depth(renderer, args, run: Run) -> None:
@@ -414,7 +429,7 @@ def stage_table(bench: Benchmark, run: Run) -> None:
 def headline_figures(bench: Benchmark, run: Run) -> None:
     """The method's crown IoU from unseen views (beside the same-preset baseline's) and its seconds per tree."""
     label = METRICS["crown_iou_unseen"].label
-    variant = next((v for v in run.rows if v != BASELINE), None)
+    variant = next((v for v in reversed(run.rows) if v != BASELINE), None)  # the fitted one, where it ran
 
     def mean(rows: list[dict]) -> float:
         return float(np.mean([r[label] for r in rows if np.isfinite(r.get(label, np.nan))] or [np.nan]))
@@ -422,8 +437,9 @@ def headline_figures(bench: Benchmark, run: Run) -> None:
     if variant is not None:
         bench.figure(f"{run.method}: {label}", mean(run.rows[variant]), "",
                      f"another tree of the preset: {mean(run.rows.get(BASELINE, [])):.2f}")
-    if "total" in run.stages:
-        bench.figure(f"{run.method}: seconds per tree", float(np.mean(run.stages["total"])), "s",
+    total = f"total, {variant}" if f"total, {variant}" in run.stages else "total"
+    if total in run.stages:
+        bench.figure(f"{run.method}: seconds per tree", float(np.mean(run.stages[total])), "s",
                      f"target < {TARGET_S:.0f} s")
 
 
@@ -438,14 +454,16 @@ def main(argv=None) -> None:
                         help="surface samples per mesh (0: skip the surface distances)")
     parser.add_argument("--sheet-trees", type=int, default=3, help="trees per method on the contact sheet")
     parser.add_argument("--species", default=None, help="sketch-depth growth preset (default the method's)")
+    parser.add_argument("--fit-evals", type=int, default=DEFAULT_FIT_EVALS,
+                        help="the fit's budget (a variant beside the first guess; 0: first guess only)")
     parser.add_argument("--models", default=None, help="model registry URI (default: the shipped models/)")
     parser.add_argument("--out", type=Path, default=ROOT / "out" / "bench_reconstruct")
     args = parser.parse_args(argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     unknown = [m for m in methods if m not in drawn]
-    if unknown or args.trees < 1 or not 1 <= args.sweep_views <= 360:
+    if unknown or args.trees < 1 or not 1 <= args.sweep_views <= 360 or args.fit_evals < 0:
         parser.error(f"methods {unknown} unknown (allowed {', '.join(drawn)}), or --trees < 1, or --sweep-views "
-                     f"outside [1, 360]")
+                     f"outside [1, 360], or --fit-evals < 0")
     check_seeds()
     bench = Benchmark("reconstruct", "Reconstruction from drawings: quality on held-out trees and seconds per tree",
                       args)

@@ -208,6 +208,17 @@ def test_bad_input_is_one_line_and_writes_nothing(drawings, tmp_path, capsys):
     blank = tmp_path / "blank.png"
     Image.fromarray(np.full((64, 64), 255, np.uint8)).save(blank)
     _one_line_error(capsys, ["reconstruct", str(blank), "--out", str(out)], "blank")
+    black = tmp_path / "black.png"
+    Image.fromarray(np.zeros((64, 64), np.uint8)).save(black)
+    _one_line_error(capsys, ["reconstruct", str(black), "--out", str(out)], "blank")
+    tiny = tmp_path / "tiny.png"
+    Image.fromarray(np.array([[0, 255], [255, 0]], np.uint8)).save(tiny)
+    _one_line_error(capsys, ["reconstruct", str(tiny), "--out", str(out)])
+    _one_line_error(capsys, ["reconstruct", str(drawings["tsn"]), "--fit-evals", "-1", "--out", str(out)],
+                    "--fit-evals -1 is invalid")
+    cloud = tmp_path / "scan.xyz"
+    np.savetxt(cloud, np.random.default_rng(0).random((50, 3)))
+    _one_line_error(capsys, ["reconstruct", str(cloud), "--fit-evals", "4", "--out", str(out)], "--fit-evals")
     white = tmp_path / "white.png"
     Image.fromarray(np.full((256, 256, 3), 255, np.uint8)).save(white)
     _one_line_error(capsys, ["reconstruct", str(drawings["edges"]), "--strokes", str(white), "--out", str(out)])
