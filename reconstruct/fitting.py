@@ -80,11 +80,16 @@ def outline_iou(a: np.ndarray, b: np.ndarray) -> float:
     """IoU of two outlines (`outline`) placed on one canvas, each centred on its vertical axis; 0 if one is empty."""
     if a.size == 0 or b.size == 0:
         return 0.0
-    width = max(a.shape[1], b.shape[1])
-    placed = [np.pad(m, ((0, 0), ((width - m.shape[1]) // 2, width - m.shape[1] - (width - m.shape[1]) // 2)))
-              for m in (a, b)]
+    placed = _centred(a, b)
     union = np.logical_or(*placed).sum()
     return float(np.logical_and(*placed).sum() / union) if union else 0.0
+
+
+def _centred(*masks: np.ndarray) -> list[np.ndarray]:
+    """Outlines of one height padded to one width, each centred on the same vertical axis."""
+    width = max(m.shape[1] for m in masks)
+    return [np.pad(m, ((0, 0), ((width - m.shape[1]) // 2, width - m.shape[1] - (width - m.shape[1]) // 2)))
+            for m in masks]
 
 
 def drawing_outline(image: np.ndarray, kind: str = "sketch") -> np.ndarray:
@@ -176,6 +181,9 @@ PARAMS_FIT_SLOTS: tuple[tuple[str, int | None], ...] = (
     ("curve", 1), ("attractUp", 1), ("segSplits", 0), ("splitAngle", 0), ("leafScale", None), ("branches", 1),
 )
 SPECIES_TRIED = 3   # the network's most likely species, each grown from its guess and from its preset
+# Species are tried in the network's order until those tried hold this much of its probability: a species the
+# network is sure of is kept (a drawing of our own renders), an unsure read is settled by the outline.
+SPECIES_SURE = 0.9
 SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the best species
 
 
@@ -197,11 +205,8 @@ class FitRecord:
         """(OUTLINE_HEIGHT, W, 3) uint8: the drawing's outline in green, the first guess's (or the fitted tree's)
         in red, where both agree yellow, on black; each centred on the vertical axis as `outline_iou` places it."""
         shown = self.outline if fitted else self.first_outline
-        masks = [m if m.size else np.zeros((OUTLINE_HEIGHT, 1), bool) for m in (self.target, shown)]
-        width = max(m.shape[1] for m in masks)
-        placed = [np.pad(m, ((0, 0), ((width - m.shape[1]) // 2, width - m.shape[1] - (width - m.shape[1]) // 2)))
-                  for m in masks]
-        picture = np.zeros((OUTLINE_HEIGHT, width, 3), np.uint8)
+        placed = _centred(*(m if m.size else np.zeros((OUTLINE_HEIGHT, 1), bool) for m in (self.target, shown)))
+        picture = np.zeros((OUTLINE_HEIGHT, placed[0].shape[1], 3), np.uint8)
         picture[..., 1] = placed[0] * 255
         picture[..., 0] = placed[1] * 255
         return picture
@@ -230,8 +235,9 @@ def _slot_columns(codec) -> list[tuple[str, int]]:
 def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, renderer,
                grow: Callable[[dict], tuple] | None = None) -> ParamsFit:
     """Search TreeSketchNet's output space around its guess for the dictionary whose tree's front outline matches
-    `target` (`drawing_outline` of the sketch): the guess first, then the network's next species, then decode
-    seeds seed + 1, ..., then CMA-ES over PARAMS_FIT_SLOTS (each within the codec's training range), all within
+    `target` (`drawing_outline` of the sketch): the guess first, then the species' own preset, then the network's
+    next species (while it is unsure: SPECIES_SURE) each from its guess and its preset, then decode seeds
+    seed + 1, ..., then CMA-ES over PARAMS_FIT_SLOTS (each within the codec's training range), all within
     `evals` (>= 1) evaluations. `grow(params) -> (skeleton, mesh)` (default `species.rebuild`)."""
     import species
 
@@ -255,8 +261,10 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     def decoded(outs: dict, decode_seed: int) -> dict:
         return codec.decode_arrays(outs, seed=int(decode_seed))[0]
 
-    ranking = codec.species_ranking(outputs)[:SPECIES_TRIED]
+    ranking = codec.species_ranking(outputs)
     probabilities = dict(ranking)
+    held = np.cumsum([probability for _, probability in ranking])
+    ranking = ranking[:min(SPECIES_TRIED, int(np.searchsorted(held, SPECIES_SURE)) + 1)]
     best_outputs, best_seed, best_params, best = outputs, int(seed), None, -1.0
     species_scores: dict[str, tuple[float, float]] = {}
     for rank, (name, probability) in enumerate(ranking):
