@@ -56,7 +56,8 @@ from farm.jobs import load_spec  # noqa: E402
 from farm.tree_chain import stage_rngs, tree_seed  # noqa: E402
 from reconstruct import metrics  # noqa: E402
 from reconstruct.from_sketch import DEFAULT_SPECIES  # noqa: E402
-from reconstruct.methods import DEFAULT_FIT_EVALS, METHODS, Method, RunOptions  # noqa: E402
+from reconstruct.fit_budget import DEFAULT_FIT_EVALS  # noqa: E402
+from reconstruct.methods import METHODS, Method, RunOptions  # noqa: E402
 from reconstruct.networks import predictor  # noqa: E402
 from reconstruct.scoring import METRICS, TreeScorer, depth_picture, main_branch_nodes, network_depth_error  # noqa: E402
 from renderers import RenderedView, ViewRenderer, write_contact_sheet  # noqa: E402

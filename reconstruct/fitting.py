@@ -26,7 +26,7 @@ from scipy import ndimage
 
 from species.errors import TreefarmError
 
-from .methods import DEFAULT_FIT_EVALS
+from .fit_budget import DEFAULT_FIT_EVALS, FitError, check_fit_evals
 
 __all__ = ["OUTLINE_HEIGHT", "DEFAULT_FIT_EVALS", "FitError", "FitTrace", "outline", "outline_iou",
            "drawing_outline", "search", "check_fit_evals", "render_outline", "front_camera", "FitRecord", "ParamsFit", "fit_params",
@@ -36,17 +36,6 @@ OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall
 OUTLINE_CLOSING = 5    # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
 FOOT_BAND = 0.15      # the lowest share of an outline's height where a row is filled between its outermost strokes
 FIT_SIZE = 96          # candidates are rendered this many pixels square
-
-
-class FitError(TreefarmError):
-    """A fitting budget that is not a count of evaluations."""
-
-
-def check_fit_evals(evals) -> int:
-    """The budget as an int, or a FitError naming it and what is allowed."""
-    if isinstance(evals, bool) or not isinstance(evals, (int, np.integer)) or evals < 0:
-        raise FitError(f"--fit-evals {evals!r} is invalid: allowed an integer >= 0 (0 turns fitting off)")
-    return int(evals)
 
 
 # ------------------------------------------------------------------------------------------------ outlines

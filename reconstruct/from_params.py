@@ -14,7 +14,8 @@ from species.timing import StageTimer
 from species.tree_mesh import TreeMesh
 
 from ._sketch_arrays import check_height
-from .fitting import DEFAULT_FIT_EVALS, FIT_SIZE, check_fit_evals, drawing_outline, fit_params
+from .fit_budget import DEFAULT_FIT_EVALS, check_fit_evals
+from .fitting import FIT_SIZE, drawing_outline, fit_params
 from .networks import as_image, predictor
 from .result import Reconstruction
 

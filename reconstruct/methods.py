@@ -19,6 +19,8 @@ import numpy as np
 
 from species.errors import TreefarmError
 
+from .fit_budget import DEFAULT_FIT_EVALS
+
 if TYPE_CHECKING:  # the result's module imports scipy (see the module docstring)
     from .result import Reconstruction
 
@@ -28,11 +30,6 @@ __all__ = ["METHODS", "Method", "Input", "Rendered", "RunOptions", "MethodError"
 # What a method can read, by kind: (one, several) as messages name them.
 INPUT_KINDS = {"image": ("an image file", "image files"), "cloud": ("a point cloud", "cloud files"),
                "photos": ("a folder of photos", "photo folders")}
-
-
-# Candidate trees a drawing method's fit grows and redraws by default (`reconstruct.fitting`): about 4 s on one
-# core here (docs/reconstruct.md, Fitting to the drawing).
-DEFAULT_FIT_EVALS = 32
 
 
 class MethodError(TreefarmError):

@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from reconstruct.methods import DEFAULT_FIT_EVALS, INPUT_KINDS, METHODS, Method, RunOptions
+from reconstruct.fit_budget import DEFAULT_FIT_EVALS
+from reconstruct.methods import INPUT_KINDS, METHODS, Method, RunOptions
 from species.errors import user_path
 
 from farm.commands import CommandLineError, reconstruct_cloud
@@ -224,6 +225,9 @@ def run(args: argparse.Namespace) -> int:
         reconstruct_cloud.print_stages(result.timings)
         if fit is not None:
             print("  fit: outline IoU after N evaluations: " + _by_evaluations(fit.trace.best))
+            if fit.species_scores:
+                print("  fit: species tried (outline IoU, network's probability): " + ", ".join(
+                    f"{name} {score:.2f} ({probability:.2f})" for name, (score, probability) in fit.species_scores.items()))
     skeleton = result.skeleton
     fitted = f"outline IoU {fit.first_score:.2f} -> {fit.score:.2f}, " if fit is not None else ""
     print(f"{method.name}: {species_read + ', ' if read else ''}{fitted}{skeleton.n_nodes} nodes, height "
