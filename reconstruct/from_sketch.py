@@ -12,6 +12,7 @@ skeleton and meshes.
 """
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import replace
 
@@ -20,6 +21,7 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
+from renderers import ViewRenderer
 from renderers.camera import Camera
 from species.colonization import GrowthSpace, MarkerSteering, grow_in_space, revolved_field, validate
 from species.geometry.vectors import unit_vectors
@@ -29,6 +31,8 @@ from species.skeleton import Skeleton
 from species.timing import StageTimer
 
 from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
+from .fit_sketch_depth import WINDOW_PAD, WINDOW_PX, fit_sketch_depth, offset_mask, settings_params
+from .fitting import DEFAULT_FIT_EVALS, check_fit_evals
 from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 from .result import Reconstruction
 from .trunk_tracing import stroke_labels, trace_trunk
@@ -291,7 +295,7 @@ def _colonization_params(species: str, rng: np.random.Generator) -> dict:
 
 def from_sketch(sketch, strokes, *, models=None, species: str | None = None, height: float | None = None,
                 rng: np.random.Generator, photo: bool = False, silhouette_net=None, trunk_net=None,
-                sketchnet=None) -> Reconstruction:
+                sketchnet=None, fit_evals: int = DEFAULT_FIT_EVALS, renderer=None) -> Reconstruction:
     """A tree from a drawing: the silhouette network reads `sketch` (black edges on white, any size; with
     `photo`, a photo whose blurred Canny edges are the sketch), the trunk network `strokes` (colour trunk strokes
     on the same page), and `from_maps` grows the tree in the drawing's view (`reconstruct.networks`).
@@ -299,6 +303,9 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     models : a registry (its champions) or None for the shipped defaults; the *_net arguments: loaded predictors.
     species : a colonization preset, "auto" (TreeSketchNet reads the species from the sketch, mapped by
               `networks.SPECIES_TO_COLONIZATION`) or None (DEFAULT_SPECIES). height, rng : as `from_maps`.
+    fit_evals : candidate trees the fit to the drawing may grow and redraw (`from_maps`'s fit_to: the sketch's
+              ink in the silhouette network's window); 0 grows the networks' guess as it is.
+    renderer : a `renderers.ViewRenderer` to redraw candidates with (one is made when fitting without it).
     Maps add "sketch" (the silhouette network's input) and "trunk_depth", "strokes", "silhouette" (in its
     window); timings add "networks".
     """
@@ -306,6 +313,7 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     start = time.perf_counter()
     if not isinstance(rng, np.random.Generator):
         raise SketchError(f"rng must be a numpy.random.Generator; got {type(rng).__name__}")
+    fit_evals = check_fit_evals(fit_evals)
     sketch = photo_edges(sketch) if photo else as_image(sketch, "sketch")
     silhouette_net = silhouette_net or predictor("pix2pix-silhouette", models)
     found = sketch_maps(sketch, strokes, silhouette_net=silhouette_net,
@@ -314,8 +322,9 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
     if species == "auto":
         chosen = colonization_species((sketchnet or predictor("sketchnet", models)).predict(sketch)["species"])
     networks = time.perf_counter() - start
+    ink = found.sketch_input[0] > 0.5 if fit_evals else None  # the drawing over the maps' window
     result = from_maps(found.silhouette, found.trunk_depth, found.strokes, found.camera, species=chosen,
-                       height=height, rng=rng)
+                       height=height, rng=rng, fit_to=ink, fit_evals=fit_evals, renderer=renderer)
     timings = {**result.timings, "networks": networks}
     timings["total"] += networks
     return replace(result, timings=timings, maps={**result.maps, "sketch": found.sketch_input[0],
@@ -325,7 +334,8 @@ def from_sketch(sketch, strokes, *, models=None, species: str | None = None, hei
 
 def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.ndarray, camera: Camera, *,
               species: str = DEFAULT_SPECIES, height: float | None = None,
-              rng: np.random.Generator) -> Reconstruction:
+              rng: np.random.Generator, fit_to: np.ndarray | None = None, fit_evals: int = 0,
+              renderer=None) -> Reconstruction:
     """Grow a tree that fills a sketch's crown from its traced main branches (seed 000 chapter 3), given the depth
     networks' maps (or ground-truth renders standing in for them).
 
@@ -343,6 +353,11 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     Maps: "front", "back", "crown_mask" (H, W) (the growth space's), "geodesic" (H, W) px,
     "directions" (H, W, 2), "trunk_px" (K, 2) (u, v) of the traced main skeleton's nodes, "main_skeleton"
     (G, 3) float32 metres, the guide grown from (the traced nodes about one internode apart: the tree's first G).
+    fit_to, fit_evals, renderer : with the drawing's ink in `camera` ((H, W) bool) and a budget of evaluations
+                      > 0, the crown envelope and growth settings are fitted so the tree's filled outline in
+                      `camera` matches the ink's (`reconstruct.fit_sketch_depth`; the main skeleton stays as
+                      traced), redrawn by `renderer` (one is made without it); maps add "fit" (a
+                      `reconstruct.fitting.FitRecord`), timings "fit". Without them the guess is grown as it is.
     """
     timer = StageTimer()
     lap = timer.lap
@@ -352,6 +367,11 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     trunk_depth = image_array(trunk_maps, "trunk_maps", (0,)).astype(np.float64)
     check_camera(camera, silhouette.shape[:2])
     check_height(height, "the preset's")
+    fit_evals = check_fit_evals(fit_evals)
+    if fit_to is not None:
+        fit_to = image_array(fit_to, "fit_to", (0,)).astype(bool)
+        if fit_to.shape != silhouette.shape[:2]:
+            raise SketchError(f"fit_to {fit_to.shape} and the maps {silhouette.shape[:2]} must share (H, W)")
     params = _colonization_params(species, rng)
     height = float(params["height"] if height is None else height)
     params["height"] = height
@@ -392,14 +412,58 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     guide_positions = (main.positions.astype(np.float64) - base) * scale
     guide = Skeleton(guide_positions, main.parent, main.radius * scale, main.order)
     guide = _thinned(guide, il)
+    fitting = fit_to is not None and fit_evals > 0
+    growth_rng = copy.deepcopy(rng) if fitting else None  # every candidate grows from the guess's draws
     skeleton = grow_in_space(params, rng, space=crown, internode_length=il, guide=guide, guide_buds="all",
                              steering=steering)
     lap("growth")
     mesh = build_mesh(skeleton, params)
     lap("mesh")
+    maps = {}
+    if fitting:
+        def grow(settings: dict[str, float]):
+            grown = settings_params(params, settings)
+            offset = int(round(settings["envelope_px"] * max(camera.width, camera.height) / _REFERENCE_PX))
+            space = crown if offset == 0 else CameraCrown(
+                *crown_maps(front, back, offset_mask(mask, offset), (base_u, base_v), axis01, camera), camera,
+                origin=base, scale=scale)
+            tree = grow_in_space(grown, copy.deepcopy(growth_rng), space=space, internode_length=il, guide=guide,
+                                 guide_buds="all", steering=steering)
+            return grown, tree, build_mesh(tree, grown)
+
+        own = renderer is None
+        renderer = ViewRenderer(WINDOW_PX + 2 * WINDOW_PAD) if own else renderer
+        size, renderer.size = renderer.size, WINDOW_PX + 2 * WINDOW_PAD
+        try:
+            fit = fit_sketch_depth(grow, (params, skeleton, mesh), fit_to, fit_evals, copy.deepcopy(growth_rng),
+                                   renderer, _in_growth_frame(camera, base, scale, WINDOW_PX + 2 * WINDOW_PAD,
+                                                              (WINDOW_PX + 2 * WINDOW_PAD) / WINDOW_PX))
+        finally:
+            renderer.size = size
+            if own:
+                renderer.close()
+        params, skeleton, mesh, maps["fit"] = fit.params, fit.skeleton, fit.mesh, fit.record
+        lap("fit")
     timings = {**timer.seconds, "total": sum(timer.seconds.values())}
     trunk_px, _ = camera.project(main.positions)
-    maps = {"front": front_c.astype(np.float32), "back": back_c.astype(np.float32), "crown_mask": crown_mask,
-            "geodesic": geodesic.astype(np.float32), "directions": directions.astype(np.float32),
-            "trunk_px": trunk_px.astype(np.float32), "main_skeleton": guide.positions.copy()}
+    maps.update({"front": front_c.astype(np.float32), "back": back_c.astype(np.float32), "crown_mask": crown_mask,
+                 "geodesic": geodesic.astype(np.float32), "directions": directions.astype(np.float32),
+                 "trunk_px": trunk_px.astype(np.float32), "main_skeleton": guide.positions.copy()})
     return Reconstruction("sketch-depth", skeleton, mesh, params, timings, maps)
+
+
+def _in_growth_frame(camera: Camera, base: np.ndarray, scale: float, size: int, zoom_out: float = 1.25) -> Camera:
+    """`camera` seen from the grown tree's frame (points = (world - base) * scale), `size` px square and its view
+    widened `zoom_out` times about its centre, so leaves past the drawing's window stay in the picture."""
+    world_to_camera = camera.world_to_camera.copy()
+    world_to_camera[:3, 3] = scale * (world_to_camera[:3, :3] @ base + world_to_camera[:3, 3])
+    k = np.array(camera.K, np.float64)
+    pixel = np.diag([size / camera.width, size / camera.height, 1.0])
+    intrinsics = pixel @ k
+    intrinsics[:2, 2] = (k[:2, 2] + 0.5) * np.diag(pixel)[:2] - 0.5
+    per_unit = 1.0 / scale if camera.is_orthographic else 1.0
+    intrinsics[0, 0] *= per_unit / zoom_out
+    intrinsics[1, 1] *= per_unit / zoom_out
+    return Camera(size, size, intrinsics, world_to_camera, camera.projection, camera.near * scale,
+                  camera.far * scale, camera.ortho_half_width * scale * zoom_out,
+                  camera.ortho_half_height * scale * zoom_out, name=camera.name)

@@ -152,7 +152,7 @@ def _run_sketch_depth(inputs, options: RunOptions):
     return from_sketch(inputs["sketch"], inputs["strokes"], models=options.models, species=options.species,
                        height=options.height, rng=np.random.default_rng(options.seed), photo=options.photo,
                        silhouette_net=nets.get("pix2pix-silhouette"), trunk_net=nets.get("pix2pix-trunk"),
-                       sketchnet=nets.get("sketchnet"))
+                       sketchnet=nets.get("sketchnet"), fit_evals=options.fit_evals)
 
 
 def _run_two_view(inputs, options: RunOptions):
@@ -192,7 +192,7 @@ METHODS: dict[str, Method] = {
                          Input("strokes", "image", "the colour trunk strokes",
                                help="colour trunk strokes drawn over the sketch", flag=True,
                                rendered=Rendered("two-view", "front", "trunk_strokes"))),
-        _run_sketch_depth, models=("pix2pix-silhouette", "pix2pix-trunk"), options=("photo", "species"),
+        _run_sketch_depth, models=("pix2pix-silhouette", "pix2pix-trunk"), options=("photo", "species", "fit_evals"),
         panels=(("input", "sketch"), ("front depth", "front"), ("trunk depth", "trunk_depth"),
                 ("strokes", "strokes")),
         summary="the silhouette and trunk pix2pix networks predict depth; a colonization tree grows inside the "
