@@ -80,6 +80,7 @@ BASELINE = "baseline: same preset"
 PAPER = {
     "depth error, silhouette network": "0.041 (thesis, 4 days GTX 1080 Ti)",
     "depth error, trunk network": "0.032 (thesis)",
+    "depth error, trunk network, up to mirror": "constant 0.5: 0.127 (bench_depth_bounds, without the mirror)",
     "main skeleton, unit-cube Hausdorff": "0.098 (thesis, trunk nodes, units n.g.)",
     "nodes, unit-cube Hausdorff": "~0.03 (TSN rotation test, one tree)",
     "rotation sweep, unit-cube Hausdorff": "~0.03 (TSN, 72 views, one unseen tree)",
@@ -287,22 +288,26 @@ def run_sketch_depth(renderer, args, run: Run) -> None:
         scorer = Scorer(renderer, truth, [front.camera], "sketch-depth", args.surface_samples)
         sil_error, sil_s = network_depth_error(silhouette_net, "silhouette", front.images)
         trunk_error, trunk_s = network_depth_error(trunk_net, "trunk", front.images)
+        trunk_mirror = network_depth_error(trunk_net, "trunk", front.images, up_to_mirror=True)[0]
         height = truth.skeleton.height
-        try:
-            result = reconstruct.from_sketch(front.images["sketch_edges"], front.images["trunk_strokes"],
-                                             silhouette_net=silhouette_net, trunk_net=trunk_net, species=args.species,
-                                             height=height, rng=np.random.default_rng(seed))
-        except TreefarmError as error:
-            run.fail("networks", truth, error)
-        else:
+        for variant, evals in fit_variants(args):
+            try:
+                result = reconstruct.from_sketch(front.images["sketch_edges"], front.images["trunk_strokes"],
+                                                 silhouette_net=silhouette_net, trunk_net=trunk_net,
+                                                 species=args.species, height=height, rng=np.random.default_rng(seed),
+                                                 fit_evals=evals, renderer=renderer)
+            except TreefarmError as error:
+                run.fail(variant, truth, error)
+                continue
             t = result.timings
             run.time({"silhouette network": sil_s, "trunk network": trunk_s, **t,
                       "trunk recovery (trunk net + trace)": trunk_s + t["trunk"],
                       "silhouette recovery (silhouette net + denoise + crown)": sil_s + t["denoise"] + t["crown"],
-                      "growth (field + growth)": t["field"] + t["growth"]})
-            run.add("networks", {"depth error, silhouette network": sil_error, "depth error, trunk network": trunk_error,
-                                 **scorer(result.skeleton, result.mesh, result.maps["main_skeleton"])})
-            if i < args.sheet_trees:
+                      "growth (field + growth)": t["field"] + t["growth"]}, variant)
+            run.add(variant, {"depth error, silhouette network": sil_error, "depth error, trunk network": trunk_error,
+                              METRICS["depth_error_trunk_mirror"].label: trunk_mirror,
+                              **scorer(result.skeleton, result.mesh, result.maps["main_skeleton"])})
+            if i < args.sheet_trees and evals == args.fit_evals:
                 inputs = {"sketch_edges": front.images["sketch_edges"], "trunk_strokes": front.images["trunk_strokes"]}
                 run.sheet.append((f"sketch-depth {preset}",
                                   sheet_cells(renderer, scorer, inputs, result.skeleton, result.mesh)))

@@ -83,14 +83,22 @@ def _finite_array(value, name: str) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------ depth
-def foreground_depth_error(predicted, target, mask, channels: Sequence[int] | None = None) -> float:
+def foreground_depth_error(predicted, target, mask, channels: Sequence[int] | None = None,
+                           up_to_mirror: bool = False) -> float:
     """Mean absolute error of [0, 1] depth over the foreground (mask > 0), pooled over the batch and the chosen
     channels: seed 000's depth metric (eq. 3.2 as a mean).
 
     predicted, target : (H, W), (C, H, W) or (B, C, H, W) arrays of one shape, depth01 (0 near, 1 far).
     mask              : (H, W), (1, H, W) or (B, 1, H, W), foreground where > 0, the same for every channel.
     channels          : the channels scored (default all; (C, H, W) and (B, C, H, W) inputs only).
+    up_to_mirror      : the error against the target or its mirror through the view's middle plane (depth
+                        1 - d), whichever is nearer: a tree and its mirror draw the same orthographic strokes, so
+                        one drawing cannot tell them apart (benchmarks/bench_depth_bounds.py).
     """
+    if up_to_mirror:
+        mirrored = 1.0 - _finite_array(target, "target depth")
+        return min(foreground_depth_error(predicted, target, mask, channels),
+                   foreground_depth_error(predicted, mirrored, mask, channels))
     p, t = _finite_array(predicted, "predicted depth"), _finite_array(target, "target depth")
     if p.shape != t.shape or p.ndim not in (2, 3, 4):
         raise MetricError(f"predicted {p.shape} and target {t.shape} depth must share one shape: allowed (H, W), "

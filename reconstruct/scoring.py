@@ -68,6 +68,9 @@ METRICS: dict[str, Metric] = {
     "depth_error_silhouette": Metric("depth error, silhouette network", False, "0.041 (thesis, GTX 1080 Ti)",
                                      "sketch-depth"),
     "depth_error_trunk": Metric("depth error, trunk network", False, "0.032 (thesis)", "sketch-depth"),
+    "depth_error_trunk_mirror": Metric("depth error, trunk network, up to mirror", False,
+                                       "bound: constant 0.5 scores 0.127 without the mirror (bench_depth_bounds)",
+                                       "sketch-depth"),
     "species_correct": Metric("species accuracy", True, "n.g. (bench_train target >= 0.95)", "params"),
     "levels_correct": Metric("levels accuracy", True),
     "param_score": Metric("parameter score (1 - RMSE) x 100", True, "n.g. (TSN tables are images)", "params"),
@@ -144,9 +147,10 @@ def depth_picture(renderer: ViewRenderer, mesh: TreeMesh, skeleton: Skeleton, ca
     return viewable("depth", view.images["depth"])
 
 
-def network_depth_error(net, task_name: str, images: dict) -> tuple[float, float]:
+def network_depth_error(net, task_name: str, images: dict, up_to_mirror: bool = False) -> tuple[float, float]:
     """(foreground depth error of a pix2pix network on one view's images, the network's seconds): the target cut
-    to the network's crop of its input as training cut it, scored on the task's depth channels and mask rule."""
+    to the network's crop of its input as training cut it, scored on the task's depth channels and mask rule
+    (`up_to_mirror`: against the target or its mirror, `metrics.foreground_depth_error`)."""
 
     task = get_task(f"pix2pix-{task_name}")
     source, target_name = task.inputs[0], task.targets[0]
@@ -158,4 +162,5 @@ def network_depth_error(net, task_name: str, images: dict) -> tuple[float, float
            target_name: apply_crop(images[target_name], prepared.crop, size, TARGET_BACKGROUND[target_name])}
     cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
     _, target, mask = targets_from_views(task, cut)
-    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels), seconds
+    return metrics.foreground_depth_error(prediction, target.numpy(), mask.numpy(), task.depth_channels,
+                                          up_to_mirror), seconds

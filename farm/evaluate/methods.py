@@ -223,6 +223,8 @@ def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
             row["depth_error_silhouette"] = network_depth_error(nets["pix2pix-silhouette"], "silhouette", images)[0]
         if "trunk_depth" in images:
             row["depth_error_trunk"] = network_depth_error(nets["pix2pix-trunk"], "trunk", images)[0]
+            row["depth_error_trunk_mirror"] = network_depth_error(nets["pix2pix-trunk"], "trunk", images,
+                                                                  up_to_mirror=True)[0]
         return row
 
     return run_drawn("sketch-depth", tree, ctx, labels=("input", "trunk strokes"), extra=extra)

@@ -43,6 +43,18 @@ def test_depth_error_averages_only_the_foreground():
     assert foreground_depth_error(predicted, target, mask) == pytest.approx(0.2)
 
 
+def test_depth_error_up_to_mirror_forgives_a_tree_seen_from_behind_and_nothing_else():
+    rng = np.random.default_rng(0)
+    target = rng.uniform(0.0, 1.0, (16, 16))
+    mask = np.ones((16, 16))
+    mirrored = 1.0 - target  # the mirror tree's depth: the same strokes from the same side
+    assert foreground_depth_error(mirrored, target, mask) > 0.2
+    assert foreground_depth_error(mirrored, target, mask, up_to_mirror=True) == pytest.approx(0.0)
+    off = np.clip(target + 0.1, 0, 1)
+    assert foreground_depth_error(off, target, mask, up_to_mirror=True) == pytest.approx(
+        foreground_depth_error(off, target, mask))
+
+
 def test_depth_error_scores_only_the_named_channels_pooled_over_the_batch():
     predicted = np.zeros((2, 3, 1, 2))
     target = np.zeros((2, 3, 1, 2))
