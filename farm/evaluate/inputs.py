@@ -21,18 +21,20 @@ import dataclasses
 import json
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from farm.dataset import IMAGE_SUFFIXES, read_image
-from reconstruct.fitting import FIT_SIZE, FitRecord, FitTrace, drawing_outline, outline_iou, render_outline
 from species.errors import user_path
 
 from .methods import MethodContext, MethodResult, fit_cells, joined_share
 from .units import EvaluationError, Unit
 
-# reconstruct is imported where used: the package imports torch.
+# reconstruct is imported where used: the package imports torch, and reconstruct.fitting scipy, which planning an
+# evaluation does not need (the command's start-up time).
+if TYPE_CHECKING:
+    from reconstruct.fitting import FitRecord
 
 __all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "drawing_fit"]
 
@@ -70,6 +72,8 @@ def drawing_fit(result, image: np.ndarray, renderer) -> FitRecord:
     `render_outline`) against the drawing's filled outline (`outline_iou`), and whose first guess, trace and
     species are the fit's (`result.maps["fit"]`), or the result's own when it was not fitted. One measure at every
     budget: budget 0 scores what a fit's first guess scores, and a fit's result what the fit reported."""
+    from reconstruct.fitting import FIT_SIZE, FitRecord, FitTrace, drawing_outline, outline_iou, render_outline
+
     target = drawing_outline(image)
     size, renderer.size = renderer.size, FIT_SIZE
     try:

@@ -33,13 +33,12 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
 import numpy as np
 
 from farm.dataset import read_image
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
-from reconstruct.fitting import FitRecord
 from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
 from reconstruct.methods import DEFAULT_FIT_EVALS, RunOptions, get_method
 from reconstruct.report import cloud_drawing
@@ -52,6 +51,8 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 # reconstruct.metrics and reconstruct.scoring are imported where used: both import torch, which planning an
 # evaluation (`farm evaluate --print-data-spec`, the command's checks) does not need.
+if TYPE_CHECKING:  # reconstruct.fitting imports scipy, which the command's checks do not need (start-up time)
+    from reconstruct.fitting import FitRecord
 
 __all__ = ["METHODS", "Method", "Needs", "HeldOutTree", "MethodResult", "EvalSettings", "MethodContext",
            "tree_rng_seed", "joined_share", "needs_of", "run_drawn", "run_method", "fit_cells"]
