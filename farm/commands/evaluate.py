@@ -1,7 +1,8 @@
 """`farm evaluate`: every reconstruction method scored on the held-out trees of datasets (and on real inputs).
 
   farm evaluate --data DIR [DIR...] --out REPORT [--methods sketch-depth,params,two-view,cloud[,photos]]
-                [--models URI] [--trees N] [--part test|val|all] [--inputs DIR] [--workers N] [--address ADDR]
+                [--models URI] [--trees N] [--part test|val|all] [--inputs DIR] [--fit-evals N] [--workers N]
+                [--address ADDR]
   farm evaluate --print-data-spec > eval.yaml       a job spec whose dataset serves every method
   farm evaluate compare REPORT_A REPORT_B [--fail-if-worse METRIC[:TOLERANCE] ...]
 
@@ -15,7 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from reconstruct.methods import METHODS
+from reconstruct.methods import DEFAULT_FIT_EVALS, METHODS
 
 from farm.commands import CommandLineError, check_flag_int
 from farm.commands.ray_options import add_ray_options, check_workers
@@ -38,6 +39,9 @@ def register(subparsers) -> None:
     parser.add_argument("--trees", type=int, help="at most N held-out trees per dataset, picked across its species")
     parser.add_argument("--part", default="test", help="the split part: test (default), val, or all")
     parser.add_argument("--inputs", help="a folder of real clouds and sketches (docs/evaluation.md)")
+    parser.add_argument("--fit-evals", type=int, default=DEFAULT_FIT_EVALS, metavar="N",
+                        help="candidate trees each drawing method grows and redraws to fit its drawing "
+                             f"(default {DEFAULT_FIT_EVALS}; 0: the methods' first guesses)")
     add_ray_options(parser, workers_help="trees evaluated at once (default: the CPUs)")
     parser.add_argument("--sweep-step", type=float, default=5.0,
                         help="rotation sweep step, degrees (default 5: 72 views; 0: no sweep)")
@@ -84,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.sweep_step <= 360:
         raise CommandLineError(f"--sweep-step {args.sweep_step} is invalid: allowed degrees in (0, 360], or 0 for "
                                "no sweep")
-    settings = EvalSettings(surface_samples=args.surface_samples)
+    settings = EvalSettings(surface_samples=args.surface_samples, fit_evals=args.fit_evals)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     plan = plan_evaluation(args.data, methods, trees=args.trees, part=args.part, inputs=args.inputs,
                            settings=settings, models=args.models)

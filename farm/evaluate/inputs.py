@@ -8,34 +8,37 @@ Subfolders are not read.
 - A cloud goes through the cloud method (`reconstruct.from_cloud`): the share of its points within 10 cm of the
   reconstruction's bark and their median distance (AdTree's fit), the bark's height against the cloud's
   (`bark_height_rel_error`) and the share of its points the skeleton graph joined to the tree (connectedness).
-- A sketch goes through the params method (TreeSketchNet): with a reference, species and levels right or wrong and
-  the parameter score (Weber-Penn references); without one, the silhouette IoU of the result re-rendered in the
-  sketch's view (tsn4 front), both outlines cut to their bounding boxes and compared at one height.
+- A sketch goes through the params method (TreeSketchNet, fitted to the drawing within `EvalSettings.fit_evals`
+  candidate trees): with a reference, species and levels right or wrong and the parameter score (Weber-Penn
+  references); without one, `silhouette_iou_input`: the result redrawn in the sketch's view (tsn4 front) against
+  the drawing, as filled outlines (`reconstruct.fitting`: each cut to its box, scaled to one height, pen gaps closed
+  and enclosed paper filled, so a contour drawing is the shape it encloses), the one measure the fit maximises.
+  Its panel shows the outlines of the first guess and of the result over the drawing's.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from farm.dataset import IMAGE_SUFFIXES, read_image
-from renderers.silhouette_metric import closed_silhouette
 from species.errors import user_path
 
-from .methods import MethodContext, MethodResult, joined_share
+from .methods import MethodContext, MethodResult, fit_cells, joined_share
 from .units import EvaluationError, Unit
 
-# reconstruct is imported where used: the package imports torch.
+# reconstruct is imported where used: the package imports torch, and reconstruct.fitting scipy, which planning an
+# evaluation does not need (the command's start-up time).
+if TYPE_CHECKING:
+    from reconstruct.fitting import FitRecord
 
-__all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "outline_iou"]
+__all__ = ["input_units", "run_input", "SKETCH_SUFFIXES", "drawing_fit"]
 
 SKETCH_SUFFIXES = IMAGE_SUFFIXES
-_IOU_SIZE = 128  # both outlines are compared at this size, cut to their bounding boxes
-_INK = 128       # grey levels below this are strokes
-_CLOSING_PX = 6  # gaps up to about twice this closed in a drawing's and a render's outline (at 224-256 px)
 
 
 def input_units(folder: str, methods: Sequence[str]):
@@ -63,25 +66,26 @@ def input_units(folder: str, methods: Sequence[str]):
     return units, skipped
 
 
-def outline_iou(mask_a: np.ndarray, mask_b: np.ndarray) -> float:
-    """IoU of two outlines at one scale (a drawing has none): each cut to its bounding box and scaled to one
-    height, keeping its aspect, both centred on one vertical axis (a tree's) on a shared canvas."""
-    import cv2
+def drawing_fit(result, image: np.ndarray, renderer) -> FitRecord:
+    """How a params result matches its drawing: a `reconstruct.fitting.FitRecord` whose `outline` and `score` are
+    the result's tree redrawn in the drawing's view (tsn4 front) as the fit draws its candidates (FIT_SIZE pixels,
+    `render_outline`) against the drawing's filled outline (`outline_iou`), and whose first guess, trace and
+    species are the fit's (`result.maps["fit"]`), or the result's own when it was not fitted. One measure at every
+    budget: budget 0 scores what a fit's first guess scores, and a fit's result what the fit reported."""
+    from reconstruct.fitting import FIT_SIZE, FitRecord, FitTrace, drawing_outline, outline_iou, render_outline
 
-    from reconstruct import metrics
-
-    cut = []
-    for mask in (mask_a, mask_b):
-        rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
-        if rows.size == 0:
-            return 0.0
-        box = mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1].astype(np.uint8)
-        width = max(1, int(round(box.shape[1] * _IOU_SIZE / box.shape[0])))
-        cut.append(cv2.resize(box, (width, _IOU_SIZE), interpolation=cv2.INTER_NEAREST))
-    canvas = max(c.shape[1] for c in cut)
-    placed = [np.pad(c, ((0, 0), ((canvas - c.shape[1]) // 2, canvas - c.shape[1] - (canvas - c.shape[1]) // 2)))
-              for c in cut]
-    return metrics.silhouette_iou(*placed)
+    target = drawing_outline(image)
+    size, renderer.size = renderer.size, FIT_SIZE
+    try:
+        camera = renderer.cameras(result.mesh, "tsn4", np.random.default_rng(0))[0]
+        shape = render_outline(renderer, result.mesh, camera)
+    finally:
+        renderer.size = size
+    score = outline_iou(shape, target)
+    fit = result.maps.get("fit")
+    if fit is None:
+        return FitRecord(target, shape, score, shape, score, FitTrace())
+    return dataclasses.replace(fit, target=target, outline=shape, score=score)
 
 
 def _run_cloud(path: Path, ctx: MethodContext) -> tuple[MethodResult, None]:
@@ -108,16 +112,16 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
     import reconstruct
     from reconstruct import metrics
     from reconstruct.scoring import depth_picture
-    from scipy.ndimage import binary_fill_holes
 
     net = ctx.net("sketchnet")
     image = read_image(str(path))
-    result = reconstruct.from_params(image, net=net)
+    result = reconstruct.from_params(image, net=net, fit_evals=ctx.settings.fit_evals, renderer=ctx.renderer)
     start = time.perf_counter()
     camera = ctx.renderer.cameras(result.mesh, "tsn4", np.random.default_rng(0))[0]
     reference_path = path.with_suffix(".json")
     row: dict[str, float] = {}
     species = None
+    record = drawing_fit(result, image, ctx.renderer)
     if reference_path.exists():
         with user_path(reference_path, "read"):
             reference = json.loads(reference_path.read_text())
@@ -128,13 +132,10 @@ def _run_sketch(path: Path, ctx: MethodContext) -> tuple[MethodResult, str | Non
             row["levels_correct"] = float(int(result.params.get("levels", -1)) == int(reference["levels"]))
         if reference.get("generator", "weber_penn") == "weber_penn" and "levels" in reference:
             row["param_score"] = metrics.parameter_scores(net.codec, result.params, reference)["score_overall"]
-    else:
-        grey = image if image.ndim == 2 else image.mean(axis=2)
-        drawn = ctx.renderer.silhouette_masks(result.mesh, [camera])[0]
-        # Outlines: a drawing's strokes and the rendered twigs and leaves closed into one filled shape each.
-        ink, shape = (binary_fill_holes(closed_silhouette(m, _CLOSING_PX)) for m in (grey < _INK, drawn))
-        row["silhouette_iou_input"] = outline_iou(ink, shape)
-    cells = [("input", image), ("reconstruction", depth_picture(ctx.renderer, result.mesh, result.skeleton, camera))]
+    else:  # a sketch of a known tree is scored against the tree; the outline is what a drawing alone gives
+        row["silhouette_iou_input"] = record.score
+    cells = [("input", image), *fit_cells(record),
+             ("reconstruction", depth_picture(ctx.renderer, result.mesh, result.skeleton, camera))]
     return (MethodResult(row, {**result.timings, "scoring": time.perf_counter() - start}, cells,
                          {"sketchnet": net.source}), species)
 

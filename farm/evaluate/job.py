@@ -151,7 +151,7 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
                     inputs: str | None = None, settings: EvalSettings = EvalSettings(),
                     models: str | None = None) -> EvaluationPlan:
     """The units to run; EvaluationError for an unknown method or part, a dataset that cannot be read, or a job
-    with nothing to evaluate. Writes nothing."""
+    with nothing to evaluate, FitError for a fit budget that is not a count. Writes nothing."""
     methods = list(dict.fromkeys(methods))
     unknown = [m for m in methods if m not in METHODS]
     if unknown or not methods:
@@ -161,6 +161,9 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
         raise EvaluationError(f"--part {part!r} is invalid: allowed {', '.join(PARTS)}")
     if trees is not None and trees < 1:
         raise EvaluationError(f"--trees {trees} is invalid: allowed an integer >= 1")
+    from reconstruct.fitting import check_fit_evals  # here: it imports scipy (the command's start-up time)
+
+    check_fit_evals(settings.fit_evals)
     if not data and inputs is None:
         raise EvaluationError("nothing to evaluate: pass --data DIR [DIR...] and/or --inputs DIR")
     datasets = [_open_dataset(path, part) for path in data]

@@ -10,7 +10,8 @@ span).
 
 A method runs by the kind of what it reads, and three add what the evaluation knows of them (`RUNNERS`):
 - drawings (`run_drawn`): its inputs from the views the registry names (`Input.rendered`), its networks loaded once
-  per worker, the tree's seed, the true height, and the geometry metrics in its input views.
+  per worker, the tree's seed, the true height, the fit budget (`EvalSettings.fit_evals`), and the geometry metrics
+  in its input views; a method that fitted its tree (a `FitRecord` in its maps) shows the fit's outlines.
   - params (seed 004): TreeSketchNet reads the `tsn4` front view's `sketch_tsn`, with the dictionary's seed 0;
     species, levels and the parameter score (Weber-Penn trees only: the codec's dictionaries) beside the geometry.
   - sketch-depth (seed 000): the `two-view` front view's `sketch_edges` and `trunk_strokes` through both pix2pix
@@ -32,14 +33,14 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterator, Sequence
+from typing import TYPE_CHECKING, Callable, Iterator, Sequence
 
 import numpy as np
 
 from farm.dataset import read_image
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
 from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
-from reconstruct.methods import RunOptions, get_method
+from reconstruct.methods import DEFAULT_FIT_EVALS, RunOptions, get_method
 from reconstruct.report import cloud_drawing
 from renderers import Camera, ViewRenderer
 from renderers.blender import render_photos
@@ -50,9 +51,11 @@ from species.tree_mesh import MeshPart, TreeMesh
 
 # reconstruct.metrics and reconstruct.scoring are imported where used: both import torch, which planning an
 # evaluation (`farm evaluate --print-data-spec`, the command's checks) does not need.
+if TYPE_CHECKING:  # reconstruct.fitting imports scipy, which the command's checks do not need (start-up time)
+    from reconstruct.fitting import FitRecord
 
 __all__ = ["METHODS", "Method", "Needs", "HeldOutTree", "MethodResult", "EvalSettings", "MethodContext",
-           "tree_rng_seed", "joined_share", "needs_of", "run_drawn", "run_method"]
+           "tree_rng_seed", "joined_share", "needs_of", "run_drawn", "run_method", "fit_cells"]
 
 
 @dataclass(frozen=True)
@@ -90,8 +93,9 @@ class MethodResult:
 
 @dataclass(frozen=True)
 class EvalSettings:
-    """How the evaluation measures: surface samples per mesh (0: no surface distances), the synthetic scan, and
-    the photos' orbit (views 10 deg apart, leafless: digest and docs/reconstruct.md say why)."""
+    """How the evaluation measures: surface samples per mesh (0: no surface distances), the synthetic scan, the
+    photos' orbit (views 10 deg apart, leafless: digest and docs/reconstruct.md say why), and the drawing methods'
+    fit to their drawings (`RunOptions.fit_evals`: candidate trees per drawing; 0: each method's first guess)."""
 
     surface_samples: int = 20_000
     cloud_points: int = 20_000
@@ -102,6 +106,7 @@ class EvalSettings:
     photo_size: int = 400
     photo_samples: int = 4
     seed: int = 0
+    fit_evals: int = DEFAULT_FIT_EVALS
 
 
 class MethodContext:
@@ -165,19 +170,39 @@ def _pictures(ctx: MethodContext, tree: HeldOutTree, camera: Camera, skeleton: S
 
 
 # ------------------------------------------------------------------------------------------------ drawn inputs
+def _square(picture: np.ndarray) -> np.ndarray:
+    """An (H, W, 3) picture padded with black to a square, so a panel's cell does not stretch it."""
+    side = max(picture.shape[:2])
+    rows, cols = side - picture.shape[0], side - picture.shape[1]
+    return np.pad(picture, ((rows // 2, rows - rows // 2), (cols // 2, cols - cols // 2), (0, 0)))
+
+
+def fit_cells(record: FitRecord) -> list[tuple[str, np.ndarray]]:
+    """Panel cells of a fit (`reconstruct.fitting.FitRecord`): the drawing's outline (green) under the first
+    guess's and the result's (red; both yellow), each labelled with its outline IoU; one cell when the record holds
+    no evaluations (a result scored, not fitted)."""
+    fitted = ("fitted", _square(record.overlay(fitted=True)), record.score)
+    if not record.trace.evals:
+        return [(f"outline IoU {record.score:.2f}", fitted[1])]
+    first = ("first guess", _square(record.overlay(fitted=False)), record.first_score)
+    return [(f"{name}: outline IoU {score:.2f}", picture) for name, picture, score in (first, fitted)]
+
+
 # What a drawn method's extra metrics are made from: (its result, its networks by task, the tree's views).
 ExtraMetrics = Callable[[object, dict, dict], dict]
 
 
 def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | None = None,
               height: float | None = None, labels: Sequence[str] = (), extra: ExtraMetrics | None = None,
-              **options) -> MethodResult:
+              run: Callable | None = None, **options) -> MethodResult:
     """A registry method whose inputs are rendered drawings, on one tree: its inputs from the tree's views (the
     registry's `Input.rendered`), its networks, the tree's seed (`tree_rng_seed`, unless `seed`), the true height
-    (unless `height`) and `options` (RunOptions fields); scored with the geometry metrics in its input views
-    (`main_skeleton` from its maps), then `extra`'s metrics. Cells: its inputs (`labels`, default "input" or
+    (unless `height`), the settings' fit budget (`EvalSettings.fit_evals`) and `options` (RunOptions fields), run
+    by the registry's `run` (unless `run`, called the same way); scored with the geometry metrics in its input
+    views (`main_skeleton` from its maps), then `extra`'s metrics. Cells: its inputs (`labels`, default "input" or
     "input NAME"), then the reconstruction and the truth in its first input view."""
     method = get_method(name)
+    run = run or method.run
     needs = needs_of(name)
     inputs = {item.name: tree.views[item.rendered.view][1][item.rendered.output] for item in method.reads}
     cameras = [tree.views[view][0] for view in needs.views]
@@ -185,8 +210,9 @@ def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | N
     nets = ctx.nets(method.models)
     seed = tree_rng_seed(tree, name, ctx.settings.seed) if seed is None else seed
     start = time.perf_counter()
-    result = method.run(inputs, RunOptions(seed=seed, height=tree.skeleton.height if height is None else height,
-                                           nets=nets, **options))
+    options = {"fit_evals": ctx.settings.fit_evals, **options}
+    result = run(inputs, RunOptions(seed=seed, height=tree.skeleton.height if height is None else height, nets=nets,
+                                    **options))
     timings = {**result.timings}
     timings.setdefault("total", time.perf_counter() - start)
     start = time.perf_counter()
@@ -195,12 +221,22 @@ def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | N
         row.update(extra(result, nets, {view: images for view, (_, images) in tree.views.items()}))
     timings["scoring"] = time.perf_counter() - start
     labels = labels or (["input"] if len(inputs) == 1 else [f"input {key}" for key in inputs])
-    cells = [*zip(labels, inputs.values()), *_pictures(ctx, tree, cameras[0], result.skeleton, result.mesh)]
+    fit = result.maps.get("fit")  # a reconstruct.fitting.FitRecord where the method fitted its tree
+    cells = [*zip(labels, inputs.values()), *(fit_cells(fit) if fit is not None else []),
+             *_pictures(ctx, tree, cameras[0], result.skeleton, result.mesh)]
     return MethodResult(row, timings, cells, {task: net.source for task, net in nets.items()})
 
 
 def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     from reconstruct import metrics
+    from reconstruct.from_params import from_params
+
+    def fitted_with_worker_renderer(inputs, options: RunOptions):
+        # The registry's params run, its fit drawing candidates with the worker's renderer (one GL context per
+        # worker, not one per tree).
+        return from_params(inputs["sketch"], models=options.models, net=options.nets.get("sketchnet"),
+                           seed=options.seed, height=options.height, fit_evals=options.fit_evals,
+                           renderer=ctx.renderer)
 
     def extra(result, nets, views) -> dict:
         codec, row = nets["sketchnet"].codec, {}
@@ -211,7 +247,8 @@ def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
             row["param_score"] = metrics.parameter_scores(codec, result.params, tree.params)["score_overall"]
         return row
 
-    return run_drawn("params", tree, ctx, seed=0, extra=extra)  # seed 0: the dictionary's own, as a user's run
+    # seed 0: the dictionary's own, as a user's run
+    return run_drawn("params", tree, ctx, seed=0, extra=extra, run=fitted_with_worker_renderer)
 
 
 def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:

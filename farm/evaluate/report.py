@@ -144,7 +144,10 @@ def _summary_markdown(rows, plan, sources: dict, models: str | None, sweep, tabl
     cap = (f", at most {plan.record['trees']} per dataset, picked across its species" if plan.record.get("trees")
            else "")
     trees = f"; trees: {which}{cap}" if plan.datasets else ""
-    lines = ["# Evaluation", "", *_wrapped(f"Methods: {', '.join(plan.methods)}{trees}."), ""]
+    evals = plan.record["settings"].get("fit_evals")
+    fitting = ("" if evals is None else f" Drawing methods fitted to their drawings within {evals} candidate trees "
+               "each (--fit-evals)." if evals else " Drawing methods not fitted (--fit-evals 0): their first guesses.")
+    lines = ["# Evaluation", "", *_wrapped(f"Methods: {', '.join(plan.methods)}{trees}.{fitting}"), ""]
     if plan.datasets:
         lines += ["Datasets:", ""]
         for info in plan.datasets:

@@ -3,7 +3,8 @@ unit-cube Hausdorff per angle (digest 4.5: 72 views 5 degrees apart; the paper r
 
 The tree is the first held-out Weber-Penn tree of the first dataset that serves the params method (or the first
 held-out tree when none is Weber-Penn); the views are rig `orbit:N:10` (N = 360 / step) rendered in `sketch_tsn`,
-the style the network reads. Written to REPORT_DIR/sweep.parquet (azimuth, metric), kept on a rerun.
+the style the network reads, each fitted to its drawing as the params rows are (`EvalSettings.fit_evals`).
+Written to REPORT_DIR/sweep.parquet (azimuth, metric), kept on a rerun.
 """
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ def _sweep_task(unit, models, settings, step: float) -> dict:
     for k, view in enumerate(views):
         rows["azimuth_deg"].append(k * 360.0 / n)
         try:
-            result = reconstruct.from_params(view.images["sketch_tsn"], net=net, height=tree.skeleton.height)
+            result = reconstruct.from_params(view.images["sketch_tsn"], net=net, height=tree.skeleton.height,
+                                             fit_evals=settings.fit_evals, renderer=ctx.renderer)
             rows["unit_cube_hausdorff"].append(metrics.unit_cube_hausdorff(result.skeleton, tree.skeleton))
         except TreefarmError:  # a view the method cannot read: a gap in the curve, not a failed job
             rows["unit_cube_hausdorff"].append(float("nan"))

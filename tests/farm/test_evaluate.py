@@ -18,7 +18,7 @@ import species
 from farm.cli import main
 from farm.evaluate.job import ROWS, TREE_PICK, evaluation_data_spec, pick_across_species, plan_evaluation, serves
 from farm.evaluate.methods import EvalSettings
-from farm.evaluate.inputs import input_units, outline_iou
+from farm.evaluate.inputs import input_units
 from farm.jobs import parse_spec
 from farm.pipeline import run_job
 from reconstruct.scoring import METRICS
@@ -27,7 +27,7 @@ from trainers.data import split_part
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
 METHODS = ["params", "sketch-depth", "two-view", "cloud"]
-FAST = ["--sweep-step", "90", "--surface-samples", "2000", "--workers", "2"]
+FAST = ["--sweep-step", "90", "--surface-samples", "2000", "--fit-evals", "2", "--workers", "2"]
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +160,7 @@ def test_trees_are_picked_across_species_of_an_interleaved_dataset():
 def test_a_report_of_trees_picked_the_old_way_is_not_resumed_with_new_picks(eval_data, tmp_path, capsys):
     out = tmp_path / "report"
     plan = plan_evaluation([str(eval_data)], ["cloud"], part="all", trees=2,
-                           settings=EvalSettings(surface_samples=2000))  # FAST's
+                           settings=EvalSettings(surface_samples=2000, fit_evals=2))  # FAST's
     old = {k: v for k, v in plan.record.items() if k != "pick"}
     out.mkdir()
     (out / "evaluation.json").write_text(json.dumps(old, indent=1, sort_keys=True))
@@ -300,18 +300,6 @@ def test_inputs_take_sketches_of_every_image_kind_the_reader_reads(tmp_path):
         (tmp_path / name).write_bytes(b"")
     units, skipped = input_units(str(tmp_path), ["params"])
     assert [Path(u.tree_id).name for u in units] == ["a.png", "b.jpg", "c.JPEG", "d.tif", "e.webp"] and not skipped
-
-
-def test_outline_iou_compares_shapes_at_one_height_on_known_answers():
-    square = np.zeros((64, 64), bool)
-    square[10:30, 10:30] = True
-    bigger = np.zeros((200, 200), bool)
-    bigger[50:150, 20:120] = True  # the same square at another scale and place
-    assert outline_iou(square, bigger) == 1.0
-    wide = bigger.copy()
-    wide[100:150] = False  # 50 x 100: at the square's height, twice as wide
-    assert abs(outline_iou(square, wide) - 0.5) < 0.01
-    assert outline_iou(square, np.zeros_like(square)) == 0.0
 
 
 def test_eval_settings_are_part_of_the_job_record(eval_data):
