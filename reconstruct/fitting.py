@@ -224,8 +224,8 @@ def _slot_columns(codec) -> list[tuple[str, int]]:
 def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, renderer,
                grow: Callable[[dict], tuple] | None = None) -> ParamsFit:
     """Search TreeSketchNet's output space around its guess for the dictionary whose tree's front outline matches
-    `target` (`drawing_outline` of the sketch): the guess first, then the species' own preset, then the network's
-    next species (while it is unsure: SPECIES_SURE) each from its guess and its preset, then decode seeds
+    `target` (`drawing_outline` of the sketch): the guess first, then the species' own preset, then the presets of
+    the network's next species (while it is unsure: SPECIES_SURE), then decode seeds
     seed + 1, ..., then CMA-ES over PARAMS_FIT_SLOTS (each within the codec's training range), all within
     `evals` (>= 1) evaluations. `grow(params) -> (skeleton, mesh)` (default `species.rebuild`)."""
     import species
@@ -257,9 +257,10 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     best_outputs, best_seed, best_params, best = outputs, int(seed), None, -1.0
     species_scores: dict[str, tuple[float, float]] = {}
     for rank, (name, probability) in enumerate(ranking):
-        # The network's guess read as this species, then the species' own preset: a drawing far from what
-        # training drew is often nearer a preset than the guess.
-        starts = [outputs if rank == 0 else codec.with_species(outputs, name)]
+        # The network's guess, then each species' own preset: a drawing far from what training drew is often
+        # nearer a preset than the guess. (The guess read as another species is nearly the same tree: the
+        # species only sets a few fixed values.)
+        starts = [outputs] if rank == 0 else []
         starts.append(codec.as_outputs(codec.encode_arrays([species.sample(name, np.random.default_rng(seed))],
                                                            np.float64)))
         for outs in starts:

@@ -342,14 +342,6 @@ class ParameterCodec:
         order = np.argsort(-scores[held], kind="stable")
         return [(self.species[int(held[i])], float(weights[i] / weights.sum())) for i in order]
 
-    def with_species(self, outputs: Mapping[str, np.ndarray], name: str) -> dict[str, np.ndarray]:
-        """A copy of `outputs` whose species head reads `name` (a species training held), all else alike."""
-        index = self.species.index(name)
-        logits = np.array(outputs[SPECIES_HEAD], np.float64, copy=True)
-        finite = logits[np.isfinite(logits)]
-        logits[:, index] = (finite.max() if finite.size else 0.0) + 1.0
-        return {**outputs, SPECIES_HEAD: logits}
-
     def normalised_range(self, head: str) -> tuple[np.ndarray, np.ndarray]:
         """(low, high) (n,) of a regression head's outputs: the values `decode_arrays` keeps unclamped."""
         stats = self._stats[head]
