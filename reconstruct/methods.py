@@ -85,7 +85,8 @@ class RunOptions:
                  progress : photos: told each stage's progress (`reconstruct.sfm.Progress`).
     name       : the mesh's name (cloud, photos).
     fit_evals  : the drawing methods' fit to their input (`reconstruct.fitting`): candidate trees grown and redrawn;
-                 0 keeps the method's first guess.
+                 0 keeps the method's first guess; renderer : the `renderers.ViewRenderer` the fit redraws them with
+                 (None: the method makes one, a GL context per call).
     """
 
     seed: int = 0
@@ -105,6 +106,7 @@ class RunOptions:
     log: Any = None
     progress: Callable[[str, int, int], None] | None = None
     fit_evals: int = DEFAULT_FIT_EVALS
+    renderer: Any = None
 
 
 @dataclass(frozen=True)
@@ -142,7 +144,7 @@ def _run_params(inputs, options: RunOptions):
     from .from_params import from_params  # imported when run (module docstring)
 
     return from_params(inputs["sketch"], models=options.models, net=options.nets.get("sketchnet"), seed=options.seed,
-                       height=options.height, fit_evals=options.fit_evals)
+                       height=options.height, fit_evals=options.fit_evals, renderer=options.renderer)
 
 
 def _run_sketch_depth(inputs, options: RunOptions):
@@ -152,7 +154,7 @@ def _run_sketch_depth(inputs, options: RunOptions):
     return from_sketch(inputs["sketch"], inputs["strokes"], models=options.models, species=options.species,
                        height=options.height, rng=np.random.default_rng(options.seed), photo=options.photo,
                        silhouette_net=nets.get("pix2pix-silhouette"), trunk_net=nets.get("pix2pix-trunk"),
-                       sketchnet=nets.get("sketchnet"), fit_evals=options.fit_evals)
+                       sketchnet=nets.get("sketchnet"), fit_evals=options.fit_evals, renderer=options.renderer)
 
 
 def _run_two_view(inputs, options: RunOptions):

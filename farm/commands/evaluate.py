@@ -16,7 +16,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from reconstruct.methods import DEFAULT_FIT_EVALS, METHODS
+from reconstruct.fit_budget import DEFAULT_FIT_EVALS
+from reconstruct.methods import METHODS
 
 from farm.commands import CommandLineError, check_flag_int
 from farm.commands.ray_options import add_ray_options, check_workers

@@ -40,7 +40,8 @@ import numpy as np
 from farm.dataset import read_image
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
 from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
-from reconstruct.methods import DEFAULT_FIT_EVALS, RunOptions, get_method
+from reconstruct.fit_budget import DEFAULT_FIT_EVALS
+from reconstruct.methods import RunOptions, get_method
 from reconstruct.report import cloud_drawing
 from renderers import Camera, ViewRenderer
 from renderers.blender import render_photos
@@ -194,15 +195,14 @@ ExtraMetrics = Callable[[object, dict, dict], dict]
 
 def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | None = None,
               height: float | None = None, labels: Sequence[str] = (), extra: ExtraMetrics | None = None,
-              run: Callable | None = None, **options) -> MethodResult:
+              **options) -> MethodResult:
     """A registry method whose inputs are rendered drawings, on one tree: its inputs from the tree's views (the
     registry's `Input.rendered`), its networks, the tree's seed (`tree_rng_seed`, unless `seed`), the true height
-    (unless `height`), the settings' fit budget (`EvalSettings.fit_evals`) and `options` (RunOptions fields), run
-    by the registry's `run` (unless `run`, called the same way); scored with the geometry metrics in its input
-    views (`main_skeleton` from its maps), then `extra`'s metrics. Cells: its inputs (`labels`, default "input" or
-    "input NAME"), then the reconstruction and the truth in its first input view."""
+    (unless `height`), the settings' fit budget (`EvalSettings.fit_evals`), the worker's renderer for the fit and
+    `options` (RunOptions fields); scored with the geometry metrics in its input views (`main_skeleton` from its
+    maps), then `extra`'s metrics. Cells: its inputs (`labels`, default "input" or "input NAME"), the fit's
+    outlines where it fitted, then the reconstruction and the truth in its first input view."""
     method = get_method(name)
-    run = run or method.run
     needs = needs_of(name)
     inputs = {item.name: tree.views[item.rendered.view][1][item.rendered.output] for item in method.reads}
     cameras = [tree.views[view][0] for view in needs.views]
@@ -210,9 +210,9 @@ def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | N
     nets = ctx.nets(method.models)
     seed = tree_rng_seed(tree, name, ctx.settings.seed) if seed is None else seed
     start = time.perf_counter()
-    options = {"fit_evals": ctx.settings.fit_evals, **options}
-    result = run(inputs, RunOptions(seed=seed, height=tree.skeleton.height if height is None else height, nets=nets,
-                                    **options))
+    options = {"fit_evals": ctx.settings.fit_evals, "renderer": ctx.renderer, **options}
+    result = method.run(inputs, RunOptions(seed=seed, height=tree.skeleton.height if height is None else height,
+                                           nets=nets, **options))
     timings = {**result.timings}
     timings.setdefault("total", time.perf_counter() - start)
     start = time.perf_counter()
@@ -229,14 +229,6 @@ def run_drawn(name: str, tree: HeldOutTree, ctx: MethodContext, *, seed: int | N
 
 def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
     from reconstruct import metrics
-    from reconstruct.from_params import from_params
-
-    def fitted_with_worker_renderer(inputs, options: RunOptions):
-        # The registry's params run, its fit drawing candidates with the worker's renderer (one GL context per
-        # worker, not one per tree).
-        return from_params(inputs["sketch"], models=options.models, net=options.nets.get("sketchnet"),
-                           seed=options.seed, height=options.height, fit_evals=options.fit_evals,
-                           renderer=ctx.renderer)
 
     def extra(result, nets, views) -> dict:
         codec, row = nets["sketchnet"].codec, {}
@@ -248,7 +240,7 @@ def run_params(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
         return row
 
     # seed 0: the dictionary's own, as a user's run
-    return run_drawn("params", tree, ctx, seed=0, extra=extra, run=fitted_with_worker_renderer)
+    return run_drawn("params", tree, ctx, seed=0, extra=extra)
 
 
 def run_sketch_depth(tree: HeldOutTree, ctx: MethodContext) -> MethodResult:
