@@ -2,6 +2,8 @@
 deterministic, a tree drawn by our own renderer fitted back to its crowns, the drawing's cameras, bad budgets."""
 from __future__ import annotations
 
+from contextlib import closing
+
 import numpy as np
 import pytest
 
@@ -19,9 +21,8 @@ BUDGET = DEFAULT_FIT_EVALS
 
 @pytest.fixture(scope="module")
 def renderer():
-    renderer = ViewRenderer(256)
-    yield renderer
-    renderer.close()
+    with closing(ViewRenderer(256)) as opened:
+        yield opened
 
 
 @pytest.fixture(scope="module")
