@@ -161,7 +161,7 @@ def _run_two_view(inputs, options: RunOptions):
     from .two_view import two_view  # imported when run (module docstring)
 
     return two_view(inputs["front"], inputs["side"], height=options.height, rng=np.random.default_rng(options.seed),
-                    brush=options.brush)
+                    brush=options.brush, fit_evals=options.fit_evals)
 
 
 def _run_cloud(inputs, options: RunOptions):
@@ -205,7 +205,7 @@ METHODS: dict[str, Method] = {
                            rendered=Rendered("two-view:shared", "front", "sketch_strokes")),
                      Input("side", "image", "the side drawing", help="the side drawing, 90 degrees from the front",
                            flag=True, rendered=Rendered("two-view:shared", "side", "sketch_strokes"))),
-        _run_two_view, options=("brush",),
+        _run_two_view, options=("brush", "fit_evals"),
         summary="no network: 2D skeletons, equal-height matching, twigs clipped by both outlines",
         source="seed 001"),
     "cloud": Method(

@@ -21,6 +21,8 @@ from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_he
 from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
+from .fit_two_view import GrowthSettings, fit_growth
+from .fitting import DEFAULT_FIT_EVALS, check_fit_evals
 from .result import Reconstruction
 
 __all__ = ["two_view", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
@@ -124,9 +126,10 @@ def _frame(mask: np.ndarray, skeleton: Skeleton2D, name: str) -> _Frame:
     return frame
 
 
-def _outline(given, mask: np.ndarray, frame: _Frame, name: str) -> np.ndarray:
+def _given_outline(given, mask: np.ndarray, name: str) -> np.ndarray | None:
+    """A caller's crown outline checked, or None where the method draws its own (`crown_outline`)."""
     if given is None:
-        return crown_outline(mask, OUTLINE_MARGIN * frame.height_px)
+        return None
     given = np.asarray(given)
     if given.shape != mask.shape:
         raise TwoViewError(f"{name} outline has shape {given.shape}: allowed the image's {mask.shape}")
@@ -147,7 +150,7 @@ def _check_height(height) -> float:
 
 def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None, rng: np.random.Generator,
              brush: bool | None = None, front_outline=None, side_outline=None, twig_options: dict | None = None,
-             leaf_options: dict | None = None) -> Reconstruction:
+             leaf_options: dict | None = None, fit_evals: int = DEFAULT_FIT_EVALS) -> Reconstruction:
     """A tree from two orthogonal drawings (seed 001, digest 2).
 
     front, side : (H, W) grey or (H, W, 3) colour uint8 images of one size, dark strokes on light paper: the trunk
@@ -155,17 +158,23 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
                   right), Z up. Their scales may differ: each view is normalised on its trunk base (lowest ink
                   row, the base column of its 2D skeleton's root) and its tree height (rows the ink spans).
     height      : metres from the base to the top of the drawn tree (default DEFAULT_HEIGHT).
-    rng         : numpy Generator for the twigs and leaves; the same seed gives the same bytes.
+    rng         : numpy Generator for the twigs and leaves (and the fit's search); the same seed and fit_evals give
+                  the same bytes.
     brush       : True for brush strokes (radius from width; pieces may be apart), False for 1-pixel strokes
                   (must be connected), None to tell from the drawings (`is_brush_drawing` on either view).
     front_outline, side_outline : optional (H, W) bool crown masks in each image's pixels; default
                   `crown_outline` of the ink (convex hull + OUTLINE_MARGIN of the tree height).
-    twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS.
-    Timings: "ink", "skeleton_2d", "match", "lift", "main_skeleton", "twigs", "mesh". Maps: "brush" (bool, the
+    twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS (the fit's start).
+    fit_evals   : candidate trees the fit may grow and redraw in both views (`reconstruct.fit_two_view`: the
+                  outline margin and the twig and leaf settings move, the main skeleton stays); 0 grows the first
+                  guess as it is, with the options above.
+    Timings: "ink", "skeleton_2d", "match", "lift", "main_skeleton", "twigs" (fit_evals 0) or "fit" (which grows
+    every candidate's twigs), "mesh". Maps: "brush" (bool, the
     stroke kind used), "metres_per_pixel" and "side_scale" (front pixels per side pixel), "front_2d" and "side_2d"
     (Skeleton2D; the side mapped into the front's pixels), "cloud" (M, 3) and "lifted" (N, 3) pixels (front column,
     row, side column), "main" (the main Skeleton, metres) and "main_skeleton" (its nodes), "twig_level" (N,)
-    uint8, "outlines" (front, side) CrownOutline.
+    uint8, "outlines" (front, side) CrownOutline; with fitting, "fit" (a `reconstruct.fitting.FitRecord`, both
+    views side by side) and "growth" (the `GrowthSettings` chosen).
     Radii: the pipe model with exponent 2.5 (TWIG_DEFAULTS) and tips 0.002 x height; with brush strokes the main skeleton keeps
     its drawn radii and no twig is thicker than the main branch it grows from.
     Raises TwoViewError for images that are blank, not (H, W) / (H, W, 3) uint8, of different sizes, 1-pixel
@@ -178,6 +187,7 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
         raise TwoViewError(f"rng is a {type(rng).__name__}: allowed a numpy.random.Generator "
                            f"(numpy.random.default_rng(seed))")
     height = _check_height(height)
+    fit_evals = check_fit_evals(fit_evals)
     front_ink, side_ink = ink_mask(front, "front image"), ink_mask(side, "side image")
     if front_ink.shape != side_ink.shape:
         raise TwoViewError(f"the front image is {front_ink.shape[1]} x {front_ink.shape[0]} px and the side image "
@@ -196,8 +206,7 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     lap("skeleton_2d")
     front_frame = _frame(front_ink, front_2d, "the front image")
     side_frame = _frame(side_ink, side_2d, "the side image")
-    outlines_px = (_outline(front_outline, front_ink, front_frame, "front"),
-                   _outline(side_outline, side_ink, side_frame, "side"))
+    given = (_given_outline(front_outline, front_ink, "front"), _given_outline(side_outline, side_ink, "side"))
     scale = front_frame.height_px / side_frame.height_px  # front pixels per side pixel
     side_in_front = side_2d.transformed(scale, (side_frame.base_col, side_frame.base_row),
                                         (front_frame.base_col, front_frame.base_row))
@@ -215,23 +224,39 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     main = resample_skeleton(world, dense.parent, order, np.maximum(dense.radius, LINE_RADIUS_PX) * mpp,
                              NODE_SPACING * height)
     ppm = 1.0 / mpp
-    outlines = (
-        CrownOutline(outlines_px[0], 0, (front_frame.base_col + root[0] * ppm, front_frame.base_row - root[2] * ppm),
-                     ppm),
-        CrownOutline(outlines_px[1], 1, (side_frame.base_col + root[1] * ppm / scale,
-                                         side_frame.base_row - root[2] * ppm / scale), ppm / scale),
-    )
+    places = (((front_frame.base_col + root[0] * ppm, front_frame.base_row - root[2] * ppm), ppm),
+              ((side_frame.base_col + root[1] * ppm / scale, side_frame.base_row - root[2] * ppm / scale),
+               ppm / scale))
     lap("main_skeleton")
-    skeleton, level = grow_twigs(main, *outlines, rng, **(twig_options or {}))
-    if brush:
-        skeleton = _with_drawn_radii(skeleton, level, main.radius)
-    skeleton = add_leaves(skeleton, level, rng, **(leaf_options or {}))
-    lap("twigs")
+    inks, frames = (front_ink, side_ink), (front_frame, side_frame)
+
+    def grow(settings: GrowthSettings, growth_rng: np.random.Generator):
+        """The tree of the main skeleton with twigs and leaves grown by `settings`, and its two CrownOutlines."""
+        outlines = tuple(CrownOutline(mask if mask is not None else
+                                      crown_outline(ink, settings.outline_margin * frame.height_px), axis, *place)
+                         for axis, (mask, ink, frame, place) in enumerate(zip(given, inks, frames, places)))
+        tree, level = grow_twigs(main, *outlines, growth_rng, **settings.twig)
+        if brush:
+            tree = _with_drawn_radii(tree, level, main.radius)
+        return add_leaves(tree, level, growth_rng, **settings.leaf), level, outlines
+
+    settings = GrowthSettings(None if given[0] is not None and given[1] is not None else OUTLINE_MARGIN,
+                              {**TWIG_DEFAULTS, **(twig_options or {})}, {**LEAF_DEFAULTS, **(leaf_options or {})})
+    maps = {}
+    if fit_evals:
+        frames_px = tuple(CrownOutline(np.zeros(ink.shape, bool), axis, *place)
+                          for axis, (ink, place) in enumerate(zip(inks, places)))
+        fit = fit_growth(grow, settings, inks, frames_px, fit_evals, rng)
+        (skeleton, level, outlines), maps["fit"], maps["growth"] = fit.grown, fit.record, fit.settings
+        lap("fit")
+    else:
+        skeleton, level, outlines = grow(settings, rng)
+        lap("twigs")
     mesh = build_mesh(skeleton, MESH_PARAMS)
     lap("mesh")
-    maps = {"brush": brush, "metres_per_pixel": mpp, "side_scale": scale, "front_2d": front_2d,
-            "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
-            "main_skeleton": main.positions, "twig_level": level, "outlines": outlines}
+    maps.update({"brush": brush, "metres_per_pixel": mpp, "side_scale": scale, "front_2d": front_2d,
+                 "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
+                 "main_skeleton": main.positions, "twig_level": level, "outlines": outlines})
     return Reconstruction("two-view", skeleton, mesh, timings=timings, maps=maps)
 
 

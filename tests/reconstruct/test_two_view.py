@@ -158,7 +158,8 @@ def test_mesh_has_bark_and_leaves(lines_result):
     assert len(mesh.bark.faces) > 100 and len(mesh.leaves.faces) > 20
     skeleton = lines_result.skeleton
     assert skeleton.radius[0] == skeleton.radius.max()
-    assert skeleton.radius[skeleton.tips].min() == pytest.approx(0.002 * skeleton.positions[:, 2].max(), rel=1e-3)
+    drawn_top = lines_result.maps["main"].positions[:, 2].max()  # twigs may reach half a pixel above it
+    assert skeleton.radius[skeleton.tips].min() == pytest.approx(0.002 * drawn_top, rel=1e-3)
 
 
 def test_same_seed_gives_the_same_bytes():
