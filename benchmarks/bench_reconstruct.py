@@ -44,6 +44,7 @@ from benchmarks.harness import ROOT, Benchmark, arguments, pin_threads
 if __name__ == "__main__":  # before numpy loads; a test that imports this module keeps its own thread pools
     pin_threads()
 
+import itertools  # noqa: E402
 import time  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 from pathlib import Path  # noqa: E402
@@ -333,21 +334,24 @@ def run_two_view(renderer, args, run: Run) -> None:
         front, side = truth.views
         scorer = Scorer(renderer, truth, [front.camera, side.camera], "two-view", args.surface_samples)
         drawn_height = float(truth.main_nodes[:, 2].max())
-        for variant, output in (("1-px lines", "sketch_strokes"), ("brush", "sketch_strokes_brush")):
+        for (stroke, output), (fit, evals) in itertools.product(
+                (("1-px lines", "sketch_strokes"), ("brush", "sketch_strokes_brush")), fit_variants(args)):
+            variant = f"{stroke}, {fit}"
             start = time.perf_counter()
             try:
                 result = reconstruct.two_view(front.images[output], side.images[output], height=drawn_height,
-                                              rng=np.random.default_rng(seed), brush=variant == "brush")
+                                              rng=np.random.default_rng(seed), brush=stroke == "brush",
+                                              fit_evals=evals)
             except TreefarmError as error:
                 run.fail(variant, truth, error)
                 continue
             total = time.perf_counter() - start
-            if variant == "1-px lines":
-                run.time({**result.timings, "total": total})
+            if stroke == "1-px lines":
+                run.time({**result.timings, "total": total}, fit)
             else:
-                run.time({"total, brush": total})
+                run.time({"total, brush": total}, fit)
             run.add(variant, scorer(result.skeleton, result.mesh, result.maps["main_skeleton"]))
-            if i < args.sheet_trees and variant == "1-px lines":
+            if i < args.sheet_trees and stroke == "1-px lines" and evals == args.fit_evals:
                 inputs = {"front": front.images[output], "side": side.images[output]}
                 run.sheet.append((f"two-view {preset}", sheet_cells(renderer, scorer, inputs, result.skeleton,
                                                                     result.mesh)))
