@@ -81,7 +81,7 @@ BASELINE = "baseline: same preset"
 PAPER = {
     "depth error, silhouette network": "0.041 (thesis, 4 days GTX 1080 Ti)",
     "depth error, trunk network": "0.032 (thesis)",
-    "depth error, trunk network, up to mirror": "constant 0.5: 0.127 (bench_depth_bounds, without the mirror)",
+    "trunk depth error, up to mirror": "0.127 for a constant 0.5 (bench_depth_bounds)",
     "main skeleton, unit-cube Hausdorff": "0.098 (thesis, trunk nodes, units n.g.)",
     "nodes, unit-cube Hausdorff": "~0.03 (TSN rotation test, one tree)",
     "rotation sweep, unit-cube Hausdorff": "~0.03 (TSN, 72 views, one unseen tree)",

@@ -173,11 +173,15 @@ def test_every_kind_of_image_file_reconstructs_as_the_drawing_it_shows(drawings,
 
 def test_the_api_returns_skeleton_mesh_and_report(drawings):
     image = np.asarray(Image.open(drawings["tsn"]))
-    result = from_params(image, seed=3)
+    result = from_params(image, seed=3, fit_evals=0)
     assert result.params["seed"] == 3 and result.skeleton.n_nodes > 10 and result.mesh.n_faces > 0
     assert set(result.timings) == {"network", "grow_mesh", "total"} and result.maps["input"].shape == (224, 224)
     name, confidence = result.maps["species"]
     assert name == result.params["species"] and 0.0 < confidence <= 1.0
+    # Fitted (the default), the split decisions may come from one of the next decode seeds.
+    fitted = from_params(image, seed=3, fit_evals=6)
+    assert fitted.params["seed"] in (3, 4, 5) and list(fitted.timings) == ["network", "fit", "grow_mesh", "total"]
+    assert fitted.maps["fit"].score >= fitted.maps["fit"].first_score
     with pytest.raises(InputImageError, match=r"\(10, 10, 2\)"):
         from_params(np.zeros((10, 10, 2), np.uint8))
 
