@@ -26,7 +26,8 @@ from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 from ._sketch_arrays import disc
-from .fitting import FitError, FitRecord, FitTrace, outline, search
+from .fit_budget import FitError
+from .fitting import FitRecord, FitTrace, outline, search
 
 __all__ = ["Knob", "SKETCH_DEPTH_KNOBS", "SketchDepthFit", "knob_settings", "fit_sketch_depth", "GUESS_SETTINGS",
            "window_outline", "window_iou", "WINDOW_PX", "WINDOW_PAD", "settings_params", "offset_mask"]

@@ -26,7 +26,8 @@ from renderers.silhouette_metric import closed_silhouette
 from species import Skeleton
 
 from ._two_view_twigs import CrownOutline
-from .fitting import OUTLINE_HEIGHT, FitError, FitRecord, FitTrace, check_fit_evals, search
+from .fit_budget import FitError, check_fit_evals
+from .fitting import OUTLINE_HEIGHT, FitRecord, FitTrace, search
 
 __all__ = ["GrowthSettings", "TwoViewFit", "FIT_SLOTS", "CROWN_GAP", "CROWN_SLEEVE", "LEAF_GAP", "DRAW_SIZE", "drawn_crown",
            "fit_camera", "coverage", "crown_iou", "fit_growth"]

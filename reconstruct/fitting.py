@@ -26,10 +26,10 @@ from scipy import ndimage
 
 from species.errors import TreefarmError
 
-from .fit_budget import DEFAULT_FIT_EVALS, FitError, check_fit_evals
+from .fit_budget import FitError
 
-__all__ = ["OUTLINE_HEIGHT", "DEFAULT_FIT_EVALS", "FitError", "FitTrace", "outline", "outline_iou",
-           "drawing_outline", "search", "check_fit_evals", "render_outline", "front_camera", "FitRecord", "ParamsFit", "fit_params",
+__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou",
+           "drawing_outline", "search", "render_outline", "front_camera", "FitRecord", "ParamsFit", "fit_params",
            "PARAMS_FIT_SLOTS"]
 
 OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall

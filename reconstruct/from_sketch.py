@@ -32,7 +32,7 @@ from species.timing import StageTimer
 
 from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
 from .fit_sketch_depth import WINDOW_PAD, WINDOW_PX, fit_sketch_depth, offset_mask, settings_params
-from .fitting import DEFAULT_FIT_EVALS, check_fit_evals
+from .fit_budget import DEFAULT_FIT_EVALS, check_fit_evals
 from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 from .result import Reconstruction
 from .trunk_tracing import stroke_labels, trace_trunk

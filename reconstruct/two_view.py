@@ -22,7 +22,7 @@ from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
 from .fit_two_view import GrowthSettings, fit_growth
-from .fitting import DEFAULT_FIT_EVALS, check_fit_evals
+from .fit_budget import DEFAULT_FIT_EVALS, check_fit_evals
 from .result import Reconstruction
 
 __all__ = ["two_view", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",

@@ -28,6 +28,7 @@ import numpy as np
 
 from farm.dataset import DatasetError, read_columns, read_manifest
 from farm.pipeline import ray_connection
+from reconstruct.fit_budget import check_fit_evals
 from reconstruct.networks import predictor
 from renderers import rig_parts
 from renderers.camera import parse_rig
@@ -161,8 +162,6 @@ def plan_evaluation(data: Sequence[str], methods: Sequence[str], *, trees: int |
         raise EvaluationError(f"--part {part!r} is invalid: allowed {', '.join(PARTS)}")
     if trees is not None and trees < 1:
         raise EvaluationError(f"--trees {trees} is invalid: allowed an integer >= 1")
-    from reconstruct.fitting import check_fit_evals  # here: it imports scipy (the command's start-up time)
-
     check_fit_evals(settings.fit_evals)
     if not data and inputs is None:
         raise EvaluationError("nothing to evaluate: pass --data DIR [DIR...] and/or --inputs DIR")

@@ -7,7 +7,8 @@ import pytest
 
 import species
 from reconstruct.fit_sketch_depth import SKETCH_DEPTH_KNOBS, GUESS_SETTINGS, knob_settings, window_iou, window_outline
-from reconstruct.fitting import FitError, FitRecord
+from reconstruct.fit_budget import FitError
+from reconstruct.fitting import FitRecord
 from reconstruct.from_sketch import from_maps
 from renderers import ViewRenderer
 

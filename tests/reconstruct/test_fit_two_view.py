@@ -9,7 +9,8 @@ import pytest
 
 import species
 from reconstruct.fit_two_view import DRAW_SIZE, coverage, crown_iou, drawn_crown, fit_camera
-from reconstruct.fitting import DEFAULT_FIT_EVALS, OUTLINE_HEIGHT, FitError
+from reconstruct.fit_budget import DEFAULT_FIT_EVALS, FitError
+from reconstruct.fitting import OUTLINE_HEIGHT
 from reconstruct.scoring import CROWN_CLOSING_PX, crowns, main_branch_nodes
 from reconstruct.two_view import CrownOutline, ink_mask, two_view
 from renderers import ViewRenderer

@@ -9,8 +9,8 @@ import pytest
 
 import species
 from reconstruct import from_params
-from reconstruct.fitting import (OUTLINE_HEIGHT, FitError, check_fit_evals, drawing_outline, outline, outline_iou,
-                                 search)
+from reconstruct.fit_budget import FitError, check_fit_evals
+from reconstruct.fitting import OUTLINE_HEIGHT, drawing_outline, outline, outline_iou, search
 from reconstruct.networks import predictor
 from renderers import ViewRenderer
 
