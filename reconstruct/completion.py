@@ -2,12 +2,18 @@
 over-long twigs (Algorithm 3), grafts of noisy copies of the tree's own branches into the crown's gaps
 (Algorithms 4-8), and leafy phyllotaxis twigs at the tips; `complete` chains them.
 
-In: a `Skeleton` (Z up, metres; the cloud-to-skeleton method's output) and a numpy Generator. Out: a new Skeleton
-that `build_mesh` meshes. Randomness comes only from the Generator passed in: the same seed gives the same arrays.
+In: a `Skeleton` (Z up, metres; the cloud-to-skeleton method's output), a numpy Generator, and optionally the
+scan's `ScanReach` (its points' convex hull and ground plane). Out: a new Skeleton that `build_mesh` meshes. With a
+reach, what completion adds stays inside it: a gap is grafted only where the scan's points are sparse too, and
+added nodes and leaf cards below the ground or beyond the hull's margin are cut; measured nodes are never removed.
+Randomness comes only from the Generator passed in: the same seed gives the same arrays.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from species.errors import ParameterError
 from species.geometry.topology import depth_levels
@@ -15,9 +21,10 @@ from species.geometry.vectors import unit_vectors
 from species.lsystem.graft import extract_subtree, graft, side_anchor
 from species.lsystem.lstring_io import lstring_to_tree, tree_to_lstring
 from species.lsystem.phyllotaxis import PATTERNS, add_twigs
-from species.skeleton import Skeleton
+from species.skeleton import LEAF_CARD_CORNERS, Skeleton
 
-__all__ = ["identify_trunk", "prune_long_twigs", "crown_sector_lengths", "fill_gaps", "complete",
+__all__ = ["identify_trunk", "prune_long_twigs", "crown_sector_lengths", "fill_gaps", "complete", "ScanReach",
+           "HULL_MARGIN_M",
            "RADIUS_THRESHOLD", "DEGREE_THRESHOLD", "GAP_SECTORS", "GAP_RATIO", "DEGREE_DIFF", "DIST_DIFF_PERCENT"]
 
 # Digest 3.4 (Algorithm 2): a child continues the trunk when at least this share of the thickest child's radius
@@ -30,6 +37,59 @@ GAP_SECTORS, GAP_RATIO = 12, 0.25
 DEGREE_DIFF, DIST_DIFF_PERCENT = 10.0, 0.15
 # At most this many grafts fill one gap (a run of neighbouring gap sectors).
 MAX_GRAFTS_PER_GAP = 3
+# Issue 50: nothing added lies farther than this outside the scan's convex hull.
+HULL_MARGIN_M = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class ScanReach:
+    """Where completion may add wood and leaves: above `ground` (Z, metres), no higher than the highest point, and
+    within `margin` metres of the convex hull of `points` ((N, 3), the skeleton's frame). Points too few or flat
+    for a hull bound only by the ground and the top."""
+
+    points: np.ndarray
+    ground: float
+    margin: float = HULL_MARGIN_M
+
+    def __post_init__(self) -> None:
+        points = np.asarray(self.points, np.float64)
+        try:
+            planes = ConvexHull(points).equations if len(points) >= 4 else np.zeros((0, 4))
+        except QhullError:
+            planes = np.zeros((0, 4))
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "_planes", planes)
+
+    def outside(self, xyz: np.ndarray, radius: np.ndarray | float = 0.0) -> np.ndarray:
+        """(M,) bool: balls of `radius` (a tube's; 0 for points) about the positions that reach below the ground,
+        whose centres are above the highest point, or that reach beyond the margin (by their farthest hull plane,
+        exact off a face)."""
+        xyz = np.asarray(xyz, np.float64).reshape(-1, 3)
+        low = (xyz[:, 2] - radius < self.ground) | (xyz[:, 2] > self.points[:, 2].max(initial=-np.inf))
+        if not len(self._planes):
+            return low
+        beyond = (xyz @ self._planes[:, :3].T + self._planes[:, 3]).max(axis=1, initial=-np.inf) + radius
+        return low | (beyond > self.margin)
+
+
+def keep_within_reach(skeleton: Skeleton, reach: ScanReach, first_added: int) -> Skeleton:
+    """The skeleton less the added nodes (index `first_added` on) outside `reach` (their tube's bottom below the
+    ground, or beyond the hull's margin), each with everything under it, and less every leaf card with a corner
+    outside. Nodes before `first_added` are never removed."""
+    node = np.arange(len(skeleton))
+    drop = (node >= first_added) & reach.outside(skeleton.positions, skeleton.radius.astype(np.float64))
+    for level in depth_levels(skeleton.depth):
+        drop[level] |= drop[skeleton.parent[level]]
+    trimmed = skeleton.subset(~drop) if drop.any() else skeleton
+    if not len(trimmed.leaves):
+        return trimmed
+    corners = np.einsum("mij,cj->mci", trimmed.leaves.astype(np.float64)[:, :3, :3], LEAF_CARD_CORNERS) \
+        + trimmed.leaves.astype(np.float64)[:, None, :3, 3]
+    inside = ~reach.outside(corners).reshape(len(trimmed.leaves), -1).any(axis=1)
+    if inside.all():
+        return trimmed
+    return Skeleton(positions=trimmed.positions, parent=trimmed.parent, radius=trimmed.radius, order=trimmed.order,
+                    leaves=trimmed.leaves[inside], leaf_node=trimmed.leaf_node[inside])
 
 
 def _check_mask(skeleton: Skeleton, mask, key: str) -> np.ndarray:
@@ -138,6 +198,20 @@ def crown_sector_lengths(skeleton: Skeleton, trunk_mask, sectors: int = GAP_SECT
     return np.bincount(sector, skeleton.segment_lengths[crown].astype(np.float64), sectors)
 
 
+def _scan_is_sparse(reach: ScanReach, axis: np.ndarray, low: float, trunk_radius: float, start: int, count: int,
+                    sectors: int, gap_ratio: float) -> bool:
+    """Whether the scan's points above `low` and off the trunk (farther than twice `trunk_radius` from `axis`) in
+    sectors start .. start + count - 1 number under `gap_ratio` of the median sector's: an occlusion gap, not a
+    part of the crown the skeleton missed."""
+    crown = reach.points[reach.points[:, 2] >= low, :2] - axis
+    crown = crown[np.hypot(crown[:, 0], crown[:, 1]) > 2 * trunk_radius]
+    azimuth = np.mod(np.arctan2(crown[:, 1], crown[:, 0]), 2 * np.pi)
+    counts = np.bincount(np.minimum((azimuth / (2 * np.pi) * sectors).astype(np.int64), sectors - 1),
+                         minlength=sectors)
+    span = (start + np.arange(count)) % sectors
+    return bool(counts[span].max(initial=0) < gap_ratio * np.median(counts))
+
+
 def _gap_runs(lengths: np.ndarray, gap_ratio: float) -> list[tuple[int, int, float]]:
     """(first sector, sector count, missing metres) of each circular run of gap sectors, in sector order."""
     median = float(np.median(lengths))
@@ -167,7 +241,7 @@ def _subtree_lengths(skeleton: Skeleton) -> np.ndarray:
 def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, sectors: int = GAP_SECTORS,
               gap_ratio: float = GAP_RATIO, degree_diff: float = DEGREE_DIFF,
               dist_diff_percent: float = DIST_DIFF_PERCENT, max_grafts_per_gap: int = MAX_GRAFTS_PER_GAP,
-              pipe_exponent: float = 2.5) -> Skeleton:
+              pipe_exponent: float = 2.5, reach: ScanReach | None = None) -> Skeleton:
     """Graft noisy copies of the tree's own branches into the crown's azimuthal gaps (what occlusion leaves).
 
     A gap is a run of neighbouring sectors (`crown_sector_lengths`) with under `gap_ratio` of the median sector's
@@ -181,8 +255,10 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
        faces the gap (the digest's "toCam toward the gap" read so that the new branch grows into it);
     4. the graft (Algorithm 7) with pipe-rule radii (n = `pipe_exponent`) clamped to the anchor, and the anchor
        itself no thicker than the grafted branch it carries.
-    trunk_mask : (N,) bool, default `identify_trunk`. Returns the skeleton unchanged when there is no gap, no donor
-    or no anchor node; otherwise the grafts are appended after the existing nodes.
+    trunk_mask : (N,) bool, default `identify_trunk`. reach : the scan's `ScanReach`; with it, a gap is grafted only
+    where the scan's own points are as sparse (`_scan_is_sparse`), and grafted nodes outside the reach are cut
+    (`keep_within_reach`). Returns the skeleton unchanged when there is no gap, no donor or no anchor node;
+    otherwise the grafts are appended after the existing nodes.
     """
     trunk = identify_trunk(skeleton) if trunk_mask is None else _check_mask(skeleton, trunk_mask, "trunk_mask")
     if not 0 < gap_ratio < 1:
@@ -209,8 +285,13 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
     weights = donor_length[donors] / donor_length[donors].sum()
     mean_donor = float(donor_length[donors].mean())
     width = 2 * np.pi / sectors
-    reach = 2.0 * max(skeleton.crown_radius, 1.0)
+    camera_distance = 2.0 * max(skeleton.crown_radius, 1.0)
     grown = skeleton
+    if reach is not None:
+        axis, crown_low = _trunk_axis(skeleton, trunk), float(z[skeleton.parent[donors]].min())
+        trunk_radius = float(skeleton.radius[trunk].max())
+        runs = [run for run in runs
+                if _scan_is_sparse(reach, axis, crown_low, trunk_radius, run[0], run[1], sectors, gap_ratio)]
     for start, count, missing in runs:
         n_grafts = int(min(max_grafts_per_gap, max(1, np.ceil(missing / mean_donor))))
         for _ in range(n_grafts):
@@ -221,7 +302,7 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
             azimuth = (start + rng.uniform(0.15, 0.85) * count) * width
             toward_gap = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
             at = int(rng.choice(anchors))
-            camera = skeleton.positions[at] + reach * np.cross([0.0, 0.0, 1.0], toward_gap)
+            camera = skeleton.positions[at] + camera_distance * np.cross([0.0, 0.0, 1.0], toward_gap)
             grown, anchor = side_anchor(grown, at, camera, right=True)
             grown = graft(grown, anchor, copy, smoothing="pipe", pipe_exponent=pipe_exponent)
             radius = grown.radius.copy()
@@ -229,13 +310,13 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
             radius[anchor] = min(radius[anchor], (carried ** pipe_exponent).sum() ** (1 / pipe_exponent))
             grown = Skeleton(positions=grown.positions, parent=grown.parent, radius=radius, order=grown.order,
                              leaves=grown.leaves, leaf_node=grown.leaf_node)
-    return grown
+    return grown if reach is None else keep_within_reach(grown, reach, len(skeleton))
 
 
 # ------------------------------------------------------------------------------------------- the chain
 def complete(skeleton: Skeleton, rng: np.random.Generator, *, twigs: str | None = "alternate", prune: bool = True,
              fill: bool = True, radius_threshold: float = RADIUS_THRESHOLD,
-             degree_threshold: float = DEGREE_THRESHOLD) -> Skeleton:
+             degree_threshold: float = DEGREE_THRESHOLD, reach: ScanReach | None = None) -> Skeleton:
     """Seed 003's editing chain on a measured skeleton, ready for `build_mesh`:
 
     1. `identify_trunk` (Algorithm 2), and orders made to agree with it (trunk 0, every other node >= 1, so the
@@ -244,6 +325,9 @@ def complete(skeleton: Skeleton, rng: np.random.Generator, *, twigs: str | None 
     3. `fill_gaps` (Algorithms 4-8) when `fill`;
     4. `add_twigs` with the phyllotaxis pattern `twigs` (a `PATTERNS` name: opposite, alternate, whorled) at every
        tip, a leaf card on each terminal F; None adds no twigs and no leaves.
+    With `reach` (the scan's `ScanReach`), grafts go only into the scan's own gaps, and every node and leaf card
+    added by steps 3-4 outside the reach is cut (`keep_within_reach`). Pruning removes measured twigs: a
+    measured skeleton is completed with `prune=False`, which removes nothing.
     """
     if twigs is not None and twigs not in PATTERNS:
         raise ParameterError("twigs", twigs, f"one of {sorted(PATTERNS)} or None")
@@ -251,8 +335,9 @@ def complete(skeleton: Skeleton, rng: np.random.Generator, *, twigs: str | None 
     edited = _with_trunk_orders(skeleton, trunk)
     if prune:
         edited = prune_long_twigs(edited, edited.order == 0)
+    first_added = len(edited)
     if fill:
-        edited = fill_gaps(edited, rng, trunk_mask=edited.order == 0)
+        edited = fill_gaps(edited, rng, trunk_mask=edited.order == 0, reach=reach)
     if twigs is not None:
         edited = add_twigs(edited, twigs, rng)
-    return edited
+    return edited if reach is None else keep_within_reach(edited, reach, first_added)

@@ -18,7 +18,7 @@ from species.skeleton import Skeleton
 from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
-from .completion import complete
+from .completion import ScanReach, complete
 from .qsm import qsm_measures
 from .result import Reconstruction, ScanRecord
 from .skeleton import SkeletonSettings, _adjacency, cloud_skeleton
@@ -67,11 +67,14 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
 
     cloud      : a path, an (N, 3) array or a PointCloud; up : the cloud's up axis (`clouds.UP_AXES`).
     frame      : "base" or "scan" (see the module docstring).
-    completion : seed 003's editing (trunk identification, twig pruning, gap grafting, twigs and leaves by
-                 phyllotaxis); off, the mesh is the measured skeleton's bark only. twigs : the phyllotaxis pattern.
+    completion : seed 003's editing (trunk identification, gap grafting, twigs and leaves by phyllotaxis), inside
+                 the scan's reach (`completion.ScanReach`: nothing below the scan's lowest point, nothing beyond
+                 1 m outside its convex hull) and never removing a measured node; off, the mesh is the measured
+                 skeleton's bark only. twigs : the phyllotaxis pattern.
     seed       : the completion's random draws (numpy Generator seeded with it): same cloud, same seed, same bytes.
-    separate_leaves : drop leaf points before skeletonising (`reconstruct.wood`); None does so when the cloud
-                 looks leaf-on, with a warning either way.
+    separate_leaves : drop leaf points before skeletonising (`reconstruct.wood`); None (and False) keep them, with
+                 a warning when the cloud looks leaf-on: the bark then follows the leaves' points too, as AdTree's
+                 does, which fits a leafy scan far closer than branches from its wood points alone.
     Raises CloudError (one line) for a cloud that cannot be one tree.
     """
     if frame not in FRAMES:
@@ -86,14 +89,14 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
     points = cloud.points
     share = leaf_on_share(points)
     looks_leafy = share >= LEAF_ON_SHARE
-    if separate_leaves or (separate_leaves is None and looks_leafy):
+    if separate_leaves:
         keep = wood_points(points)
-        warnings.append(f"{cloud.source} looks leaf-on ({share:.0%} of its crown points are not linear): "
-                        f"{(~keep).sum()} leaf points were set aside; the branches will be coarse")
+        warnings.append(f"{cloud.source}: {(~keep).sum()} leaf points were set aside ({share:.0%} of its crown "
+                        f"points are not linear); the branches will be coarse")
         points = points[keep]
     elif looks_leafy:
         warnings.append(f"{cloud.source} looks leaf-on ({share:.0%} of its crown points are not linear) and "
-                        f"leaves were kept: the skeleton will be coarse")
+                        f"leaves were kept: the bark follows the leaves' points too")
     timer.lap("read")
     working = cloud if len(points) == len(cloud.points) else PointCloud(
         points, cloud.offset, cloud.up, cloud.up_rotation, None, cloud.source)
@@ -107,7 +110,10 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
         measures = qsm_measures(measured)
         measures["trunk_radius_fit_m"] = fit.trunk_radius
     with timer.stage("completion"):
-        tree = complete(measured, np.random.default_rng(seed), twigs=twigs) if completion else measured
+        # Completion adds only inside the scan's reach, above its lowest point, and prunes no measured twig.
+        reach = ScanReach(points.astype(np.float64) - root, ground=-float(root[2]))
+        tree = complete(measured, np.random.default_rng(seed), twigs=twigs, prune=False, reach=reach) \
+            if completion else measured
     with timer.stage("mesh"):
         mesh = build_mesh(tree, {"name": name})
     transform = np.eye(4)

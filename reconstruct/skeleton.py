@@ -16,10 +16,11 @@ The stages, each a function below:
    fits a little closer and costs three times as long (benchmarks/bench_reconstruct_cloud.py);
 5. the shortest-path tree from the lowest point (Dijkstra), and each point's path length along it;
 6. merging of adjacent vertices: points in the same band of path length that touch become one skeleton vertex at
-   their centroid (the band is a few point spacings wide, so a branch's cross-section is one vertex); then
+   their centroid (the band is a few point spacings wide, so a branch's cross-section is one vertex, and at most
+   MAX_BAND_M, so a sparse scan's vertices stay near their points); then
    vertices closer than three bands at about the same path length join (the two flanks of a thick branch);
-7. pruning of small subtrees: a side subtree whose reach (longest path to a tip) is below 0.019 of the tree's
-   reach goes;
+7. pruning of small subtrees: a side subtree whose reach (longest path to a tip) is below PRUNE_RATIO of the
+   tree's reach goes;
 8. merging of near-parallel siblings (their directions within 20 degrees): the weaker joins the stronger; and
    a side branch running beside its parent branch (90 % of it within 1.5 bands) is taken for the other flank
    of a thick limb and joins it (a thick limb sampled densely still keeps some such twigs);
@@ -30,8 +31,9 @@ The stages, each a function below:
 11. Hermite smoothing: a cubic Hermite point inserted in every segment where the branch turns by more than 15
     degrees, so the tube bends smoothly without a dense skeleton.
 
-AdTree's paper gives the pruning ratio (0.019) and the power law's exponent (1.1); the other constants are ours,
-chosen on `tree1.xyz` and the synthetic clouds of `benchmarks/bench_reconstruct_cloud.py`.
+AdTree's paper gives the power law's exponent (1.1) and a pruning ratio (0.019, ours is smaller: see PRUNE_RATIO);
+the other constants are ours, chosen on the shared real scans (`tree1.xyz` and the others in
+../shared/data/pointclouds/) and the synthetic clouds of `benchmarks/bench_reconstruct_cloud.py`.
 """
 from __future__ import annotations
 
@@ -52,10 +54,16 @@ from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT",
+           "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
-PRUNE_RATIO = 0.019        # AdTree: side subtrees shorter than this share of the tree's reach are removed
+# Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
+# on sparse scans (airborne lidar) that removes measured twigs, each the only wood near its points.
+PRUNE_RATIO = 0.005
+# A path-length band is at most this wide, whatever the point spacing: a vertex stands for the points of its band,
+# so on a sparse scan a band of a few spacings would put them beyond the fit's 10 cm bar.
+MAX_BAND_M = 0.06
 RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
 DUPLICATE_M = 1e-3         # points closer than this are one point
 
@@ -68,7 +76,8 @@ class SkeletonSettings:
     outlier_sigma     : points whose mean distance to their 16 neighbours exceeds the mean by this many
                         standard deviations go (0 keeps all).
     graph             : "knn" (`knn` nearest neighbours, pieces joined) or "delaunay" (AdTree's, slower).
-    band_spacings     : width of a path-length band in median point spacings (stage 6).
+    band_spacings     : width of a path-length band in median point spacings (stage 6), at most max_band_m
+                        metres.
     link_spacings     : points closer than this many spacings and in one band are one vertex.
     merge_bands       : stage 6b's distance, in bands.
     prune_ratio       : stage 7's share of the tree's reach.
@@ -85,6 +94,7 @@ class SkeletonSettings:
     knn: int = 16
     trunk_base_share: float = 0.02
     band_spacings: float = 4.0
+    max_band_m: float = MAX_BAND_M
     link_spacings: float = 2.5
     merge_bands: float = 0.0
     flank_bands: float = 1.5
@@ -102,8 +112,8 @@ class SkeletonSettings:
         for name, (value, least) in checks.items():
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
                 raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
-        for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "link_spacings", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
-                     "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
+        for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "max_band_m", "link_spacings",
+                     "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg", "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise CloudError(f"{name} = {value!r}: allowed a finite number >= 0")
@@ -164,10 +174,20 @@ def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
 
 def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0) -> np.ndarray:
     """(N,) bool: points whose mean distance to their k nearest neighbours is within the cloud's mean + `sigma`
-    standard deviations of it (digest 3.1's outlier filter; stray returns in the air are far from everything)."""
-    distance, _ = cKDTree(points).query(points, k=min(k + 1, len(points)))
+    standard deviations of it (digest 3.1's outlier filter; stray returns in the air are far from everything),
+    and the points above that bound that still hang together with at least k others (linked to a neighbour
+    within twice the bound): the sparse top of a crown is thinly sampled, not stray."""
+    distance, index = cKDTree(points).query(points, k=min(k + 1, len(points)))
     mean = distance[:, 1:].mean(axis=1)
-    return mean <= mean.mean() + sigma * mean.std()
+    bound = mean.mean() + sigma * mean.std()
+    inlier = mean <= bound
+    if inlier.all():
+        return inlier
+    linked = distance[:, 1:] <= 2 * bound
+    rows = np.repeat(np.arange(len(points)), index.shape[1] - 1)[linked.ravel()]
+    _, group = connected_components(_adjacency(np.column_stack([rows, index[:, 1:][linked]]), len(points)),
+                                    directed=False)
+    return inlier | (np.bincount(group)[group] > k)
 
 
 # ------------------------------------------------------------------------------------------------ stages 2, 3
@@ -627,7 +647,7 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     root = int(np.argmin(np.where(trunk, moved[:, 2], np.inf))) if trunk.any() else int(np.argmin(moved[:, 2]))
     predecessor, along = shortest_path_tree(moved, edges, root)
     lap("shortest_paths")
-    band = settings.band_spacings * spacing
+    band = min(settings.band_spacings * spacing, settings.max_band_m)
     positions, parent, weight, first_along = merge_bands(moved, edges, predecessor, along, band,
                                                          settings.link_spacings * spacing)
     if settings.merge_bands > 0:

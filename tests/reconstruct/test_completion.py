@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.completion import (complete, crown_sector_lengths, fill_gaps, GAP_RATIO, identify_trunk,
+from reconstruct.completion import (ScanReach, complete, crown_sector_lengths, fill_gaps, GAP_RATIO, identify_trunk,
                                     prune_long_twigs)
 from species.errors import ParameterError
 from species.geometry.radii import pipe_model_radii
 from species.meshing.tubes_and_cards import build_mesh
-from species.skeleton import Skeleton
+from species.skeleton import LEAF_CARD_CORNERS, Skeleton
 
 
 def chain(start, direction, count, step) -> np.ndarray:
@@ -170,3 +170,56 @@ def test_complete_without_twigs_or_filling_only_prunes():
 def test_an_unknown_twig_pattern_is_rejected():
     with pytest.raises(ParameterError, match="'twigs'"):
         complete(stem_with_branches(FULL), np.random.default_rng(0), twigs="spiral")
+
+
+def scan_of(tree: Skeleton, per_segment: int = 5) -> np.ndarray:
+    """(P, 3) points along every segment of a skeleton: a scan that sees exactly that tree."""
+    child = np.arange(1, len(tree))
+    u = np.linspace(0.0, 1.0, per_segment)[:, None, None]
+    start, end = tree.positions[tree.parent[child]], tree.positions[child]
+    return (start + u * (end - start)).reshape(-1, 3).astype(np.float64)
+
+
+def assert_inside(tree: Skeleton, measured: Skeleton, reach: ScanReach) -> None:
+    """The measured nodes are all there, unchanged; nothing added and no leaf card lies outside the reach."""
+    np.testing.assert_array_equal(tree.positions[:len(measured)], measured.positions)
+    np.testing.assert_array_equal(tree.parent[:len(measured)], measured.parent)
+    added = np.arange(len(tree)) >= len(measured)
+    assert not reach.outside(tree.positions[added], tree.radius[added].astype(float)).any()
+    corners = np.einsum("mij,cj->mci", tree.leaves[:, :3, :3], LEAF_CARD_CORNERS) + tree.leaves[:, None, :3, 3]
+    assert (corners[..., 2] >= reach.ground).all()
+
+
+def drooping(azimuths_deg) -> Skeleton:
+    """Branches from low on the stem that droop to just above the ground: grafts and twigs would reach below it."""
+    tree = stem_with_branches(azimuths_deg)
+    positions = tree.positions.copy()
+    side = tree.order > 0
+    positions[side, 2] = np.maximum(positions[side, 2] - 3.0 * np.linalg.norm(positions[side, :2], axis=1), 0.05)
+    return Skeleton(positions, tree.parent, tree.radius, tree.order)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("make", [stem_with_branches, drooping])
+def test_completion_in_the_scans_reach_never_removes_a_measured_node_nor_goes_below_the_ground(make, seed):
+    measured = make(GAPPY)
+    reach = ScanReach(scan_of(measured), ground=0.0)
+    tree = complete(measured, np.random.default_rng(seed), prune=False, reach=reach)
+    assert len(tree) > len(measured) and len(tree.leaves)
+    assert_inside(tree, measured, reach)
+
+
+def test_a_gap_in_the_skeleton_but_not_in_the_scan_is_not_grafted():
+    measured = stem_with_branches(GAPPY)
+    # The scan is as empty there (an occlusion gap): grafted, as far as a hull margin wide enough for a branch.
+    filled = fill_gaps(measured, np.random.default_rng(0), reach=ScanReach(scan_of(measured), 0.0, margin=3.0))
+    assert len(filled) > len(measured)
+    seen = ScanReach(scan_of(stem_with_branches(FULL)), 0.0)  # the scan has points where the skeleton has none
+    assert len(fill_gaps(measured, np.random.default_rng(0), reach=seen)) == len(measured)
+
+
+def test_the_reach_bounds_by_ground_top_and_hull_margin():
+    reach = ScanReach(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 2], [1, 1, 2]], float), ground=0.0)
+    inside = reach.outside(np.array([[0.5, 0.5, 1.0], [1.5, 0.5, 1.0], [0.5, 0.5, -0.1], [0.5, 0.5, 2.1],
+                                     [3.5, 0.5, 1.0], [0.5, 0.5, 0.05]]), np.array([0, 0, 0, 0, 0, 0.1]))
+    assert inside.tolist() == [False, False, True, True, True, True]

@@ -11,6 +11,8 @@ import pytest
 from reconstruct import CloudError, from_cloud, read_cloud
 from reconstruct.metrics import cloud_fit
 from reconstruct.qsm import read_skeleton_ply
+from reconstruct.completion import ScanReach
+from reconstruct.skeleton import SkeletonSettings, statistical_inliers
 from reconstruct.wood import leaf_on_share
 from species.meshing.gltf import read_glb_json
 
@@ -141,3 +143,31 @@ def test_cli_batch_reports_a_bad_tree_and_finishes_the_others(y_points, tmp_path
     assert not (out / "broken.glb").exists()
     assert (out / "contact_sheet.png").stat().st_size > 1000
     assert json.loads(json.dumps(rows))  # the summary is plain text cells
+
+
+SHARED = TREE1.parent
+# The shared real scans that reconstruct in well under a second (path under SHARED, up axis).
+FAST_SCANS = [("tree1.xyz", "z"), ("street_trees_ahn/ahn/filtered_tree_121913_487434.las", "z"),
+              ("street_trees_ahn/ahn/filtered_tree_121922_487459.las", "z"), ("species_yup/Tree1_input.xyz", "y"),
+              ("species_yup/Tree2_peach.xyz", "y"), ("species_yup/Tree3_Maple.xyz", "y"),
+              ("species_yup/Tree4_Prunus-Triloba.xyz", "y"), ("species_yup/Tree5_Cercis.xyz", "y")]
+
+
+@pytest.mark.parametrize("relative, up", FAST_SCANS, ids=[Path(name).stem for name, _ in FAST_SCANS])
+def test_a_shared_scan_keeps_its_height_and_completion_stays_in_its_reach(relative, up):
+    path = SHARED / relative
+    if not path.is_file():
+        pytest.skip(f"shared/data/pointclouds/{relative} is missing")
+    cloud = read_cloud(path, up=up)
+    result = from_cloud(cloud)
+    measured, tree = result.scan.measured, result.skeleton
+    root = result.scan.fit.skeleton.positions[0].astype(np.float64)
+    points = cloud.points.astype(np.float64)
+    top = points[statistical_inliers(points, sigma=SkeletonSettings().outlier_sigma), 2].max()
+    assert abs((measured.positions[:, 2].max() + root[2]) / top - 1) <= 0.02
+    np.testing.assert_array_equal(tree.positions[:len(measured)], measured.positions)  # nothing measured removed
+    reach = ScanReach(points - root, ground=-root[2])
+    added = np.arange(len(tree)) >= len(measured)
+    assert not reach.outside(tree.positions[added], tree.radius[added].astype(np.float64)).any()
+    leaves = result.mesh.leaves.vertices.astype(np.float64)
+    assert not reach.outside(leaves).any()
