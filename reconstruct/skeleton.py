@@ -172,18 +172,18 @@ def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
     return np.sort(first)
 
 
-def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0) -> np.ndarray:
+def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0, link: float = 2.0) -> np.ndarray:
     """(N,) bool: points whose mean distance to their k nearest neighbours is within the cloud's mean + `sigma`
     standard deviations of it (digest 3.1's outlier filter; stray returns in the air are far from everything),
-    and the points above that bound that still hang together with at least k others (linked to a neighbour
-    within twice the bound): the sparse top of a crown is thinly sampled, not stray."""
+    and the points above that bound that still hang together with more than k others (each linked to a neighbour
+    within `link` x the bound): the sparse top of a crown is thinly sampled, not stray."""
     distance, index = cKDTree(points).query(points, k=min(k + 1, len(points)))
     mean = distance[:, 1:].mean(axis=1)
     bound = mean.mean() + sigma * mean.std()
     inlier = mean <= bound
     if inlier.all():
         return inlier
-    linked = distance[:, 1:] <= 2 * bound
+    linked = distance[:, 1:] <= link * bound
     rows = np.repeat(np.arange(len(points)), index.shape[1] - 1)[linked.ravel()]
     _, group = connected_components(_adjacency(np.column_stack([rows, index[:, 1:][linked]]), len(points)),
                                     directed=False)
