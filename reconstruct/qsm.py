@@ -210,22 +210,22 @@ def _order_volumes(skeleton: Skeleton, volume: np.ndarray) -> dict[str, float]:
 def _dbh(skeleton: Skeleton, points: np.ndarray | None, breast_height: float) -> dict:
     """The DBH keys of `qsm_measures`."""
     at = trunk_at_height(skeleton, breast_height)
+    skeleton_dbh = None if at is None else float(2.0 * at[1])
+    circle = None if points is None else stem_circle(points, skeleton, breast_height)
+    if circle is not None:
+        return {"dbh_m": 2.0 * circle.radius, "dbh_method": "circle fit", "dbh_points": circle.n_points,
+                "dbh_arc_deg": round(circle.arc_deg, 1), "dbh_rms_m": circle.rms_m, "skeleton_dbh_m": skeleton_dbh,
+                "dbh_note": None}
+    fit_note = None if points is None else (f"too few stem points at breast height for a circle fit (at least "
+                                            f"{MIN_STEM_POINTS} over {MIN_ARC_DEG:g} degrees of arc)")
     if at is None:
         trunk_top = float(skeleton.positions[skeleton.branch_paths[0], 2].max() - skeleton.positions[0, 2])
+        note = f"the trunk reaches {trunk_top:.3f} m above its base, below breast height {breast_height} m"
         return {"dbh_m": None, "dbh_method": None, "dbh_points": None, "dbh_arc_deg": None, "dbh_rms_m": None,
-                "skeleton_dbh_m": None, "dbh_note": f"the trunk reaches {trunk_top:.3f} m above its base, below "
-                                                    f"breast height {breast_height} m"}
-    skeleton_dbh = float(2.0 * at[1])
-    circle = None if points is None else stem_circle(points, skeleton, breast_height)
-    if circle is None:
-        note = None if points is None else (f"too few stem points at breast height for a circle fit (at least "
-                                             f"{MIN_STEM_POINTS} over {MIN_ARC_DEG:g} degrees of arc): the "
-                                             "skeleton's radius")
-        return {"dbh_m": skeleton_dbh, "dbh_method": "skeleton radius", "dbh_points": None, "dbh_arc_deg": None,
-                "dbh_rms_m": None, "skeleton_dbh_m": skeleton_dbh, "dbh_note": note}
-    return {"dbh_m": 2.0 * circle.radius, "dbh_method": "circle fit", "dbh_points": circle.n_points,
-            "dbh_arc_deg": round(circle.arc_deg, 1), "dbh_rms_m": circle.rms_m, "skeleton_dbh_m": skeleton_dbh,
-            "dbh_note": None}
+                "skeleton_dbh_m": None, "dbh_note": note if fit_note is None else f"{fit_note}, and {note}"}
+    return {"dbh_m": skeleton_dbh, "dbh_method": "skeleton radius", "dbh_points": None, "dbh_arc_deg": None,
+            "dbh_rms_m": None, "skeleton_dbh_m": skeleton_dbh,
+            "dbh_note": None if fit_note is None else f"{fit_note}: the skeleton's radius"}
 
 
 def qsm_measures(skeleton: Skeleton, points: np.ndarray | None = None,
@@ -239,8 +239,8 @@ def qsm_measures(skeleton: Skeleton, points: np.ndarray | None = None,
             `dbh_method` "circle fit" (`scan_measures.stem_circle` on the scan's stem points there, robust to a
             half-scanned stem: `dbh_points` kept, `dbh_arc_deg` of arc they cover, `dbh_rms_m` off the circle) or,
             without points or with too few, "skeleton radius" (twice the radius interpolated between the two trunk
-            nodes around breast height: `skeleton_dbh_m`, always given); None when the trunk is shorter, with
-            `dbh_note` saying why (a note also says why a fit fell back).
+            nodes around breast height: `skeleton_dbh_m`, given whenever the trunk reaches breast height); None when
+            neither can be had, with `dbh_note` saying why (a note also says why a fit fell back).
     height_m : highest node above the base; scan_height_m : highest scan point above the base (None without points).
     crown_projection_area_m2, crown_diameter_m : the convex hull of the points' ground projection, its area and
             the diameter of its smallest enclosing circle (`scan_measures.crown_projection`; None without points).

@@ -27,8 +27,10 @@ WIDE_SLICE_HALF_M = 0.15   # taken instead when the thin slice holds fewer than 
 MIN_STEM_POINTS = 10       # fewer cannot pin a circle down against scanner noise
 MIN_ARC_DEG = 90.0         # a shorter arc leaves the radius free (a flat arc fits any large circle)
 SEARCH_RADII = 3.0         # stem points lie within this many skeleton radii of the trunk's axis ...
-MIN_SEARCH_M = 0.3         # ... and never less than this (a skeleton radius can be far too thin)
+MIN_SEARCH_M = 0.3         # ... and never less than this (a skeleton radius can be far too thin), ...
+LOST_TRUNK_SEARCH_M = 1.0  # ... or this where the skeleton's trunk stops below breast height (it may be off the stem)
 CANDIDATE_POINTS = 24      # circles through every three of this many slice points are tried (2,024 of them)
+MAX_SCORED_POINTS = 1500   # candidates are scored on at most about this many of the slice's points
 INLIER_BAND_M = 0.02       # a point this near a candidate circle supports it: scanner noise and bark
 OUTLIER_SIGMAS = 3.0       # residuals beyond this many robust deviations are not the stem (twigs, leaves, noise)
 MIN_TOLERANCE_M = 0.005    # the smallest residual ever rejected: scanner noise on a clean stem
@@ -131,7 +133,8 @@ def robust_circle(xy: np.ndarray, slice_half_m: float = SLICE_HALF_M, max_radius
                   around: np.ndarray | None = None) -> StemCircle | None:
     """The circle through (M, 2) float64 stem-slice points that most of them lie on, robust to twigs, leaves and a
     half-scanned stem: of the circles through three points (`_candidate_circles`, radius at most `max_radius`,
-    centre within `max_radius` of `around` when given), the one with the most points within INLIER_BAND_M; then
+    centre within `max_radius` of `around` when given), the one with the most points within INLIER_BAND_M less the
+    points inside it (a stem is solid: a circle through twigs around it holds the stem's own points); then
     refitted geometrically to the points near it, dropping those farther than OUTLIER_SIGMAS robust deviations
     (median absolute residual), until the kept set settles. None when fewer than MIN_STEM_POINTS stay."""
     if len(xy) < MIN_STEM_POINTS:
@@ -143,11 +146,13 @@ def robust_circle(xy: np.ndarray, slice_half_m: float = SLICE_HALF_M, max_radius
     if not fits.any():
         return None
     centres, radii = centres[fits], radii[fits]
-    distance = np.hypot(xy[None, :, 0] - centres[:, None, 0], xy[None, :, 1] - centres[:, None, 1])
-    support = (np.abs(distance - radii[:, None]) <= INLIER_BAND_M).sum(axis=1)
-    best = int(np.argmax(support))  # the first of equals: the same points give the same circle
+    scored = xy[::-(-len(xy) // MAX_SCORED_POINTS)]  # every k-th point: a dense slice scored at a bounded cost
+    distance = np.hypot(scored[None, :, 0] - centres[:, None, 0], scored[None, :, 1] - centres[:, None, 1])
+    offset = distance - radii[:, None]
+    score = (np.abs(offset) <= INLIER_BAND_M).sum(axis=1) - (offset < -2 * INLIER_BAND_M).sum(axis=1)
+    best = int(np.argmax(score))  # the first of equals: the same points give the same circle
     centre, radius = centres[best], float(radii[best])
-    keep = np.abs(distance[best] - radius) <= INLIER_BAND_M
+    keep = np.abs(np.hypot(xy[:, 0] - centre[0], xy[:, 1] - centre[1]) - radius) <= INLIER_BAND_M
     for _ in range(10):
         if keep.sum() < MIN_STEM_POINTS:
             return None
@@ -166,14 +171,20 @@ def robust_circle(xy: np.ndarray, slice_half_m: float = SLICE_HALF_M, max_radius
 
 def stem_circle(points: np.ndarray, skeleton: Skeleton, height: float) -> StemCircle | None:
     """The stem's circle at `height` above the base: the points of a SLICE_HALF_M slice there (WIDE_SLICE_HALF_M
-    when too few) within SEARCH_RADII skeleton radii (at least MIN_SEARCH_M) of the trunk's axis, fitted by
-    `robust_circle`. None when the trunk is lower, the points too few, their arc under MIN_ARC_DEG, or the circle
-    no stem there could be (centre or radius beyond the search disc)."""
+    when too few) within SEARCH_RADII skeleton radii (at least MIN_SEARCH_M) of the trunk's axis (where the trunk
+    is lower than `height`, of its node nearest that height, at least LOST_TRUNK_SEARCH_M), fitted by
+    `robust_circle`. None when the points are
+    too few, their arc under MIN_ARC_DEG, or the circle no stem there could be (centre or radius beyond the search
+    disc)."""
     at = trunk_at_height(skeleton, height)
+    least = MIN_SEARCH_M if at is not None else LOST_TRUNK_SEARCH_M
     if at is None:
-        return None
+        trunk = skeleton.branch_paths[0]
+        nearest = trunk[np.argmin(np.abs(skeleton.positions[trunk, 2] - skeleton.positions[0, 2] - height))]
+        at = (skeleton.positions[nearest].astype(np.float64), float(skeleton.radius[nearest]))
+        at[0][2] = skeleton.positions[0, 2] + height
     axis, skeleton_radius = at
-    search = max(SEARCH_RADII * skeleton_radius, MIN_SEARCH_M)
+    search = max(SEARCH_RADII * skeleton_radius, least)
     horizontal = np.hypot(points[:, 0] - axis[0], points[:, 1] - axis[1])
     near = horizontal <= search
     circle = None
