@@ -258,22 +258,24 @@ def run_params(renderer, args, run: Run) -> None:
 def sweep(renderer, net, args, presets: list[str], run: Run) -> None:
     """TreeSketchNet's rotation test: the unit-cube Hausdorff of the tree read from each view of orbit:N:10."""
     rig = f"orbit:{args.sweep_views}:10"
-    per_tree = []
+    per_tree: dict[str, list[list[float]]] = {variant: [] for variant, _ in fit_variants(args)}
     for i, preset in enumerate(presets[:args.sweep_trees]):
         truth = grow_truth(renderer, preset, tree_seed(BENCH_SEEDS["params"], i), rig, net.input_size, ["sketch_tsn"])
-        distances = [metrics.unit_cube_hausdorff(reconstruct.from_params(
-            v.images["sketch_tsn"], net=net, fit_evals=args.fit_evals, renderer=renderer).skeleton, truth.skeleton)
-            for v in truth.views]
-        per_tree.append(distances)
-        print(f"  sweep {i + 1}/{args.sweep_trees} {preset}: {len(distances)} views, mean {np.mean(distances):.3f}",
-              flush=True)
-    if per_tree:
-        everything = np.concatenate(per_tree)
+        for variant, evals in fit_variants(args):
+            per_tree[variant].append([metrics.unit_cube_hausdorff(reconstruct.from_params(
+                v.images["sketch_tsn"], net=net, fit_evals=evals, renderer=renderer).skeleton, truth.skeleton)
+                for v in truth.views])
+        print(f"  sweep {i + 1}/{args.sweep_trees} {preset}: {len(truth.views)} views, mean "
+              + ", ".join(f"{v} {np.mean(d[-1]):.3f}" for v, d in per_tree.items()), flush=True)
+    for variant, distances in per_tree.items():
+        if not distances:
+            continue
+        everything = np.concatenate(distances)
         for name, value in (("rotation sweep, unit-cube Hausdorff", float(everything.mean())),
                             ("  median", float(np.median(everything))),
                             ("  worst view", float(everything.max())), ("  best view", float(everything.min())),
-                            ("  trees x views", f"{len(per_tree)} x {args.sweep_views} ({rig})")):
-            run.pooled[name] = {fit_variants(args)[-1][0]: value}
+                            ("  trees x views", f"{len(distances)} x {args.sweep_views} ({rig})")):
+            run.pooled.setdefault(name, {})[variant] = value
 
 
 def run_sketch_depth(renderer, args, run: Run) -> None:
