@@ -9,6 +9,7 @@ whose one line names the value and what is allowed.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -71,33 +72,61 @@ def to_z_up(points: np.ndarray, up: str) -> np.ndarray:
     return np.asarray(points, np.float64) @ UP_AXES[up].T
 
 
-def _text_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
-    import pandas as pd
-
+def _text_separator(path: Path) -> str | None:
+    """"," or ";" when the first line holds one, else None (any run of whitespace)."""
     with path.open("r", errors="replace") as handle:
         first = handle.readline()
-    separator = "," if "," in first else (";" if ";" in first else r"\s+")
+    return "," if "," in first else (";" if ";" in first else None)
+
+
+def _first_bad_row(path: Path, separator: str | None) -> CloudError:
+    """The error naming the first row (1-based, as the file counts its lines) whose first three fields are not
+    three numbers, or the column count when every row is short. Read line by line: only a refused file comes here."""
+    widths = set()
+    with path.open("r", errors="replace") as handle:
+        for number, line in enumerate(handle, 1):
+            text = line.split("#", 1)[0].strip()
+            if not text:
+                continue
+            fields = text.split(separator)
+            widths.add(len(fields))
+            if not all(_is_number(field) for field in fields[:3]) or (len(fields) < 3 and len(widths) > 1):
+                return CloudError(f"{path} row {number} is {' '.join(fields[:3])!r}: allowed three numbers x y z "
+                                  "per row")
+    if widths and max(widths) < 3:
+        return CloudError(f"{path} has {max(widths)} column(s): allowed rows of at least x y z")
+    return CloudError(f"{path} is not a text point cloud: allowed rows of x y z [r g b ...] numbers")
+
+
+def _is_number(text: str) -> bool:
     try:
-        table = pd.read_csv(path, sep=separator, header=None, comment="#", engine="c", dtype=str,
-                            skip_blank_lines=True)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise CloudError(f"{path} is not a text point cloud ({str(exc).splitlines()[0]}): allowed rows of x y z "
-                         f"[r g b ...] numbers") from None
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _text_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """x y z, and colours where columns 4-6 of every row are integers 0-255; blank lines and # comments skipped.
+    numpy's own reader: a cloud run loads no table library (the command's start-up time)."""
+    separator = _text_separator(path)
+    try:
+        with warnings.catch_warnings():  # an empty file: refused below with the file's name, not warned about
+            warnings.simplefilter("ignore", UserWarning)
+            table = np.loadtxt(path, delimiter=separator, comments="#", dtype=np.float64, ndmin=2)
+    except ValueError:
+        try:  # rows of differing widths: their x y z still count, their colours do not
+            table = np.loadtxt(path, delimiter=separator, comments="#", dtype=np.float64, ndmin=2, usecols=(0, 1, 2))
+        except (ValueError, IndexError):
+            raise _first_bad_row(path, separator) from None
     if table.shape[1] < 3:
-        raise CloudError(f"{path} has {table.shape[1]} column(s): allowed rows of at least x y z")
-    numbers = table.apply(pd.to_numeric, errors="coerce")
-    bad = numbers.iloc[:, :3].isna().to_numpy() & table.iloc[:, :3].notna().to_numpy()
-    missing = table.iloc[:, :3].isna().to_numpy()
-    if bad.any() or missing.any():
-        row = int(np.flatnonzero((bad | missing).any(axis=1))[0])
-        raise CloudError(f"{path} row {row + 1} is {' '.join(map(str, table.iloc[row, :3].tolist()))!r}: allowed "
-                         f"three numbers x y z per row")
+        raise _first_bad_row(path, separator)
     colours = None
     if table.shape[1] >= 6:
-        rgb = numbers.iloc[:, 3:6].to_numpy(np.float64)
+        rgb = table[:, 3:6]
         if np.isfinite(rgb).all() and rgb.min() >= 0 and rgb.max() <= 255 and np.all(rgb == np.round(rgb)):
             colours = rgb.astype(np.uint8)
-    return numbers.iloc[:, :3].to_numpy(np.float64), colours
+    return table[:, :3].copy(), colours
 
 
 def _ply_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:

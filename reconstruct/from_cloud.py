@@ -107,7 +107,7 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
         root = fit.skeleton.positions[0].astype(np.float64)
         measured = Skeleton((fit.skeleton.positions - fit.skeleton.positions[0]), fit.skeleton.parent,
                             fit.skeleton.radius, fit.skeleton.order)
-        measures = qsm_measures(measured)
+        measures = qsm_measures(measured, cloud.points.astype(np.float64) - root)
         measures["trunk_radius_fit_m"] = fit.trunk_radius
     with timer.stage("completion"):
         # Completion adds only inside the scan's reach, above its lowest point, and prunes no measured twig.

@@ -1,11 +1,14 @@
 """Quantitative structure model outputs of a reconstructed tree: the skeleton as a PLY of vertices and edges (what
-AdTree writes), the measures TreeQSM users read (DBH, trunk and woody volume, length, height) and a branch table.
+AdTree writes), the measures QSM users compare (height, DBH, crown projection, woody volume by order, lengths) and a
+branch table.
 
-In: a `Skeleton` (Z up, metres). Out: PLY files (ascii or binary little-endian) and their reader, a dict of
-measures, a pandas DataFrame of branches and its CSV. Every sum is a bincount over node arrays, no loop over nodes.
+In: a `Skeleton` (Z up, metres) and, for the measures read off a scan, its points. Out: PLY files (ascii or binary
+little-endian) and their reader, a flat dict of measures and its one-row CSV, the branch table and its CSV. Every
+sum is a bincount over node arrays, no loop over nodes.
 """
 from __future__ import annotations
 
+import csv
 import math
 from pathlib import Path
 
@@ -18,12 +21,22 @@ from species.lsystem.lstring_io import branch_orders
 from species.meshing.ascii_numbers import fixed6_rows, int_rows
 from species.skeleton import Skeleton
 
-__all__ = ["QsmError", "write_skeleton_ply", "read_skeleton_ply", "qsm_measures", "branch_table",
-           "write_branch_csv", "segment_volumes", "BREAST_HEIGHT_M", "PLY_FORMATS", "BRANCH_COLUMNS"]
+from .scan_measures import MIN_ARC_DEG, MIN_STEM_POINTS, crown_projection, stem_circle, trunk_at_height
+
+__all__ = ["QsmError", "write_skeleton_ply", "read_skeleton_ply", "qsm_measures", "write_qsm_csv", "branch_table",
+           "branch_columns", "write_branch_csv", "segment_volumes", "BREAST_HEIGHT_M", "PLY_FORMATS",
+           "BRANCH_COLUMNS", "QSM_COLUMNS", "ORDER_VOLUME_COLUMNS"]
 
 BREAST_HEIGHT_M = 1.3  # where DBH is measured, above the tree's base
 PLY_FORMATS = {"ascii": "ascii", "binary": "binary_little_endian"}
 BRANCH_COLUMNS = ("id", "parent", "order", "length_m", "base_radius_m", "volume_m3")
+# Woody volume by branch order: the trunk, first and second orders, and every higher order together (fixed columns,
+# so the tables of different trees line up).
+ORDER_VOLUME_COLUMNS = ("volume_order_0_m3", "volume_order_1_m3", "volume_order_2_m3", "volume_order_3plus_m3")
+QSM_COLUMNS = ("height_m", "scan_height_m", "dbh_m", "dbh_method", "dbh_points", "dbh_arc_deg", "dbh_rms_m",
+               "skeleton_dbh_m", "dbh_note", "breast_height_m", "crown_projection_area_m2", "crown_diameter_m",
+               "trunk_volume_m3", "total_volume_m3", *ORDER_VOLUME_COLUMNS, "trunk_length_m", "total_length_m",
+               "branch_count", "max_order")
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
               "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
               "float": "f4", "float32": "f4", "double": "f8", "float64": "f8"}
@@ -187,73 +200,130 @@ def segment_volumes(skeleton: Skeleton) -> np.ndarray:
     return volume
 
 
-def _breast_height_diameter(skeleton: Skeleton, breast_height: float) -> tuple[float | None, str | None]:
-    """DBH along the trunk path (branch 0): the radius interpolated where its height above the base first
-    reaches `breast_height`, doubled; or None and why."""
-    trunk = skeleton.branch_paths[0]
-    height = skeleton.positions[trunk, 2].astype(np.float64) - float(skeleton.positions[0, 2])
-    above = np.flatnonzero(height >= breast_height)  # height[0] = 0 < breast_height, so above[0] >= 1
-    if len(above) == 0:
-        return None, f"the trunk reaches {float(height.max()):.3f} m above its base, below breast height " \
-                     f"{breast_height} m"
-    k = int(above[0])
-    z0, z1 = height[k - 1], height[k]
-    r0, r1 = float(skeleton.radius[trunk[k - 1]]), float(skeleton.radius[trunk[k]])
-    t = (breast_height - z0) / (z1 - z0)
-    return float(2.0 * (r0 + t * (r1 - r0))), None
+def _order_volumes(skeleton: Skeleton, volume: np.ndarray) -> dict[str, float]:
+    """Woody volume per branch order, the orders from ORDER_VOLUME_COLUMNS' last on summed into it."""
+    last = len(ORDER_VOLUME_COLUMNS) - 1
+    sums = np.bincount(np.minimum(skeleton.order.astype(np.int64), last), volume, last + 1)
+    return {name: float(v) for name, v in zip(ORDER_VOLUME_COLUMNS, sums)}
 
 
-def qsm_measures(skeleton: Skeleton, breast_height: float = BREAST_HEIGHT_M) -> dict:
-    """The TreeQSM-style measures of `skeleton`, JSON-able, metres and cubic metres.
+def _dbh(skeleton: Skeleton, points: np.ndarray | None, breast_height: float) -> dict:
+    """The DBH keys of `qsm_measures`."""
+    at = trunk_at_height(skeleton, breast_height)
+    skeleton_dbh = None if at is None else float(2.0 * at[1])
+    circle = None if points is None else stem_circle(points, skeleton, breast_height)
+    if circle is not None:
+        return {"dbh_m": 2.0 * circle.radius, "dbh_method": "circle fit", "dbh_points": circle.n_points,
+                "dbh_arc_deg": round(circle.arc_deg, 1), "dbh_rms_m": circle.rms_m, "skeleton_dbh_m": skeleton_dbh,
+                "dbh_note": None}
+    fit_note = None if points is None else (f"too few stem points at breast height for a circle fit (at least "
+                                            f"{MIN_STEM_POINTS} over {MIN_ARC_DEG:g} degrees of arc)")
+    if at is None:
+        trunk_top = float(skeleton.positions[skeleton.branch_paths[0], 2].max() - skeleton.positions[0, 2])
+        note = f"the trunk reaches {trunk_top:.3f} m above its base, below breast height {breast_height} m"
+        return {"dbh_m": None, "dbh_method": None, "dbh_points": None, "dbh_arc_deg": None, "dbh_rms_m": None,
+                "skeleton_dbh_m": None, "dbh_note": note if fit_note is None else f"{fit_note}, and {note}"}
+    return {"dbh_m": skeleton_dbh, "dbh_method": "skeleton radius", "dbh_points": None, "dbh_arc_deg": None,
+            "dbh_rms_m": None, "skeleton_dbh_m": skeleton_dbh,
+            "dbh_note": None if fit_note is None else f"{fit_note}: the skeleton's radius"}
 
-    dbh_m : diameter of the trunk (branch 0, the order-0 path from the root) where its height above the base
-            (z - z of node 0) first reaches `breast_height`, radius linearly interpolated between the two trunk
-            nodes around it; None when the trunk is shorter, with `dbh_note` saying why (else None).
+
+def qsm_measures(skeleton: Skeleton, points: np.ndarray | None = None,
+                 breast_height: float = BREAST_HEIGHT_M) -> dict:
+    """The QSM measures of `skeleton` (and of the scan's `points` where given), JSON-able, flat, metres, square and
+    cubic metres; the keys are QSM_COLUMNS, in that order.
+
+    points : optional (N, 3) metres in the skeleton's frame (Z up, the base at node 0), the scan the skeleton was
+            measured from: DBH, height and crown are then read from it.
+    dbh_m : the stem's diameter where the trunk (branch 0) is `breast_height` above its base (z - z of node 0):
+            `dbh_method` "circle fit" (`scan_measures.stem_circle` on the scan's stem points there, robust to a
+            half-scanned stem: `dbh_points` kept, `dbh_arc_deg` of arc they cover, `dbh_rms_m` off the circle) or,
+            without points or with too few, "skeleton radius" (twice the radius interpolated between the two trunk
+            nodes around breast height: `skeleton_dbh_m`, given whenever the trunk reaches breast height); None when
+            neither can be had, with `dbh_note` saying why (a note also says why a fit fell back).
+    height_m : highest node above the base; scan_height_m : highest scan point above the base (None without points).
+    crown_projection_area_m2, crown_diameter_m : the convex hull of the points' ground projection, its area and
+            the diameter of its smallest enclosing circle (`scan_measures.crown_projection`; None without points).
     trunk_volume_m3, total_volume_m3 : sums of `segment_volumes` over the trunk's nodes and over all nodes
-            (woody volume: bark tubes, no leaves).
+            (woody volume: bark tubes, no leaves); volume_order_0_m3 ... volume_order_3plus_m3 : by branch order.
     trunk_length_m, total_length_m : edge lengths summed over the trunk and over all nodes.
-    height_m : highest node above the base; branch_count : branches other than the trunk; max_order.
+    branch_count : branches other than the trunk; max_order.
     """
     if not (isinstance(breast_height, (int, float)) and 0 < breast_height < 1e3):
         raise QsmError(f"breast_height {breast_height!r} is invalid: allowed metres in (0, 1000)")
+    if points is not None:
+        points = np.asarray(points, np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or not len(points):
+            raise QsmError(f"points of shape {points.shape} are invalid: allowed (N, 3) metres, N >= 1")
     volume = segment_volumes(skeleton)
     on_trunk = skeleton.branch_id == 0
-    dbh, note = _breast_height_diameter(skeleton, float(breast_height))
-    return {
-        "dbh_m": dbh, "dbh_note": note, "breast_height_m": float(breast_height),
+    base = float(skeleton.positions[0, 2])
+    crown = None if points is None else crown_projection(points)
+    measures = {
+        "height_m": float(skeleton.positions[:, 2].max() - base),
+        "scan_height_m": None if points is None else float(points[:, 2].max() - base),
+        **_dbh(skeleton, points, float(breast_height)), "breast_height_m": float(breast_height),
+        "crown_projection_area_m2": None if crown is None else crown.area_m2,
+        "crown_diameter_m": None if crown is None else crown.diameter_m,
         "trunk_volume_m3": float(volume[on_trunk].sum()), "total_volume_m3": float(volume.sum()),
+        **_order_volumes(skeleton, volume),
         "trunk_length_m": float(skeleton.segment_lengths[on_trunk].sum(dtype=np.float64)),
         "total_length_m": skeleton.total_length,
-        "height_m": float(skeleton.positions[:, 2].max() - skeleton.positions[0, 2]),
         "branch_count": skeleton.n_branches - 1, "max_order": int(skeleton.order.max()),
     }
+    return {key: measures[key] for key in QSM_COLUMNS}
 
 
-def branch_table(skeleton: Skeleton):
-    """A pandas DataFrame, one row per branch (`Skeleton.branch_paths`, the trunk first), columns BRANCH_COLUMNS:
+def write_qsm_csv(measures: dict, path: str | Path, source: str = "") -> None:
+    """The tree's measures (`qsm_measures`, plus whatever keys a caller added) as a CSV of one header row and one
+    row: `source` (the scan), then QSM_COLUMNS, then any other keys in their order; floats to 9 significant
+    digits, a missing value empty. One row a tree, the same columns for every tree: files concatenate."""
+    columns = ["source", *QSM_COLUMNS, *(key for key in measures if key not in QSM_COLUMNS)]
+    row = {"source": source, **measures}
+    cells = ["" if row.get(c) is None else (f"{row[c]:.9g}" if isinstance(row[c], float) else str(row[c]))
+             for c in columns]
+    with user_path(path, "write"):
+        with open(path, "w", newline="") as handle:
+            writer = csv.writer(handle, lineterminator="\n")
+            writer.writerow(columns)
+            writer.writerow(cells)
+
+
+def branch_columns(skeleton: Skeleton) -> dict[str, np.ndarray]:
+    """One row per branch (`Skeleton.branch_paths`, the trunk first) as {column: (B,) array}, columns BRANCH_COLUMNS:
 
     id : branch id (`Skeleton.branch_id`); parent : the id of the branch it grows from, -1 for the trunk;
     order : its branch order; length_m : its edges summed (the edge from its junction included, so the rows
     sum to the skeleton's total length); base_radius_m : the radius of its first own node; volume_m3 : its
     `segment_volumes` summed (the rows sum to the total woody volume).
     """
-    import pandas as pd
-
     branch = skeleton.branch_id
     starts = skeleton.branch_starts
     n_branches = skeleton.n_branches
     junction = skeleton.parent[starts]
-    return pd.DataFrame({
+    return {
         "id": np.arange(n_branches, dtype=np.int64),
         "parent": np.where(junction >= 0, branch[np.maximum(junction, 0)], -1).astype(np.int64),
         "order": skeleton.order[starts].astype(np.int64),
         "length_m": np.bincount(branch, skeleton.segment_lengths.astype(np.float64), n_branches),
         "base_radius_m": skeleton.radius[starts].astype(np.float64),
         "volume_m3": np.bincount(branch, segment_volumes(skeleton), n_branches),
-    }, columns=list(BRANCH_COLUMNS))
+    }
+
+
+def branch_table(skeleton: Skeleton):
+    """`branch_columns` as a pandas DataFrame."""
+    import pandas as pd  # here: pandas is for scripts; the command line writes the table without it (start-up time)
+
+    return pd.DataFrame(branch_columns(skeleton), columns=list(BRANCH_COLUMNS))
 
 
 def write_branch_csv(skeleton: Skeleton, path: str | Path) -> None:
-    """`branch_table` as CSV with a header row, floats to 9 significant digits."""
+    """`branch_columns` as CSV with a header row, floats to 9 significant digits."""
+    columns = branch_columns(skeleton)
+    text = [",".join(BRANCH_COLUMNS)]
+    integers = np.column_stack([columns[c] for c in ("id", "parent", "order")])
+    floats = np.column_stack([columns[c] for c in ("length_m", "base_radius_m", "volume_m3")])
+    text += [f"{i},{p},{o},{a:.9g},{b:.9g},{c:.9g}" for (i, p, o), (a, b, c) in zip(integers.tolist(), floats.tolist())]
     with user_path(path, "write"):
-        branch_table(skeleton).to_csv(path, index=False, float_format="%.9g", lineterminator="\n")
+        Path(path).write_text("\n".join(text) + "\n")

@@ -13,7 +13,7 @@ from species.skeleton import Skeleton
 from species.tree_mesh import TreeMesh
 
 from .clouds import PointCloud
-from .qsm import write_branch_csv, write_skeleton_ply
+from .qsm import write_branch_csv, write_qsm_csv, write_skeleton_ply
 from .skeleton import CloudSkeleton
 
 __all__ = ["Reconstruction", "ScanRecord"]
@@ -25,7 +25,8 @@ class ScanRecord:
 
     cloud      : the points read (`reconstruct.clouds.PointCloud`: Z up, recentred, with the offset and up axis).
     measured   : the skeleton from the points alone, in the base frame (the trunk's base at the origin).
-    measures   : its QSM measures (`reconstruct.qsm.qsm_measures`, plus "trunk_radius_fit_m").
+    measures   : its QSM measures (`reconstruct.qsm.qsm_measures` of the measured skeleton and the cloud's points,
+                 plus "trunk_radius_fit_m"); in the GLB's extras and the `write(qsm_csv=)` table.
     frame      : "base" or "scan", the frame the files are written in; transform : (4, 4) float64 from the base
                  frame to the scan's own coordinates (the offset and up axis `read_cloud` took off, put back).
     fit        : the skeletonisation's record (trunk radius, spacing, points used, stage timings).
@@ -114,11 +115,12 @@ class Reconstruction:
             extras["treefarm"]["timings_s"] = {stage: round(float(s), 3) for stage, s in self.timings.items()}
         return self.mesh.to_glb(transform=None if scan.frame == "base" else scan.transform, extras=extras)
 
-    def write(self, out: str | Path, *, skeleton_ply: str | Path | None = None,
-              qsm_csv: str | Path | None = None, timings: bool = False) -> None:
-        """The GLB at `out` (with the stage timings in its extras when `timings`, see `glb`), and the measured
-        skeleton's PLY and branch table when asked; each file is written whole to a temporary name first, so a
-        failure leaves no half file."""
+    def write(self, out: str | Path, *, skeleton_ply: str | Path | None = None, qsm_csv: str | Path | None = None,
+              branches_csv: str | Path | None = None, timings: bool = False) -> None:
+        """The GLB at `out` (with the stage timings in its extras when `timings`, see `glb`), and when asked the
+        measured skeleton's PLY, its measures (`qsm_csv`: one row, `reconstruct.qsm.write_qsm_csv`) and its branch
+        table (`branches_csv`); each file is written whole to a temporary name first, so a failure leaves no half
+        file."""
         scan = self._scan()
         jobs = [(Path(out), lambda p: p.write_bytes(self.glb(timings=timings)))]
         if skeleton_ply is not None:
@@ -128,7 +130,9 @@ class Reconstruction:
                 turned = _rotated(scan.measured, scan.transform[:3, :3])
                 jobs.append((Path(skeleton_ply), lambda p: write_skeleton_ply(turned, p, offset=scan.transform[:3, 3])))
         if qsm_csv is not None:
-            jobs.append((Path(qsm_csv), lambda p: write_branch_csv(scan.measured, p)))
+            jobs.append((Path(qsm_csv), lambda p: write_qsm_csv(scan.measures, p, scan.cloud.source)))
+        if branches_csv is not None:
+            jobs.append((Path(branches_csv), lambda p: write_branch_csv(scan.measured, p)))
         for path, _ in jobs:
             path.parent.mkdir(parents=True, exist_ok=True)
         written = []

@@ -3,7 +3,7 @@
   farm reconstruct SKETCH.png --out tree.glb                          parameters from one sketch (TreeSketchNet)
   farm reconstruct SKETCH.png --strokes STROKES.png --out tree.glb    depth-guided growth (seed 000)
   farm reconstruct --front FRONT.png --side SIDE.png --out tree.glb   two orthogonal drawings (seed 001)
-  farm reconstruct CLOUD.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv b.csv]   a scan (AdTree, seed 003)
+  farm reconstruct CLOUD.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv q.csv]   a scan (AdTree, seed 003)
   farm reconstruct PHOTOS/ --method photos --out tree.glb [--height M]                 photos, SfM (seed 003)
   farm reconstruct A.laz B.laz SCANS/ --out TREES/                    a batch on Ray: one GLB each, summary.csv
 
@@ -111,7 +111,8 @@ def _method(args: argparse.Namespace) -> Method:
     if kind != "image":
         raise CommandLineError(f"--method {method.name} takes {INPUT_KINDS[kind][1]} as INPUT (got none that exist)")
     cloud_only = [flag for flag, value in (("--skeleton-ply", args.skeleton_ply), ("--qsm-csv", args.qsm_csv),
-                                           ("--workers", args.workers), ("--address", args.address)) if value]
+                                           ("--branches-csv", args.branches_csv), ("--workers", args.workers),
+                                           ("--address", args.address)) if value]
     if cloud_only or args.up != "z" or args.frame != "base":
         scans = [m.name for m in METHODS.values() if m.reads[0].kind != "image"]
         raise CommandLineError(f"{', '.join(cloud_only) or '--up/--frame'} are {listed(scans)} options, not "

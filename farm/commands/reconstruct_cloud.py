@@ -1,13 +1,16 @@
 """`farm reconstruct --method cloud|photos`: trees from point clouds and photo folders, one or a batch.
 
-  farm reconstruct cloud.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv b.csv] [--no-complete] [--up y]
+  farm reconstruct cloud.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv q.csv] [--branches-csv b.csv]
+                   [--no-complete] [--up y]
   farm reconstruct photos/ --method photos --out tree.glb [--height 9]
   farm reconstruct a.laz b.laz scans/ --out trees/          a batch: one tree each, summary.csv, contact_sheet.png
 
 The method is inferred when omitted: cloud files -> cloud; a folder of images -> photos; a folder of cloud files or
-of photo folders -> a batch of those. A batch runs one Ray task per tree; a tree that fails is reported in the
-summary and the others still finish (exit status 2 if any failed). Photos: COLMAP's log goes to NAME.sfm.log beside
-each GLB (the summary line names it), and a single run shows a progress bar per stage.
+of photo folders -> a batch of those. The measures (height, DBH by a circle fit at 1.3 m, crown projection, woody
+volume by order) go in the GLB's extras and, one row a tree, in --qsm-csv (a batch: NAME.qsm.csv and summary.csv).
+A batch runs one Ray task per tree; a tree that fails is reported in the summary and the others still finish (exit
+status 2 if any failed). Photos: COLMAP's log goes to NAME.sfm.log beside each GLB (the summary line names it), and
+a single run shows a progress bar per stage.
 """
 from __future__ import annotations
 
@@ -26,8 +29,9 @@ from species.errors import TreefarmError, user_path
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options
 
-SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "dbh_m", "total_volume_m3", "branches",
-                   "faces", "seconds", "message")
+SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "scan_height_m", "dbh_m", "dbh_method",
+                   "crown_projection_area_m2", "crown_diameter_m", "total_volume_m3", "branches", "faces", "seconds",
+                   "message")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,7 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--frame", choices=("base", "scan"), default="base",
                        help="base: the trunk's base at the origin (default); scan: the scan's own coordinates")
     group.add_argument("--skeleton-ply", help="write the measured skeleton as PLY (vertices with radii, edges)")
-    group.add_argument("--qsm-csv", help="write the branch table (id, parent, order, length, radius, volume)")
+    group.add_argument("--qsm-csv", help="write the tree's measures, one row: height, DBH (circle fit at 1.3 m), "
+                                         "crown projection area and diameter, woody volume by order, lengths")
+    group.add_argument("--branches-csv", help="write the branch table (id, parent, order, length, radius, volume)")
     group.add_argument("--complete", action=argparse.BooleanOptionalAction, default=True,
                        help="seed 003's editing: twigs, leaves and grafts into occlusion gaps (default on)")
     group.add_argument("--poses", choices=("auto", "known", "estimate"), default="auto",
@@ -127,7 +133,7 @@ def log_path(method: str, out: Path) -> Path | None:
 
 
 def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, skeleton_ply: Path | None = None,
-                    qsm_csv: Path | None = None, report: Path | None = None) -> dict:
+                    qsm_csv: Path | None = None, branches_csv: Path | None = None, report: Path | None = None) -> dict:
     """Reconstruct one tree and write its files (COLMAP's log at `log_path`); returns its summary row
     (TreefarmErrors propagate)."""
     started = time.perf_counter()
@@ -139,7 +145,7 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
             log.write_bytes(b"")
     result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem, log=log))
     with user_path(out, "write"):
-        result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv)
+        result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv, branches_csv=branches_csv)
     points = result.scan.cloud.points
     if report is not None:
         from reconstruct.report import cloud_drawing, write_report
@@ -149,12 +155,18 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
                          result.skeleton, result.mesh, title=f"{method}: {out.name}")
     measures = result.scan.measures
     return {"input": str(source), "status": "ok", "output": str(out), "points": len(points),
-            "height_m": round(measures["height_m"], 3),
-            "dbh_m": None if measures["dbh_m"] is None else round(measures["dbh_m"], 4),
+            "height_m": round(measures["height_m"], 3), "scan_height_m": _rounded(measures["scan_height_m"], 3),
+            "dbh_m": _rounded(measures["dbh_m"], 4), "dbh_method": measures["dbh_method"],
+            "crown_projection_area_m2": _rounded(measures["crown_projection_area_m2"], 2),
+            "crown_diameter_m": _rounded(measures["crown_diameter_m"], 2),
             "total_volume_m3": round(measures["total_volume_m3"], 5), "branches": measures["branch_count"],
             "faces": result.mesh.n_faces, "seconds": round(time.perf_counter() - started, 3),
             "message": "; ".join(result.warnings), "_timings": result.timings, "_skeleton": result.skeleton,
             "_cloud": points}
+
+
+def _rounded(value: float | None, digits: int) -> float | None:
+    return None if value is None else round(value, digits)
 
 
 def print_stages(timings: dict[str, float]) -> None:
@@ -175,7 +187,9 @@ def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
     try:
         row = reconstruct_one(method, source, out, replace(_options(args), progress=bars),
                               Path(args.skeleton_ply) if args.skeleton_ply else None,
-                              Path(args.qsm_csv) if args.qsm_csv else None, Path(args.report) if args.report else None)
+                              Path(args.qsm_csv) if args.qsm_csv else None,
+                              Path(args.branches_csv) if args.branches_csv else None,
+                              Path(args.report) if args.report else None)
     except TreefarmError:
         if log is not None:  # a refused input writes nothing; the error line says what COLMAP could not do
             log.unlink(missing_ok=True)
@@ -229,6 +243,7 @@ def _batch_task(method: str, source: str, out: str, options: RunOptions, extras:
     try:
         row = reconstruct_one(method, Path(source), out_path, options,
                               out_path.with_suffix(".skeleton.ply") if extras else None,
+                              out_path.with_suffix(".qsm.csv") if extras else None,
                               out_path.with_suffix(".branches.csv") if extras else None)
         row["_skeleton"] = row["_skeleton"].to_arrays()
         row["_cloud"] = row["_cloud"][:: max(1, len(row["_cloud"]) // 20000)]
@@ -252,9 +267,10 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
     if out_dir.suffix:
         raise CommandLineError(f"--out {args.out}: a batch of {len(sources)} writes a folder (one GLB a tree); "
                                "allowed a folder name without a suffix")
-    if args.skeleton_ply or args.qsm_csv or args.report:
-        raise CommandLineError("--skeleton-ply, --qsm-csv and --report name one file: a batch writes NAME.skeleton.ply "
-                               "and NAME.branches.csv beside each GLB, and contact_sheet.png")
+    if args.skeleton_ply or args.qsm_csv or args.branches_csv or args.report:
+        raise CommandLineError("--skeleton-ply, --qsm-csv, --branches-csv and --report name one file: a batch writes "
+                               "NAME.skeleton.ply, NAME.qsm.csv and NAME.branches.csv beside each GLB, and "
+                               "contact_sheet.png")
     stems = [s.stem if s.is_file() else s.name for s in sources]
     if len(set(stems)) < len(stems):
         twice = sorted({s for s in stems if stems.count(s) > 1})

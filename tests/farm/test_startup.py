@@ -94,8 +94,15 @@ def test_a_cheap_run_imports_no_runtime_it_does_not_need(argv, allowed, tmp_path
     assert imported <= set(allowed), imported - set(allowed)
 
 
+# What a point-cloud reconstruction may import of LIBRARIES: scipy (the skeleton's graph and k-d trees) and no more;
+# a text cloud is read by numpy and the CSVs written without pandas.
+CLOUD_RUN_LIBRARIES = {"scipy"}
+
+
 @pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
 def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
-    status, imported = _imported(["reconstruct", str(TREE1), "--out", str(tmp_path / "tree.glb")], tmp_path)
-    assert status == 0
+    status, imported = _imported(["reconstruct", str(TREE1), "--out", str(tmp_path / "tree.glb"), "--qsm-csv",
+                                  str(tmp_path / "q.csv"), "--branches-csv", str(tmp_path / "b.csv")], tmp_path)
+    assert status == 0 and (tmp_path / "q.csv").is_file() and (tmp_path / "b.csv").is_file()
     assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
+    assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES

@@ -36,7 +36,7 @@ def test_from_cloud_measures_the_trunk_and_writes_valid_files(y_points, tmp_path
     np.testing.assert_allclose(result.scan.measured.positions[0], 0.0, atol=1e-6)   # the base at the origin
     assert result.scan.measures["dbh_m"] == pytest.approx(0.30, abs=0.03)            # the 0.15 m trunk at 1.3 m
     assert result.scan.measures["height_m"] == pytest.approx(4.0, rel=0.03)
-    result.write(tmp_path / "y.glb", skeleton_ply=tmp_path / "y.ply", qsm_csv=tmp_path / "y.csv")
+    result.write(tmp_path / "y.glb", skeleton_ply=tmp_path / "y.ply", branches_csv=tmp_path / "y.csv")
     assert_valid_glb((tmp_path / "y.glb").read_bytes(), tmp_path)
     back = read_skeleton_ply(tmp_path / "y.ply")
     np.testing.assert_allclose(back.positions, result.scan.measured.positions, atol=1e-5)

@@ -59,7 +59,7 @@ def test_known_poses_give_the_tree_alone_where_the_renderer_put_it(photos, photo
 
 def test_the_glb_says_photos_and_passes_the_validator(posed, tmp_path):
     out = tmp_path / "tree.glb"
-    posed.write(out, skeleton_ply=tmp_path / "tree.ply", qsm_csv=tmp_path / "tree.csv")
+    posed.write(out, skeleton_ply=tmp_path / "tree.ply", branches_csv=tmp_path / "tree.csv")
     assert_valid_glb(out.read_bytes(), tmp_path)
     document = read_glb_json(out.read_bytes())
     treefarm = next(node for node in document["nodes"] if "extras" in node)["extras"]["treefarm"]

@@ -1,7 +1,9 @@
 """Specification of reconstruct.qsm: the skeleton PLY (vertices with radii, explicit edges) and its round trip, the
-TreeQSM measures (DBH, frustum volumes, lengths) on trees with known answers, and the branch table."""
+QSM measures (DBH by the skeleton and by a circle fit to the scan, crown projection, frustum volumes by order,
+lengths) on trees and scans with known answers, their one-row CSV, and the branch table."""
 from __future__ import annotations
 
+import csv
 import math
 
 import numpy as np
@@ -9,8 +11,8 @@ import pandas as pd
 import pytest
 import trimesh
 
-from reconstruct.qsm import (BRANCH_COLUMNS, QsmError, branch_table, qsm_measures, read_skeleton_ply,
-                             segment_volumes, write_branch_csv, write_skeleton_ply)
+from reconstruct.qsm import (BRANCH_COLUMNS, ORDER_VOLUME_COLUMNS, QSM_COLUMNS, QsmError, branch_table, qsm_measures,
+                             read_skeleton_ply, segment_volumes, write_branch_csv, write_qsm_csv, write_skeleton_ply)
 from species.skeleton import Skeleton
 from fixtures.skeletons import random_tree
 
@@ -147,3 +149,86 @@ def test_branch_csv_reads_back_as_the_table(tree, tmp_path):
     np.testing.assert_array_equal(back[["id", "parent", "order"]], table[["id", "parent", "order"]])
     np.testing.assert_allclose(back[["length_m", "base_radius_m", "volume_m3"]],
                                table[["length_m", "base_radius_m", "volume_m3"]], rtol=1e-8)
+
+
+# ------------------------------------------------------------------------------ measures read off the scan's points
+def stem_slice(rng, radius, arc_deg, n, centre=(0.0, 0.0), z=(1.2, 1.4), noise=0.003) -> np.ndarray:
+    """(n, 3) points on the arc of a vertical stem of `radius` that a scanner on one side sees, with noise."""
+    angle = rng.uniform(-np.radians(arc_deg) / 2, np.radians(arc_deg) / 2, n)
+    r = radius + rng.normal(0, noise, n)
+    return np.column_stack([centre[0] + r * np.cos(angle), centre[1] + r * np.sin(angle), rng.uniform(*z, n)])
+
+
+def test_dbh_circle_fit_reads_a_half_scanned_stem_with_a_twig_beside_it():
+    rng = np.random.default_rng(0)
+    stem = stem_slice(rng, 0.25, 180, 300)
+    twig = np.column_stack([rng.uniform(0.3, 0.5, 40), rng.uniform(-0.05, 0.05, 40), rng.uniform(1.25, 1.35, 40)])
+    # the skeleton's trunk is far too thin: the fit reads the points, not the skeleton
+    skeleton = vertical([0.0, 1.0, 2.0, 3.0], [0.12] * 4)
+    measures = qsm_measures(skeleton, np.vstack([stem, twig]))
+    assert measures["dbh_method"] == "circle fit" and measures["dbh_note"] is None
+    assert measures["dbh_m"] == pytest.approx(0.50, rel=0.02)
+    assert measures["skeleton_dbh_m"] == pytest.approx(0.24)
+    assert 150 <= measures["dbh_arc_deg"] <= 180 and measures["dbh_rms_m"] < 0.01
+    assert measures["dbh_points"] < len(stem[np.abs(stem[:, 2] - 1.3) <= 0.05]) + 5   # the twig is left out
+
+
+@pytest.mark.parametrize("arc_deg, n, why", [(40, 300, "arc"), (360, 6, "too few")])
+def test_a_short_arc_or_too_few_points_fall_back_to_the_skeleton_radius(arc_deg, n, why):
+    points = stem_slice(np.random.default_rng(1), 0.2, arc_deg, n)
+    measures = qsm_measures(vertical([0.0, 2.0, 3.0], [0.18] * 3), points)
+    assert measures["dbh_method"] == "skeleton radius" and measures["dbh_m"] == pytest.approx(0.36)
+    assert measures["dbh_points"] is None and "too few stem points" in measures["dbh_note"]
+
+
+def test_crown_projection_of_a_disc_is_its_area_and_diameter_and_ignores_a_stray_return():
+    rng = np.random.default_rng(2)
+    r, angle = 3.0 * np.sqrt(rng.uniform(0, 1, 20000)), rng.uniform(0, 2 * np.pi, 20000)
+    crown = np.column_stack([r * np.cos(angle), r * np.sin(angle), rng.uniform(2, 6, 20000)])
+    stray = np.array([[20.0, 0.0, 4.0]])
+    measures = qsm_measures(vertical([0.0, 1.0, 2.0], [0.1] * 3), np.vstack([crown, stray]))
+    assert measures["crown_projection_area_m2"] == pytest.approx(math.pi * 9, rel=0.01)
+    assert measures["crown_diameter_m"] == pytest.approx(6.0, rel=0.01)
+    assert measures["scan_height_m"] == pytest.approx(crown[:, 2].max())
+
+
+def test_enclosing_circle_of_known_point_sets():
+    from reconstruct.scan_measures import enclosing_circle
+
+    square = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]])
+    centre, radius = enclosing_circle(square)
+    np.testing.assert_allclose(centre, [1.0, 1.0], atol=1e-9)
+    assert radius == pytest.approx(math.sqrt(2))
+    obtuse = np.array([[0.0, 0.0], [4.0, 0.0], [2.0, 0.5]])   # the circle on the long side, not the circumcircle
+    centre, radius = enclosing_circle(obtuse)
+    np.testing.assert_allclose(centre, [2.0, 0.0], atol=1e-9)
+    assert radius == pytest.approx(2.0)
+
+
+def test_volume_by_order_sums_to_the_woody_volume(tree):
+    measures = qsm_measures(tree)
+    by_order = [measures[c] for c in ORDER_VOLUME_COLUMNS]
+    assert sum(by_order) == pytest.approx(measures["total_volume_m3"], rel=1e-9)
+    assert by_order[0] == pytest.approx(measures["trunk_volume_m3"], rel=1e-9)
+    volume = segment_volumes(tree)
+    assert by_order[3] == pytest.approx(volume[tree.order >= 3].sum(), rel=1e-9)
+
+
+def test_measures_without_points_leave_the_scan_keys_empty_and_keep_one_schema(tree):
+    measures = qsm_measures(tree)
+    assert tuple(measures) == QSM_COLUMNS
+    assert measures["dbh_method"] == "skeleton radius" and measures["dbh_m"] == measures["skeleton_dbh_m"]
+    assert measures["scan_height_m"] is None and measures["crown_projection_area_m2"] is None
+    with pytest.raises(QsmError, match=r"shape \(4, 2\)"):
+        qsm_measures(tree, np.zeros((4, 2)))
+
+
+def test_qsm_csv_is_one_row_under_the_fixed_columns(tree, tmp_path):
+    measures = {**qsm_measures(tree), "trunk_radius_fit_m": 0.1}
+    write_qsm_csv(measures, tmp_path / "qsm.csv", source="scan.xyz")
+    rows = list(csv.reader(open(tmp_path / "qsm.csv")))
+    assert rows[0] == ["source", *QSM_COLUMNS, "trunk_radius_fit_m"] and len(rows) == 2
+    row = dict(zip(rows[0], rows[1]))
+    assert row["source"] == "scan.xyz" and row["scan_height_m"] == "" and row["dbh_method"] == "skeleton radius"
+    assert float(row["total_volume_m3"]) == pytest.approx(measures["total_volume_m3"], rel=1e-8)
+    assert int(row["branch_count"]) == tree.n_branches - 1
