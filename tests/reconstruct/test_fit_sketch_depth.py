@@ -2,6 +2,8 @@
 bytes for the same seed and budget, our own render fitted back to a close outline, bad budgets refused."""
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -18,9 +20,8 @@ EVALS = 12
 
 @pytest.fixture(scope="module")
 def renderer():
-    renderer = ViewRenderer(SIZE)
-    yield renderer
-    renderer.close()
+    with contextlib.closing(ViewRenderer(SIZE)) as renderer:
+        yield renderer
 
 
 @pytest.fixture(scope="module")
