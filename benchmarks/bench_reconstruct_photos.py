@@ -9,9 +9,12 @@ on the same photos, in one run:
 2. quality against the generated tree's skeleton: Chamfer distance / height, the Smart-Tree F1 AUC, trunk radius
    and height errors, and the share of the tree's isolated points within 10 cm of the reconstructed bark, for ours
    and, on the same isolated cloud, PyTLidar's TreeQSM (installed for the benchmark only).
+3. each `--shapes` of the crown ("sparse": from the SfM points; "hull": grown inside the visual hull of the
+   photos' tree masks, issue 51): crown and silhouette IoU in the unseen views of `farm evaluate`
+   (`reconstruct.scoring.TreeScorer`), the height error and the seconds of the hull's stages.
 
 Run: python -m benchmarks.bench_reconstruct_photos [--views 36] [--size 640] [--tree sc_broad_oak:0] [--leafless]
-     [--max-features 4096] [--matcher sequential]
+     [--max-features 4096] [--matcher sequential] [--ways estimated,aligned,known] [--shapes sparse,hull]
 """
 from __future__ import annotations
 
@@ -33,6 +36,8 @@ from benchmarks.bench_reconstruct_cloud import QUALITY_COLUMNS, message_row, qua
 from benchmarks.pytlidar_qsm import PyTLidarFailed, pytlidar_missing, pytlidar_run  # noqa: E402
 from reconstruct.from_photos import from_photos  # noqa: E402
 from reconstruct.metrics import MetricError  # noqa: E402
+from reconstruct.scoring import TreeScorer  # noqa: E402
+from renderers import ViewRenderer  # noqa: E402
 from reconstruct.sfm import PhotoError, SfmSettings  # noqa: E402
 from renderers.blender import render_photos  # noqa: E402
 from renderers.camera import perspective_camera  # noqa: E402
@@ -40,6 +45,8 @@ from species.tree_mesh import MeshPart  # noqa: E402
 
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "treefarm" / "bench-photos"
 PYTLIDAR_TIMEOUT_S = 300
+SHAPE_COLUMNS = ["way, shape", "crown IoU unseen", "silhouette IoU unseen", "height error",
+                 "masks s", "hull s", "growth s", "total s"]
 WAYS_COLUMNS = ["way", "registered", "reprojection px", "SfM points", "colour", "ground", "footprint", "group",
                 "outliers", "stem", "features s", "matching s", "mapping s", "tree s", "total s"]
 
@@ -86,6 +93,45 @@ def ways_row(label: str, result, total: float) -> list:
             f"{tree_s:.2f}", f"{total:.1f}"]
 
 
+def shape_table(ways: list, args, folder: Path, true: species.Skeleton) -> list[list]:
+    """Rows of the shapes table: each way's `--shapes` reconstructions scored in the unseen views."""
+    shapes = [s for s in args.shapes.split(",") if s]
+    preset, seed = args.tree.split(":")
+    _, mesh = species.rebuild(species.sample(preset, np.random.default_rng(int(seed))))
+    if args.leafless:
+        mesh = dataclasses.replace(mesh, leaves=MeshPart.empty())
+    base = true.positions[0]
+    moved = dataclasses.replace(mesh, bark=dataclasses.replace(mesh.bark, vertices=mesh.bark.vertices - base),
+                                leaves=dataclasses.replace(mesh.leaves, vertices=mesh.leaves.vertices - base))
+    true_here = species.Skeleton(true.positions - base, true.parent, true.radius, true.order)
+    cameras = json.loads((folder / "cameras.json").read_text())["views"]
+    renderer = ViewRenderer(256)
+    try:
+        scorer = TreeScorer(renderer, true_here, moved, [], [k * 360.0 / len(cameras) for k in range(len(cameras))])
+        rows = []
+        for label, source, poses, height in ways:
+            settings = SfmSettings(poses=poses, threads=args.threads, max_features=args.max_features,
+                                   matcher=args.matcher)
+            for shape in shapes:
+                try:
+                    timing = time_case(lambda: from_photos(source, height=height, settings=settings, shape=shape),
+                                       repeats=1)
+                except PhotoError as error:
+                    rows.append([f"{label}, {shape}", f"failed: {error}"] + [""] * (len(SHAPE_COLUMNS) - 2))
+                    continue
+                result, t = timing.result, timing.result.timings
+                row = scorer(result.skeleton, result.mesh)
+                rows.append([f"{label}, {shape}", f"{row['crown_iou_unseen']:.3f}",
+                             f"{row['silhouette_iou_unseen']:.3f}",
+                             f"{row['height_rel_error']:.3f}", f"{t.get('hull.masks', 0.0):.2f}",
+                             f"{t.get('hull.hull', 0.0):.2f}", f"{t.get('hull.growth', 0.0):.2f}",
+                             f"{timing.median:.1f}"])
+                print(rows[-1], flush=True)
+        return rows
+    finally:
+        renderer.close()
+
+
 def main() -> None:
     parser = arguments(__doc__)
     parser.add_argument("--views", type=int, default=36)
@@ -100,15 +146,21 @@ def main() -> None:
     parser.add_argument("--pytlidar-timeout", type=float, default=PYTLIDAR_TIMEOUT_S)
     parser.add_argument("--leafless", action="store_true", help="the tree in winter: bark only")
     parser.add_argument("--render-only", action="store_true")
+    parser.add_argument("--ways", default="estimated,aligned,known",
+                        help="which poses to run: estimated (scaled by the height), aligned, known")
+    parser.add_argument("--shapes", default="sparse,hull",
+                        help="crowns to compare in unseen views: sparse, hull (comma-separated)")
     args = parser.parse_args()
     preset, seed = args.tree.split(":")
     folder, true = orbit(preset, int(seed), args.views, args.size, args.samples, args.leafless)
     if args.render_only:
         return
     bench = Benchmark("reconstruct_photos", "Photos to trees: an orbit of Blender photos through SfM", args)
-    ways = [("estimated, scaled by the height", photos_only(folder), "auto", true.height),
-            ("estimated, aligned to cameras.json", folder, "estimate", None),
-            ("known poses (cameras.json)", folder, "known", None)]
+    ways = {"estimated": ("estimated, scaled by the height", photos_only(folder), "auto", true.height),
+            "aligned": ("estimated, aligned to cameras.json", folder, "estimate", None),
+            "known": ("known poses (cameras.json)", folder, "known", None)}
+    ways = [ways[w] for w in args.ways.split(",")]
+    shape_rows = shape_table(ways, args, folder, true)
     rows, results = [], []
     for label, source, poses, height in ways:
         settings = SfmSettings(poses=poses, threads=args.threads, max_features=args.max_features,
@@ -147,6 +199,9 @@ def main() -> None:
             rows.append(message_row(f"{label}, PyTLidar", "", f"failed: {error}"))
     bench.table("quality against the generated tree's skeleton (the base at the origin, as `frame='base'`)",
                 ["way, method", *QUALITY_COLUMNS], rows)
+    if shape_rows:
+        bench.table("crowns in the unseen views of `farm evaluate` (orbit:8:0, the azimuths no photo looked along)",
+                    SHAPE_COLUMNS, shape_rows)
     bench.note("SfM records: " + json.dumps({label: r.scan.provenance["sfm"] for label, r, _ in results}))
     bench.write()
 

@@ -31,11 +31,12 @@ from species.timing import StageTimer
 
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
+from .hull_growth import colonization_preset, grow_in_hull
 from .result import Reconstruction
 from .sfm import PhotoError, Progress, SfmPoints, no_progress, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
 
-__all__ = ["from_photos", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
+__all__ = ["from_photos", "SHAPES", "level_and_isolate", "check_height", "ground_plane", "camera_up", "look_at",
            "in_footprint", "IsolatedTree"]
 
 DARK = 25                 # every channel at or below: near-black (deep shadow, a dark background)
@@ -47,6 +48,7 @@ GROUND_TRIALS = 256
 LINK_FACTOR = 4.0         # points within this many median spacings are one group
 FOOTPRINT_MARGIN = 1.2    # groups whose centre lies within this times the main group's reach are kept
 FOOTPRINT_SHARE = 1.0     # of the photos' footprint radius (`in_footprint`)
+SHAPES = ("sparse", "hull")  # the crown from the SfM points alone, or grown in the photos' visual hull
 HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale is warned about
 
 
@@ -55,7 +57,8 @@ class IsolatedTree:
     """The tree's points in the upright metric frame (Z up; the cameras' world for known or aligned poses, else the
     model levelled, its ground under the tree at z = 0 and scaled to the given height), their colours, where up and
     scale came from, the ground's height under the tree, up (3,) in the SfM model's frame, and the points left
-    after each step (`counts`)."""
+    after each step (`counts`), and model_to_upright (4, 4) the similarity taking the SfM model's frame to the
+    upright metric one."""
 
     points: np.ndarray
     colours: np.ndarray
@@ -65,6 +68,7 @@ class IsolatedTree:
     ground_z: float
     up: np.ndarray
     counts: dict[str, int]
+    model_to_upright: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(4))
 
 
 def check_height(height) -> None:
@@ -225,10 +229,14 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     else:
         ground_z = float(upright[:, 2].min())
     scale, scale_source = 1.0, "cameras.json" if metric else "none"
+    model_to_upright = np.eye(4)
+    model_to_upright[:3, :3] = rotation
     if height is not None:
         # scaled about the ground under the tree, which goes to z = 0
         scale, scale_source = float(height) / float(upright[:, 2].max() - ground_z), "height"
         upright = (upright - np.array([0.0, 0.0, ground_z])) * scale
+        model_to_upright[:3] *= scale
+        model_to_upright[2, 3] = -scale * ground_z
         ground_z = 0.0
     elif not metric:
         raise PhotoError("the photos' scale is unknown (no cameras.json): allowed a tree height in metres "
@@ -241,13 +249,14 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
         keep[stray] = False
         upright, colours = upright[keep], colours[keep]
     counts["stem"] = len(upright)
-    return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts)
+    return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts, model_to_upright)
 
 
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
-                progress: Progress | None = None) -> Reconstruction:
+                progress: Progress | None = None, shape: str = "sparse", species: str | None = None
+                ) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
@@ -256,11 +265,18 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     frame, completion, seed, name : as `from_cloud`. workdir : keeps COLMAP's database and model there.
     log, progress : where COLMAP's log goes, and who is told each stage's progress (`sfm_points`); after SfM's
                stages comes "tree": the isolation, then the skeleton and the mesh.
+    shape    : "sparse" (the cloud method's tree from the SfM points) or "hull": that tree's trunk and main
+               branches, then growth of the `species` colonization preset inside the visual hull of the photos'
+               tree masks (`reconstruct.hull_growth`; timings "hull.STAGE", maps "hull", "masks", "main_skeleton").
     The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
     Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
     """
     if frame not in FRAMES:
         raise PhotoError(f"frame {frame!r} is not known: allowed {', '.join(FRAMES)}")
+    if shape not in SHAPES:
+        raise PhotoError(f"shape {shape!r} is not known: allowed {', '.join(SHAPES)}")
+    if shape == "hull":
+        colonization_preset(species)  # said before SfM spends minutes
     check_height(height)
     settings = SfmSettings() if settings is None else settings
     cameras = known_cameras(folder, photo_names(folder))
@@ -292,6 +308,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     progress("tree", 1, 2)
     cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
+    if shape == "hull":
+        result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed)
     progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,

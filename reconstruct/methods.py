@@ -76,7 +76,9 @@ class RunOptions:
     height     : the tree's height in metres; None for the method's own (a drawing has no scale).
     models     : a model registry (its champions) or None for the shipped models; nets : predictors already loaded,
                  by trainers task name, used before `models`.
-    species    : sketch-depth's colonization preset, "auto" (TreeSketchNet reads it) or None (its default).
+    species    : sketch-depth's colonization preset, "auto" (TreeSketchNet reads it) or None (its default); the
+                 photos' hull growth's preset (None: the same default).
+    shape      : photos: "sparse" (the crown from the SfM points) or "hull" (grown in the photos' visual hull).
     photo      : sketch-depth reads a photo: its blurred edges are the sketch.
     brush      : two-view's stroke kind; None tells it from the drawings.
     up, frame, completion : cloud and photos (`reconstruct.from_cloud`); poses, threads : photos' SfM
@@ -107,6 +109,7 @@ class RunOptions:
     progress: Callable[[str, int, int], None] | None = None
     fit_evals: int = DEFAULT_FIT_EVALS
     renderer: Any = None
+    shape: str = "sparse"
 
 
 @dataclass(frozen=True)
@@ -178,7 +181,8 @@ def _run_photos(inputs, options: RunOptions):
     settings = SfmSettings(poses=options.poses, threads=options.threads, seed=options.seed)
     return from_photos(inputs["photos"], height=options.height, frame=options.frame, completion=options.completion,
                        seed=options.seed, settings=settings, name=options.name, workdir=options.workdir,
-                       log=options.log, progress=options.progress)
+                       log=options.log, progress=options.progress, shape=options.shape,
+                       species=options.species)
 
 
 METHODS: dict[str, Method] = {
@@ -215,7 +219,7 @@ METHODS: dict[str, Method] = {
         source="AdTree, seed 003"),
     "photos": Method(
         "photos", (Input("photos", "photos", "a folder of photos (with cameras.json when the poses are known)"),),
-        _run_photos, options=("frame", "completion", "poses"),
+        _run_photos, options=("frame", "completion", "poses", "shape", "species"),
         summary="pycolmap SfM points, levelled, scaled and isolated from the ground, then the cloud method",
         source="SfM, seed 003"),
 }

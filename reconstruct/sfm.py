@@ -109,6 +109,8 @@ class SfmPoints:
     reprojection_px : mean reprojection error. camera_centres : (R, 3) float64, of `registered` in that order;
     camera_rotations : (R, 3, 3) float64, their world-to-camera rotations (OpenCV axes).
     half_widths : (R,) float64, each photo's half width over its focal length (tan of half the horizontal view).
+    intrinsics : (R, 3, 3) float64, each photo's pinhole matrix (COLMAP's pixel centres: pixel (0, 0) spans
+    [0, 1)); sizes : (R, 2) int, (width, height) pixels. Lens distortion is left out.
     """
 
     points: np.ndarray
@@ -122,6 +124,8 @@ class SfmPoints:
     camera_rotations: np.ndarray
     half_widths: np.ndarray
     timings: dict[str, float]
+    intrinsics: np.ndarray | None = None
+    sizes: np.ndarray | None = None
 
 
 def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoints, float]:
@@ -148,7 +152,8 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoi
     residual = float(np.sqrt(((centres - known_centres) ** 2).sum(axis=1).mean()))
     rotations = sfm.camera_rotations @ rotation.T
     return (SfmPoints(move(sfm.points), sfm.colours, sfm.track_length, sfm.registered, sfm.n_photos, "aligned",
-                      sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings), residual)
+                      sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings, sfm.intrinsics,
+                      sfm.sizes), residual)
 
 
 def known_cameras(folder: str | Path, names: list[str]) -> dict[str, Camera] | None:
@@ -379,7 +384,11 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                      half_widths=np.array([0.5 * model.camera(image.camera_id).width
                                            / model.camera(image.camera_id).mean_focal_length() for image in images],
                                           np.float64),
-                     timings=timer.seconds)
+                     timings=timer.seconds,
+                     intrinsics=np.array([model.camera(image.camera_id).calibration_matrix() for image in images],
+                                         np.float64).reshape(-1, 3, 3),
+                     sizes=np.array([(model.camera(image.camera_id).width, model.camera(image.camera_id).height)
+                                     for image in images], np.int64).reshape(-1, 2))
 
 
 def _set_known_intrinsics(database: Path, cameras: dict[str, Camera]) -> None:

@@ -48,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--poses", choices=("auto", "known", "estimate"), default="auto",
                        help="photos: known (the folder's cameras.json), estimate (SfM's own, aligned onto "
                             "cameras.json when there is one) or auto (known when cameras.json lists every photo)")
+    group.add_argument("--shape", choices=("sparse", "hull"), default="sparse",
+                       help="photos: the crown from the SfM points (sparse) or grown inside the visual hull of the "
+                            "photos' tree masks (hull; --species picks the colonization preset)")
     add_ray_options(group, workers_help="batch: Ray tasks at once (default: the CPUs)",
                     address_help="batch: a Ray cluster to join (default: a local Ray)")
 
@@ -124,7 +127,7 @@ def _cloud_suffixes() -> tuple[str, ...]:
 def _options(args: argparse.Namespace, batch: bool = False) -> RunOptions:
     """What each tree's reconstruction takes; a batch's SfM runs on one thread a Ray task."""
     return RunOptions(seed=args.seed, height=args.height, up=args.up, frame=args.frame, completion=args.complete,
-                      poses=args.poses, threads=1 if batch else 0)
+                      poses=args.poses, threads=1 if batch else 0, shape=args.shape, species=args.species)
 
 
 def log_path(method: str, out: Path) -> Path | None:

@@ -171,3 +171,30 @@ def test_cli_batch_of_photo_folders_reports_the_blank_one_and_finishes_the_other
     assert float(rows["phone"]["height_m"]) == pytest.approx(4.3, rel=0.2)
     assert rows["blank"]["status"] == "failed" and "0 of 4 photos have 15 features" in rows["blank"]["message"]
     assert not (out / "blank.glb").exists() and (out / "contact_sheet.png").is_file()
+
+
+@pytest.fixture(scope="module")
+def grown(photos):
+    return from_photos(photos.cameras_json.parent, settings=SfmSettings(threads=1), shape="hull")
+
+
+def test_the_hull_crown_holds_the_tree_and_the_growth_stays_in_it(photos, photo_tree, grown):
+    true, mesh = photo_tree
+    hull = grown.maps["hull"]                    # known poses: the upright frame is the renders' world
+    bark = mesh.bark.vertices.astype(np.float64)[::20]
+    assert hull.space().contains(bark).mean() >= 0.8
+    shift = -grown.scan.transform[:3, 3]
+    nodes = grown.skeleton.positions.astype(np.float64)
+    guide = len(grown.maps["main_skeleton"])
+    assert hull.space(shift).contains(nodes[guide:]).mean() >= 0.95    # what grew, grew inside the hull
+    assert abs(grown.skeleton.height - true.height) <= 0.2 * true.height
+    assert len(grown.maps["masks"]) == len(photos.images) and all(m.any() for m in grown.maps["masks"])
+    assert {"hull.masks", "hull.hull", "hull.growth"} <= set(grown.timings)
+
+
+def test_a_bad_shape_or_species_is_one_line(photos):
+    folder = photos.cameras_json.parent
+    with pytest.raises(PhotoError, match="shape 'dense' is not known: allowed sparse, hull"):
+        from_photos(folder, shape="dense")
+    with pytest.raises(PhotoError, match="species 'sp_oak' is unknown"):
+        from_photos(folder, shape="hull", species="sp_oak")

@@ -1,0 +1,120 @@
+"""A photo tree's crown grown inside its visual hull (issue 51): masks of every registered photo
+(`photo_masks`), the hull they carve from the SfM cameras (`visual_hull`), and self-organizing growth that fills
+it from the trunk and main branches the cloud method measured in the SfM points.
+
+In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree (`IsolatedTree`: its points and
+the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
+`Reconstruction` of those points. Out: that reconstruction with the grown skeleton and mesh in place of the
+completed one; its scan (the measured skeleton, the QSM measures) is kept.
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+from PIL import Image
+
+from species.colonization import grow_in_space, validate
+from species.meshing import build_mesh
+from species.presets import Preset, PresetError, get_preset
+from species.skeleton import Skeleton
+from species.timing import StageTimer
+
+from .from_sketch import DEFAULT_SPECIES
+from .photo_masks import tree_mask, tree_window
+from .photo_folder import PhotoError
+from .result import Reconstruction
+from .visual_hull import PinholeView, carve
+
+__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "main_branches", "DEFAULT_SPECIES", "HULL_VOXELS"]
+
+HULL_VOXELS = 64          # voxels along the hull box's longest side
+HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
+MAIN_ORDER = 1            # the measured skeleton's nodes up to this branching order guide the growth
+
+
+def photo_views(sfm, model_to_upright: np.ndarray) -> list[PinholeView]:
+    """Each registered photo's camera in the upright metric frame (`SfmPoints` with intrinsics and sizes)."""
+    if sfm.intrinsics is None or sfm.sizes is None:
+        raise PhotoError("the SfM model carries no camera intrinsics: allowed one from `sfm_points`")
+    linear, shift = model_to_upright[:3, :3], model_to_upright[:3, 3]
+    scale = float(np.cbrt(np.linalg.det(linear)))
+    rotation = linear / scale
+    views = []
+    for R, centre, K, size in zip(sfm.camera_rotations, sfm.camera_centres, sfm.intrinsics, sfm.sizes):
+        views.append(PinholeView(R @ rotation.T, linear @ centre + shift, (float(K[0, 0]), float(K[1, 1])),
+                                 (float(K[0, 2]), float(K[1, 2])), (int(size[0]), int(size[1]))))
+    return views
+
+
+def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
+    """(2, 3) the box carved: the tree's points' box grown by HULL_MARGIN, from the ground up."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    pad = HULL_MARGIN * float(max(hi - lo))
+    return np.array([[lo[0] - pad, lo[1] - pad, ground_z], [hi[0] + pad, hi[1] + pad, hi[2] + pad]])
+
+
+def main_branches(skeleton: Skeleton, max_order: int = MAIN_ORDER) -> Skeleton:
+    """The nodes of `skeleton` up to branching order `max_order` (the trunk and main branches), reindexed."""
+    keep = skeleton.order <= max_order
+    keep[0] = True
+    parent = skeleton.parent
+    # a kept node's parent is kept: the order never falls towards the root
+    ids = np.flatnonzero(keep)
+    new = np.full(len(skeleton.positions), -1, np.int64)
+    new[ids] = np.arange(len(ids))
+    return Skeleton(skeleton.positions[ids], np.where(parent[ids] >= 0, new[np.maximum(parent[ids], 0)], -1),
+                    skeleton.radius[ids], skeleton.order[ids])
+
+
+def colonization_preset(species: str | None) -> Preset:
+    """The colonization preset called `species` (None: DEFAULT_SPECIES); PhotoError for another or an unknown one."""
+    chosen = DEFAULT_SPECIES if species is None else species
+    try:
+        preset = get_preset(chosen)
+    except PresetError:
+        raise PhotoError(f"species {chosen!r} is unknown: allowed a colonization preset (sc_*), default "
+                         f"{DEFAULT_SPECIES!r}") from None
+    if preset.generator != "colonization":
+        raise PhotoError(f"species {chosen!r} is a {preset.generator} preset: allowed a colonization preset "
+                         f"(sc_*), default {DEFAULT_SPECIES!r}")
+    return preset
+
+
+def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, species: str | None = None,
+                 seed: int = 0) -> Reconstruction:
+    """`result` (the cloud method's, from `tree`'s points) regrown inside the photos' visual hull (module
+    docstring); timings add "hull.masks", "hull.hull", "hull.growth" and "hull.mesh"; maps add "hull" (the
+    `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton"; params are the species preset's draw it grew with.
+    species : a colonization preset (sc_*), default DEFAULT_SPECIES. Raises PhotoError for a preset that is not
+    a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree."""
+    preset = colonization_preset(species)
+    timer = StageTimer()
+    views = photo_views(sfm, tree.model_to_upright)
+    bounds = hull_bounds(tree.points, tree.ground_z)
+    base = np.array([*np.median(tree.points[:, :2], axis=0), tree.ground_z])
+    masks = []
+    for name, view in zip(sfm.registered, views):
+        with Image.open(Path(folder) / name) as photo:
+            image = np.asarray(photo.convert("RGB"))
+        masks.append(tree_mask(image, tree_window(view, bounds, base, tree.points)))
+    timer.lap("masks")
+    hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points)
+    timer.lap("hull")
+    rng = np.random.default_rng(seed)
+    params = validate(preset.sample(rng))
+    guide = main_branches(result.scan.measured)
+    shift = -result.scan.transform[:3, 3]                  # upright frame to the base frame (Z up already)
+    height = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size + shift[2])
+    params["height"] = height
+    internode = height / (params["crown_base"] + params["crown_height"])
+    skeleton = grow_in_space(params, rng, space=hull.space(shift), internode_length=internode, guide=guide,
+                             guide_buds="all")
+    timer.lap("growth")
+    mesh = build_mesh(skeleton, params)
+    timer.lap("mesh")
+    return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
+                               timings={**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}},
+                               maps={**result.maps, "hull": hull, "masks": tuple(masks),
+                                     "main_skeleton": guide.positions.astype(np.float32)})

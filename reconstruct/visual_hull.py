@@ -1,0 +1,146 @@
+"""A tree's volume from its outlines (issue 51): voxel carving of tree masks seen from registered cameras.
+
+In: one (H, W) bool mask per photo and its `PinholeView` (a world-to-camera rotation, a centre and pinhole
+intrinsics in the frame the hull is carved in), a box to carve and a voxel size. Out: a `VisualHull`, the voxels
+that enough of the cameras seeing them see inside the tree's mask; its `space()` is a `VoxelSpace` for growth.
+
+Carving is conservative: a voxel stays in a view when its projected ball (half its diagonal) reaches the mask,
+so a hull carved from exact masks holds the whole shape and is at most about a voxel larger than the cameras'
+outlines allow. Wrong masks (a branch lost to the sky filter, a photo where a person walks past) carve too much;
+a voxel therefore stays when at least `agree` of the cameras that see it keep it, not all of them. Points known
+to lie on the tree (SfM's) keep the voxels they fall in.
+
+Every voxel centre is projected into one camera at a time, all at once (numpy); nothing loops over voxels.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from scipy import ndimage
+
+from renderers.camera import Camera
+from species.colonization import VoxelSpace
+
+from .photo_folder import PhotoError
+
+__all__ = ["PinholeView", "VisualHull", "HullError", "carve", "DEFAULT_AGREE", "MAX_VOXELS"]
+
+DEFAULT_AGREE = 0.8       # the share of the cameras seeing a voxel that must keep it
+MAX_VOXELS = 4_000_000    # a grid larger than this is refused (memory: a few float arrays of this length)
+
+
+class HullError(PhotoError):
+    """Masks and cameras that carve no tree: no view, masks all empty, or a hull with no voxel left."""
+
+
+@dataclass(frozen=True)
+class PinholeView:
+    """A photo's camera. rotation (3, 3) world-to-camera (OpenCV axes: x right, y down, z forward), centre (3,)
+    in the world, focal (fx, fy) and principal point (cx, cy) in pixels where pixel (0, 0) spans [0, 1) x [0, 1)
+    (COLMAP's convention), size (width, height) pixels."""
+
+    rotation: np.ndarray
+    centre: np.ndarray
+    focal: tuple[float, float]
+    principal: tuple[float, float]
+    size: tuple[int, int]
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 2) pixel coordinates (u, v) and (N,) depths along the optical axis of world points (N, 3)."""
+        local = (points - self.centre) @ self.rotation.T
+        depth = local[:, 2]
+        safe = np.where(depth > 1e-9, depth, 1e-9)
+        uv = np.stack([self.focal[0] * local[:, 0] / safe + self.principal[0],
+                       self.focal[1] * local[:, 1] / safe + self.principal[1]], axis=1)
+        return uv, depth
+
+    @classmethod
+    def from_camera(cls, camera: Camera) -> "PinholeView":
+        """A perspective `renderers.camera.Camera` (OpenCV pixel centres: its principal point moves half a pixel)."""
+        K = np.asarray(camera.K, np.float64)
+        return cls(np.asarray(camera.world_to_camera[:3, :3], np.float64), np.asarray(camera.position, np.float64),
+                   (float(K[0, 0]), float(K[1, 1])), (float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5),
+                   (int(camera.width), int(camera.height)))
+
+
+@dataclass(frozen=True, eq=False)
+class VisualHull:
+    """occupancy (X, Y, Z) bool, voxel (i, j, k) spanning origin + [i, i + 1) * voxel_size; seen (X, Y, Z) int,
+    the cameras that see each voxel's centre; kept (X, Y, Z) int, those whose mask keeps it."""
+
+    occupancy: np.ndarray
+    origin: np.ndarray
+    voxel_size: float
+    seen: np.ndarray
+    kept: np.ndarray
+
+    def centres(self) -> np.ndarray:
+        """(K, 3) float64: the centres of the occupied voxels."""
+        return self.origin + (np.argwhere(self.occupancy) + 0.5) * self.voxel_size
+
+    def space(self, shift: np.ndarray | None = None) -> VoxelSpace:
+        """The hull as a growth space, moved by `shift` (3,) metres (e.g. into a tree's base frame)."""
+        origin = self.origin if shift is None else self.origin + np.asarray(shift, np.float64)
+        return VoxelSpace(self.occupancy, origin, self.voxel_size)
+
+
+def _grid(bounds: np.ndarray, voxel_size: float) -> tuple[np.ndarray, tuple[int, int, int]]:
+    lo, hi = np.asarray(bounds, np.float64)
+    if not (np.all(np.isfinite(bounds)) and np.all(hi > lo)):
+        raise HullError(f"hull bounds {np.round(bounds, 3).tolist()} are empty: allowed lo < hi on every axis")
+    if not voxel_size > 0:
+        raise HullError(f"voxel size {voxel_size!r} is invalid: allowed > 0 metres")
+    shape = tuple(int(n) for n in np.maximum(np.ceil((hi - lo) / voxel_size), 1))
+    if int(np.prod(shape)) > MAX_VOXELS:
+        raise HullError(f"a {shape} voxel grid is larger than {MAX_VOXELS} voxels: allowed a larger voxel size")
+    return lo, shape  # type: ignore[return-value]
+
+
+def carve(masks: Sequence[np.ndarray], views: Sequence[PinholeView], bounds: np.ndarray, voxel_size: float, *,
+          agree: float = DEFAULT_AGREE, min_views: int = 2, points: np.ndarray | None = None) -> VisualHull:
+    """The visual hull of `masks` seen by `views` inside `bounds` ((2, 3) metres, lo and hi), `voxel_size` metres.
+
+    agree     : a voxel stays when at least this share of the views that see its centre keep it (1.0: all).
+    min_views : a voxel seen by fewer views is dropped (too little to carve it).
+    points    : (P, 3) points on the tree; the voxels they fall in stay whatever the masks say.
+    Raises HullError when there is no view, the masks are all empty, or nothing is left.
+    """
+    if not views or len(masks) != len(views):
+        raise HullError(f"{len(views)} cameras and {len(masks)} masks: allowed at least one registered photo, "
+                        f"one mask each")
+    if not 0.0 < agree <= 1.0:
+        raise HullError(f"agree {agree!r} is out of range: allowed (0, 1]")
+    masks = [np.asarray(m, bool) for m in masks]
+    if not any(m.any() for m in masks):
+        raise HullError(f"the tree masks of all {len(masks)} photos are empty: no tree was found in the photos")
+    origin, shape = _grid(bounds, voxel_size)
+    axes = [origin[d] + (np.arange(shape[d]) + 0.5) * voxel_size for d in range(3)]
+    centres = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    seen = np.zeros(len(centres), np.int32)
+    kept = np.zeros(len(centres), np.int32)
+    radius = 0.5 * np.sqrt(3.0) * voxel_size
+    for mask, view in zip(masks, views):
+        height, width = mask.shape
+        if (width, height) != tuple(view.size):
+            raise HullError(f"a mask of {width} x {height} px for a camera of {view.size[0]} x {view.size[1]} px: "
+                            f"allowed one the photo's size")
+        # pixels from the mask (0 inside), so a voxel whose projected ball reaches the mask stays
+        outside = ndimage.distance_transform_edt(~mask) if mask.any() else np.full(mask.shape, np.inf)
+        uv, depth = view.project(centres)
+        column, row = np.floor(uv[:, 0]).astype(np.int64), np.floor(uv[:, 1]).astype(np.int64)
+        visible = (depth > radius) & (column >= 0) & (column < width) & (row >= 0) & (row < height)
+        index = np.flatnonzero(visible)
+        reach = radius * max(view.focal) / depth[index] + 0.5
+        seen[index] += 1
+        kept[index] += outside[row[index], column[index]] <= reach
+    occupancy = (seen >= min_views) & (kept >= agree * seen)
+    if points is not None and len(points):
+        ijk = np.floor((np.asarray(points, np.float64) - origin) / voxel_size).astype(np.int64)
+        inside = np.all((ijk >= 0) & (ijk < np.array(shape)), axis=1)
+        occupancy.reshape(shape)[tuple(ijk[inside].T)] = True
+    if not occupancy.any():
+        raise HullError(f"no voxel of {len(centres)} is inside the tree's outline in enough photos: the masks "
+                        "and cameras do not agree on a tree")
+    return VisualHull(occupancy.reshape(shape), origin, float(voxel_size), seen.reshape(shape), kept.reshape(shape))
