@@ -255,7 +255,7 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
-                progress: Progress | None = None, shape: str = "sparse", species: str | None = None
+                progress: Progress | None = None, shape: str = "hull", species: str | None = None
                 ) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).

@@ -109,7 +109,7 @@ class RunOptions:
     progress: Callable[[str, int, int], None] | None = None
     fit_evals: int = DEFAULT_FIT_EVALS
     renderer: Any = None
-    shape: str = "sparse"
+    shape: str = "hull"
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--poses", choices=("auto", "known", "estimate"), default="auto",
                        help="photos: known (the folder's cameras.json), estimate (SfM's own, aligned onto "
                             "cameras.json when there is one) or auto (known when cameras.json lists every photo)")
-    group.add_argument("--shape", choices=("sparse", "hull"), default="sparse",
+    group.add_argument("--shape", choices=("sparse", "hull"), default="hull",
                        help="photos: the crown from the SfM points (sparse) or grown inside the visual hull of the "
                             "photos' tree masks (hull; --species picks the colonization preset)")
     add_ray_options(group, workers_help="batch: Ray tasks at once (default: the CPUs)",
