@@ -8,8 +8,8 @@ from species.errors import TreefarmError
 
 __all__ = ["DEFAULT_FIT_EVALS", "FitError", "check_fit_evals"]
 
-# Candidate trees a drawing method's fit grows and redraws by default: about 4 s on one core here for most trees
-# (docs/reconstruct.md, Fitting to the drawing).
+# Candidate trees a drawing method's fit grows and redraws by default: a few seconds on one core for most drawings
+# (docs/reconstruct.md, Fitting to the drawing, has the measured figures).
 DEFAULT_FIT_EVALS = 32
 
 

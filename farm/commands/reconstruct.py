@@ -68,7 +68,7 @@ def register(subparsers) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the growth draws (default 0)")
     parser.add_argument("--fit-evals", type=int, default=None, metavar="N",
                         help="candidate trees the fit to the drawing grows and redraws (default "
-                             f"{DEFAULT_FIT_EVALS}, about 4 s; 0: the method's first guess as it is)")
+                             f"{DEFAULT_FIT_EVALS}, a few seconds; 0: the method's first guess as it is)")
     parser.add_argument("--models", help="model registry URI or folder (default: the shipped models/)")
     parser.add_argument("--params-out", help="write the parameter dictionary here (params method)")
     parser.add_argument("--format", choices=("glb", "obj"), default=None, help="default: from --out's suffix")
