@@ -64,6 +64,9 @@ PRUNE_RATIO = 0.005
 # A path-length band is at most this wide, whatever the point spacing: a vertex stands for the points of its band,
 # so on a sparse scan a band of a few spacings would put them beyond the fit's 10 cm bar.
 MAX_BAND_M = 0.06
+# Points are linked into one vertex at most this far apart, whatever the spacing: a vertex sits among its linked
+# points, so on a sparse scan (airborne lidar) a link of a few spacings would leave them beyond the 10 cm bar.
+MAX_LINK_M = 0.2
 RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
 DUPLICATE_M = 1e-3         # points closer than this are one point
 
@@ -78,7 +81,8 @@ class SkeletonSettings:
     graph             : "knn" (`knn` nearest neighbours, pieces joined) or "delaunay" (AdTree's, slower).
     band_spacings     : width of a path-length band in median point spacings (stage 6), at most max_band_m
                         metres.
-    link_spacings     : points closer than this many spacings and in one band are one vertex.
+    link_spacings     : points closer than this many spacings (at most max_link_m metres) and in one band are
+                        one vertex.
     merge_bands       : stage 6b's distance, in bands.
     prune_ratio       : stage 7's share of the tree's reach.
     sibling_angle_deg : stage 8's angle.
@@ -96,6 +100,7 @@ class SkeletonSettings:
     band_spacings: float = 4.0
     max_band_m: float = MAX_BAND_M
     link_spacings: float = 2.5
+    max_link_m: float = MAX_LINK_M
     merge_bands: float = 0.0
     flank_bands: float = 1.5
     prune_ratio: float = PRUNE_RATIO
@@ -113,7 +118,8 @@ class SkeletonSettings:
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
                 raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
         for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "max_band_m", "link_spacings",
-                     "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg", "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
+                     "max_link_m", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
+                     "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise CloudError(f"{name} = {value!r}: allowed a finite number >= 0")
@@ -572,12 +578,19 @@ def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: fl
 
 def power_law_radii(positions: np.ndarray, parent: np.ndarray, trunk_radius: float, trunk_top: float,
                     exponent: float, min_radius: float) -> np.ndarray:
-    """Stage 10's radii: the fitted trunk radius on the trunk (the longest-reaching path from the root, up to the
-    top of the centralised trunk, `trunk_top` metres), and above and beside it trunk radius x (reach / reach at
-    the trunk's top) ^ exponent, at least `min_radius`, never wider than the parent."""
-    _, reach = _reach(positions, parent)
+    """Stage 10's radii: the fitted trunk radius on the trunk (the longest-reaching path from the root, up to its
+    first vertex above the top of the centralised trunk, `trunk_top` metres), and above and beside it trunk radius
+    x (reach / reach at the trunk's top) ^ exponent, at least `min_radius`, never wider than the parent. Where the
+    trunk ends at a tip (the longest path never climbs above `trunk_top`: the centralised trunk spans the scan, as on
+    a stem clipped round like conifer_stems), the law has no reference and every vertex but the tips keeps the trunk radius."""
+    along, reach = _reach(positions, parent)
     main = ~_spread_down((parent >= 0) & ~_dominant_child(parent, reach + _edge_lengths(positions, parent)), parent)
-    trunk = main & (positions[:, 2] <= trunk_top)
+    # The path's first climb above trunk_top ends the trunk: a longest path that wanders back down through a
+    # crown (a crown-only airborne scan) would otherwise make its far end, a tip of zero reach, the reference.
+    above = main & (positions[:, 2] > trunk_top)
+    if not above.any():
+        return np.where(reach > 0, max(trunk_radius, min_radius), min_radius)
+    trunk = main & (along < along[above].min())
     reference = reach[trunk].min() if trunk.any() else reach[0]
     radius = np.maximum(trunk_radius * (reach / max(reference, 1e-9)) ** exponent, min_radius)
     radius[trunk] = trunk_radius
@@ -649,7 +662,7 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     lap("shortest_paths")
     band = min(settings.band_spacings * spacing, settings.max_band_m)
     positions, parent, weight, first_along = merge_bands(moved, edges, predecessor, along, band,
-                                                         settings.link_spacings * spacing)
+                                                         min(settings.link_spacings * spacing, settings.max_link_m))
     if settings.merge_bands > 0:
         positions, parent, _ = merge_close_vertices(positions, parent, weight, first_along,
                                                     settings.merge_bands * band, band)
