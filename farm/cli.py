@@ -14,22 +14,26 @@ import traceback
 
 from species.errors import TreefarmError
 
-# Each module defines `register(subparsers)`, adding its parser with `set_defaults(run=function)`.
-COMMAND_MODULES = [
-    "farm.commands.tree",
-    "farm.commands.species",
-    "farm.commands.generate",
-    "farm.commands.status",
-    "farm.commands.validate",
-    "farm.commands.inspect",
-    "farm.commands.export",
-    "farm.commands.render",
-    "farm.commands.review",
-    "farm.commands.library",
-    "farm.commands.train",
-    "farm.commands.reconstruct",
-    "farm.commands.evaluate",
-]
+# Each module defines `register(subparsers)`, adding its parsers with `set_defaults(run=function)`: command name ->
+# the module that registers it, in the order `farm --help` lists them.
+COMMANDS = {
+    "tree": "farm.commands.tree",
+    "species": "farm.commands.species",
+    "generate": "farm.commands.generate",
+    "status": "farm.commands.status",
+    "validate": "farm.commands.validate",
+    "inspect": "farm.commands.inspect",
+    "export": "farm.commands.export",
+    "render": "farm.commands.render",
+    "review": "farm.commands.review",
+    "library": "farm.commands.library",
+    "train": "farm.commands.train",
+    "retrain": "farm.commands.train",
+    "models": "farm.commands.train",
+    "reconstruct": "farm.commands.reconstruct",
+    "evaluate": "farm.commands.evaluate",
+}
+COMMAND_MODULES = list(dict.fromkeys(COMMANDS.values()))
 
 EXIT_USER_ERROR = 2
 EXIT_BUG = 1
@@ -55,16 +59,23 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The `farm` parser with every command; with `command` (a name of COMMANDS), only the module registering it
+    is imported and registered (the command's start-up time: each module imports what its own parser lists)."""
     parser = argparse.ArgumentParser(prog="farm", description="treefarm: procedural trees and training data")
     parser.add_argument("--debug", action="store_true",
                         help="print the traceback of every error, a user error's too (before the command)")
     parser.add_argument("--version", action=_VersionAction, help="print the installed treefarm's version and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMAND_MODULES:
+    for name in [COMMANDS[command]] if command in COMMANDS else COMMAND_MODULES:
         importlib.import_module(name).register(sub)
     return parser
+
+
+def _command_named(argv: list[str]) -> str | None:
+    """The command word of `argv` (its first word that is not an option: `farm`'s own options take no value)."""
+    return next((word for word in argv if not word.startswith("-")), None)
 
 
 def _named_paths(argv: list[str]) -> list[str]:
@@ -97,7 +108,7 @@ def _user_error_message(exc: BaseException, argv: list[str]) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser()
+    parser = build_parser(_command_named(argv))
     args = parser.parse_args(argv)
     try:
         result = args.run(args)
