@@ -19,6 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from renderers.camera import Camera
+from renderers.silhouette_metric import silhouette_iou
 from species.colonization import validate
 from species.colonization.params import SCHEMA
 from species.errors import TreefarmError
@@ -133,8 +134,7 @@ def window_outline(mask: np.ndarray, size: int = WINDOW_PX, pad: int = WINDOW_PA
 
 def window_iou(a: np.ndarray, b: np.ndarray) -> float:
     """Intersection over union of two masks of one window; 0 when both are empty."""
-    union = np.logical_or(a, b).sum()
-    return float(np.logical_and(a, b).sum() / union) if union else 0.0
+    return silhouette_iou(a, b) if a.any() or b.any() else 0.0
 
 
 def fit_sketch_depth(grow: Callable[[dict[str, float]], Grown], first: Grown, ink: np.ndarray, evals: int,

@@ -22,7 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 from renderers.camera import Camera, look_at
-from renderers.silhouette_metric import closed_silhouette
+from renderers.silhouette_metric import closed_silhouette, silhouette_iou
 from species import Skeleton
 
 from ._two_view_twigs import CrownOutline
@@ -142,8 +142,7 @@ def crown_iou(coverage: np.ndarray, target: np.ndarray, closing_px: int) -> tupl
     """(IoU, crown): a candidate's coverage (H, W) bool with gaps up to about 2 closing_px closed, against a
     target crown (H, W) bool, in place."""
     crown = closed_silhouette(coverage, closing_px)
-    union = np.logical_or(crown, target).sum()
-    return (float(np.logical_and(crown, target).sum() / union) if union else 0.0), crown
+    return (silhouette_iou(crown, target) if crown.any() or target.any() else 0.0), crown
 
 
 def _side_by_side(front: np.ndarray, side: np.ndarray) -> np.ndarray:

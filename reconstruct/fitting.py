@@ -17,6 +17,7 @@ The parts every sketch method shares:
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -24,13 +25,15 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
+from renderers import ViewRenderer
+from renderers.camera import make_rig
+from renderers.silhouette_metric import silhouette_iou
 from species.errors import TreefarmError
 
 from .fit_budget import FitError
 
-__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou",
-           "drawing_outline", "search", "render_outline", "front_camera", "FitRecord", "ParamsFit", "fit_params",
-           "PARAMS_FIT_SLOTS"]
+__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "render_outline",
+           "front_camera", "front_outline", "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
 
 OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall
 OUTLINE_CLOSING = 5    # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
@@ -69,9 +72,7 @@ def outline_iou(a: np.ndarray, b: np.ndarray) -> float:
     """IoU of two outlines (`outline`) placed on one canvas, each centred on its vertical axis; 0 if one is empty."""
     if a.size == 0 or b.size == 0:
         return 0.0
-    placed = _centred(a, b)
-    union = np.logical_or(*placed).sum()
-    return float(np.logical_and(*placed).sum() / union) if union else 0.0
+    return silhouette_iou(*_centred(a, b))
 
 
 def _centred(*masks: np.ndarray) -> list[np.ndarray]:
@@ -93,8 +94,6 @@ def front_camera(tree, size: int = FIT_SIZE):
     """The `tsn4` front camera (the params drawings' view) framed on the corners of a tree's bounds (a TreeMesh's
     or a Skeleton's): the outline is cut to its box anyway, and framing on 8 corners instead of every vertex
     saves most of a candidate's camera time."""
-    from renderers.camera import make_rig
-
     lo, hi = tree.bounds.astype(np.float64)
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     return make_rig("tsn4", corners, size, np.random.default_rng(0))[0]
@@ -105,6 +104,29 @@ def render_outline(renderer, mesh, camera) -> np.ndarray:
     if mesh.n_faces == 0:
         return np.zeros((0, 0), bool)
     return outline(renderer.silhouette_masks(mesh, [camera])[0])
+
+
+def front_outline(renderer, mesh) -> np.ndarray:
+    """The filled outline of a tree in its `front_camera` at the renderer's size: how the params fit sees each
+    candidate; empty for a tree with no triangles."""
+    if mesh.n_faces == 0:
+        return np.zeros((0, 0), bool)
+    return render_outline(renderer, mesh, front_camera(mesh, renderer.size))
+
+
+@contextlib.contextmanager
+def renderer_at(renderer, size: int):
+    """`renderer` (a `renderers.ViewRenderer`) drawing `size` px squares for the block, its own size given back
+    after; with None, one made here and closed after."""
+    own = renderer is None
+    renderer = ViewRenderer(size) if own else renderer
+    previous, renderer.size = renderer.size, size
+    try:
+        yield renderer
+    finally:
+        renderer.size = previous
+        if own:
+            renderer.close()
 
 
 # ------------------------------------------------------------------------------------------------ the search
@@ -200,6 +222,14 @@ class FitRecord:
         picture[..., 0] = placed[1] * 255
         return picture
 
+    def panels(self) -> list[tuple[str, np.ndarray]]:
+        """(label, `overlay`) of the first guess and of the fitted tree, each labelled with its outline IoU; the
+        fitted one alone for a record of no evaluations (a result scored, not fitted)."""
+        if not self.trace.evals:
+            return [(f"outline IoU {self.score:.2f}", self.overlay(fitted=True))]
+        return [(f"first guess: outline IoU {self.first_score:.2f}", self.overlay(fitted=False)),
+                (f"fitted: outline IoU {self.score:.2f}", self.overlay(fitted=True))]
+
 
 @dataclass
 class ParamsFit:
@@ -240,8 +270,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         except TreefarmError:
             shape = np.zeros((0, 0), bool)
         else:
-            shape = render_outline(renderer, mesh, front_camera(mesh, renderer.size)) if mesh.n_faces else \
-                np.zeros((0, 0), bool)
+            shape = front_outline(renderer, mesh)
         value = outline_iou(shape, target)
         if not trace.scores or value > max(trace.scores):
             outlines[trace.evals] = shape

@@ -15,7 +15,7 @@ from species.tree_mesh import TreeMesh
 
 from ._sketch_arrays import check_height
 from .fit_budget import DEFAULT_FIT_EVALS, check_fit_evals
-from .fitting import FIT_SIZE, drawing_outline, fit_params
+from .fitting import FIT_SIZE, drawing_outline, fit_params, renderer_at
 from .networks import as_image, predictor
 from .result import Reconstruction
 
@@ -83,15 +83,5 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
 
 def _fitted(codec, outputs: dict, image, evals: int, seed: int, renderer):
     """`fit_params` on the drawing's outline, with `renderer` (or a new one) at the fit's size."""
-    from renderers import ViewRenderer
-
-    target = drawing_outline(image)
-    own = renderer is None
-    renderer = ViewRenderer(FIT_SIZE) if own else renderer
-    size, renderer.size = renderer.size, FIT_SIZE
-    try:
-        return fit_params(codec, outputs, target, evals, seed, renderer)
-    finally:
-        renderer.size = size
-        if own:
-            renderer.close()
+    with renderer_at(renderer, FIT_SIZE) as drawing:
+        return fit_params(codec, outputs, drawing_outline(image), evals, seed, drawing)

@@ -21,7 +21,6 @@ from scipy import ndimage
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, dijkstra
 
-from renderers import ViewRenderer
 from renderers.camera import Camera
 from species.colonization import GrowthSpace, MarkerSteering, grow_in_space, revolved_field, validate
 from species.geometry.vectors import unit_vectors
@@ -33,6 +32,7 @@ from species.timing import StageTimer
 from ._sketch_arrays import SketchError, check_camera, check_height, disc, image_array, metres
 from .fit_sketch_depth import WINDOW_PAD, WINDOW_PX, fit_sketch_depth, offset_mask, settings_params
 from .fit_budget import DEFAULT_FIT_EVALS, check_fit_evals
+from .fitting import renderer_at
 from .networks import as_image, colonization_species, photo_edges, predictor, sketch_maps
 from .result import Reconstruction
 from .trunk_tracing import stroke_labels, trace_trunk
@@ -431,17 +431,10 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
                                  guide_buds="all", steering=steering)
             return grown, tree, build_mesh(tree, grown)
 
-        own = renderer is None
-        renderer = ViewRenderer(WINDOW_PX + 2 * WINDOW_PAD) if own else renderer
-        size, renderer.size = renderer.size, WINDOW_PX + 2 * WINDOW_PAD
-        try:
+        with renderer_at(renderer, WINDOW_PX + 2 * WINDOW_PAD) as drawing:
             fit = fit_sketch_depth(grow, (params, skeleton, mesh), fit_to, fit_evals, copy.deepcopy(growth_rng),
-                                   renderer, _in_growth_frame(camera, base, scale, WINDOW_PX + 2 * WINDOW_PAD,
-                                                              (WINDOW_PX + 2 * WINDOW_PAD) / WINDOW_PX))
-        finally:
-            renderer.size = size
-            if own:
-                renderer.close()
+                                   drawing, _in_growth_frame(camera, base, scale, WINDOW_PX + 2 * WINDOW_PAD,
+                                                             (WINDOW_PX + 2 * WINDOW_PAD) / WINDOW_PX))
         params, skeleton, mesh, maps["fit"] = fit.params, fit.skeleton, fit.mesh, fit.record
         lap("fit")
     timings = {**timer.seconds, "total": sum(timer.seconds.values())}

@@ -206,8 +206,7 @@ def run(args: argparse.Namespace) -> int:
     panels = [(label, shown[name]) for label, name in method.report_panels]
     fit = result.maps.get("fit")  # a reconstruct.fitting.FitRecord where the method fitted its tree
     if fit is not None:
-        panels += [(f"first guess: outline IoU {fit.first_score:.2f}", fit.overlay(fitted=False)),
-                   (f"fitted: outline IoU {fit.score:.2f}", fit.overlay(fitted=True))]
+        panels += fit.panels()
     mesh = replace(result.mesh, name=out.stem)
     if args.params_out:
         with user_path(args.params_out, "write"):

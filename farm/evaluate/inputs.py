@@ -72,15 +72,12 @@ def drawing_fit(result, image: np.ndarray, renderer) -> FitRecord:
     `render_outline`) against the drawing's filled outline (`outline_iou`), and whose first guess, trace and
     species are the fit's (`result.maps["fit"]`), or the result's own when it was not fitted. One measure at every
     budget: budget 0 scores what a fit's first guess scores, and a fit's result what the fit reported."""
-    from reconstruct.fitting import (FIT_SIZE, FitRecord, FitTrace, drawing_outline, front_camera, outline_iou,
-                                     render_outline)
+    from reconstruct.fitting import (FIT_SIZE, FitRecord, FitTrace, drawing_outline, front_outline, outline_iou,
+                                     renderer_at)
 
     target = drawing_outline(image)
-    size, renderer.size = renderer.size, FIT_SIZE
-    try:
-        shape = render_outline(renderer, result.mesh, front_camera(result.mesh, FIT_SIZE))
-    finally:
-        renderer.size = size
+    with renderer_at(renderer, FIT_SIZE) as drawing:
+        shape = front_outline(drawing, result.mesh)
     score = outline_iou(shape, target)
     fit = result.maps.get("fit")
     if fit is None:

@@ -39,8 +39,8 @@ import numpy as np
 
 from farm.dataset import read_image
 from reconstruct.cloud_sampling import WOOD, sample_tree_cloud
-from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
 from reconstruct.fit_budget import DEFAULT_FIT_EVALS
+from reconstruct.methods import METHODS as RECONSTRUCTION_METHODS
 from reconstruct.methods import RunOptions, get_method
 from reconstruct.report import cloud_drawing
 from renderers import Camera, ViewRenderer
@@ -182,11 +182,7 @@ def fit_cells(record: FitRecord) -> list[tuple[str, np.ndarray]]:
     """Panel cells of a fit (`reconstruct.fitting.FitRecord`): the drawing's outline (green) under the first
     guess's and the result's (red; both yellow), each labelled with its outline IoU; one cell when the record holds
     no evaluations (a result scored, not fitted)."""
-    fitted = ("fitted", _square(record.overlay(fitted=True)), record.score)
-    if not record.trace.evals:
-        return [(f"outline IoU {record.score:.2f}", fitted[1])]
-    first = ("first guess", _square(record.overlay(fitted=False)), record.first_score)
-    return [(f"{name}: outline IoU {score:.2f}", picture) for name, picture, score in (first, fitted)]
+    return [(label, _square(picture)) for label, picture in record.panels()]
 
 
 # What a drawn method's extra metrics are made from: (its result, its networks by task, the tree's views).
