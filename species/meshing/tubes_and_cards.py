@@ -147,12 +147,20 @@ def _branch_polylines(skeleton: Skeleton):
     pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])
     pull = np.where(nodes[at] == 0, 0.0, pull)[:, None]  # at the root that would go below the ground
     points[at] -= np.where(length > 0, pull * direction / np.maximum(length, 1e-30), 0.0)
-    keep = np.ones(len(nodes), bool)
-    step = row_norms(np.diff(points, axis=0))
-    keep[1:] = step > np.maximum(_MERGE_DISTANCE, _MERGE_RADIUS_FRACTION * radius[1:])
-    keep[first] = True
-    counts = np.bincount(branch[keep], minlength=n_paths)
-    keep &= (counts >= 2)[branch]
+    # Each pass drops a point too close to the one before it; a path that doubles back (a stem pruned to almost
+    # nothing) can leave two kept points together again, so passes repeat until none is dropped.
+    is_first = np.zeros(len(nodes), bool)
+    is_first[first] = True
+    while True:
+        keep = np.ones(len(points), bool)
+        step = row_norms(np.diff(points, axis=0))
+        keep[1:] = step > np.maximum(_MERGE_DISTANCE, _MERGE_RADIUS_FRACTION * radius[1:])
+        keep |= is_first
+        if keep.all():
+            break
+        points, radius, branch, is_first = points[keep], radius[keep], branch[keep], is_first[keep]
+    counts = np.bincount(branch, minlength=n_paths)
+    keep = (counts >= 2)[branch]
     kept_counts = counts[counts >= 2]
     offsets = np.concatenate([[0], np.cumsum(kept_counts)])
     return points[keep], radius[keep], offsets, np.flatnonzero(counts >= 2)

@@ -124,6 +124,18 @@ def test_repeated_points_are_merged():
     assert len(_seam_rows(mesh, 0)) == len(skeleton.branch_paths[0]) - 1
 
 
+def test_a_branch_that_doubles_back_onto_itself_is_merged_not_refused():
+    # A stem pruned to almost nothing: 0.1 mm out (merged into the thick point before it) and back to a hair
+    # from where it left (far from the merged point, so kept): only a second pass finds the two ends together.
+    positions = np.array([[0, 0, 0], [0, 0, 1], [0, 0, 2], [1e-4, 0, 2], [0, 0, 2 + 1e-7], [0, 0, 3]])
+    radius = np.array([0.05, 0.05, 0.01, 0.01, 1e-4, 1e-4])
+    skeleton = Skeleton(positions.astype(np.float32), np.array([-1, 0, 1, 2, 3, 4], np.int32),
+                        radius.astype(np.float32), np.zeros(6, np.uint8))
+    mesh = build_mesh(skeleton)
+    assert mesh.n_faces > 0 and np.isfinite(mesh.bark.vertices).all()
+    assert len(_seam_rows(mesh, 0)) == len(skeleton.branch_paths[0]) - 2
+
+
 def test_child_tubes_start_inside_their_parent():
     skeleton = fork_with_leaves()
     bark = build_mesh(skeleton).bark
