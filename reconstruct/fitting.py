@@ -26,19 +26,20 @@ import numpy as np
 from scipy import ndimage
 
 from renderers import ViewRenderer
-from renderers.camera import make_rig
+from renderers.camera import parse_rig, perspective_camera
 from renderers.silhouette_metric import silhouette_iou
 from species.errors import TreefarmError
 
 from .fit_budget import FitError
 
-__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "render_outline",
-           "front_camera", "front_outline", "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
+__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "front_outline", "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
 
-OUTLINE_HEIGHT = 128   # outlines are compared this many pixels tall
-OUTLINE_CLOSING = 5    # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
+OUTLINE_HEIGHT = 128  # outlines are compared this many pixels tall
+OUTLINE_CLOSING = 5   # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
 FOOT_BAND = 0.15      # the lowest share of an outline's height where a row is filled between its outermost strokes
-FIT_SIZE = 96          # candidates are rendered this many pixels square
+SKETCH_RIG = "tsn4"   # TreeSketchNet's rig: params drawings are drawn in its first view
+FIT_SIZE = 224        # params candidates are drawn this many pixels square: TreeSketchNet's input, the size its
+                      # drawings' line widths are made for
 
 
 # ------------------------------------------------------------------------------------------------ outlines
@@ -85,33 +86,29 @@ def _centred(*masks: np.ndarray) -> list[np.ndarray]:
 def drawing_outline(image: np.ndarray, kind: str = "sketch") -> np.ndarray:
     """The filled outline of a drawing's ink (`trainers.preprocess.ink_mask`: dark strokes on light paper or
     light on dark, colour strokes with kind "strokes"); PreprocessError for a blank image."""
-    from trainers.preprocess import ink_mask
+    from trainers.preprocess import ink_mask  # here, not at the top: the trainers package loads slowly
 
     return outline(ink_mask(image, kind))
 
 
-def front_camera(tree, size: int = FIT_SIZE):
-    """The `tsn4` front camera (the params drawings' view) framed on the corners of a tree's bounds (a TreeMesh's
-    or a Skeleton's): the outline is cut to its box anyway, and framing on 8 corners instead of every vertex
-    saves most of a candidate's camera time."""
-    lo, hi = tree.bounds.astype(np.float64)
-    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-    return make_rig("tsn4", corners, size, np.random.default_rng(0))[0]
+def front_outline(renderer, skeleton, mesh) -> np.ndarray:
+    """The filled outline of a tree redrawn as TreeSketchNet's drawings are drawn (`sketch_tsn` in the `tsn4`
+    front view, framed as the dataset frames it, at the renderer's size), read as a drawing (`drawing_outline`):
+    how the params fit sees each candidate, so a tree given its own drawing scores 1. Empty for a tree with no
+    triangles or a drawing with no ink."""
+    from trainers.preprocess import PreprocessError  # here, not at the top: the trainers package loads slowly
 
-
-def render_outline(renderer, mesh, camera) -> np.ndarray:
-    """The filled outline of a tree's coverage in one camera; empty for a tree with no triangles."""
     if mesh.n_faces == 0:
         return np.zeros((0, 0), bool)
-    return outline(renderer.silhouette_masks(mesh, [camera])[0])
-
-
-def front_outline(renderer, mesh) -> np.ndarray:
-    """The filled outline of a tree in its `front_camera` at the renderer's size: how the params fit sees each
-    candidate; empty for a tree with no triangles."""
-    if mesh.n_faces == 0:
+    # The rig's first view alone, framed as `ViewRenderer.cameras` frames it (the other three cost as much).
+    name, azimuth, elevation = parse_rig(SKETCH_RIG).views[0]
+    points = np.concatenate([mesh.bark.vertices, mesh.leaves.vertices])
+    camera = perspective_camera(points, azimuth, elevation, renderer.size, name=name)
+    view = renderer.render_cameras(mesh, skeleton, [camera], ["sketch_tsn"], np.random.default_rng(0))[0]
+    try:
+        return drawing_outline(view.images["sketch_tsn"])
+    except PreprocessError:
         return np.zeros((0, 0), bool)
-    return render_outline(renderer, mesh, front_camera(mesh, renderer.size))
 
 
 @contextlib.contextmanager
@@ -266,11 +263,11 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
 
     def evaluate(candidate: dict) -> float:
         try:
-            _, mesh = grow(candidate)
+            skeleton, mesh = grow(candidate)
         except TreefarmError:
             shape = np.zeros((0, 0), bool)
         else:
-            shape = front_outline(renderer, mesh)
+            shape = front_outline(renderer, skeleton, mesh)
         value = outline_iou(shape, target)
         if not trace.scores or value > max(trace.scores):
             outlines[trace.evals] = shape

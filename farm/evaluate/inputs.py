@@ -69,7 +69,7 @@ def input_units(folder: str, methods: Sequence[str]):
 def drawing_fit(result, image: np.ndarray, renderer) -> FitRecord:
     """How a params result matches its drawing: a `reconstruct.fitting.FitRecord` whose `outline` and `score` are
     the result's tree redrawn in the drawing's view (tsn4 front) as the fit draws its candidates (FIT_SIZE pixels,
-    `render_outline`) against the drawing's filled outline (`outline_iou`), and whose first guess, trace and
+    `front_outline`) against the drawing's filled outline (`outline_iou`), and whose first guess, trace and
     species are the fit's (`result.maps["fit"]`), or the result's own when it was not fitted. One measure at every
     budget: budget 0 scores what a fit's first guess scores, and a fit's result what the fit reported."""
     from reconstruct.fitting import (FIT_SIZE, FitRecord, FitTrace, drawing_outline, front_outline, outline_iou,
@@ -77,7 +77,7 @@ def drawing_fit(result, image: np.ndarray, renderer) -> FitRecord:
 
     target = drawing_outline(image)
     with renderer_at(renderer, FIT_SIZE) as drawing:
-        shape = front_outline(drawing, result.mesh)
+        shape = front_outline(drawing, result.skeleton, result.mesh)
     score = outline_iou(shape, target)
     fit = result.maps.get("fit")
     if fit is None:
