@@ -11,10 +11,7 @@ from farm.modelling import session as edits
 from farm.modelling.modelled_tree import growth_parameters, session_glb
 from farm.modelling.session import FORMAT_VERSION, History, SessionError, session_from_json, session_to_json
 
-
-def ring(z: float, radius: float, n: int = 40) -> np.ndarray:
-    t = np.linspace(0, 2 * np.pi, n + 1)
-    return np.c_[radius * np.cos(t), radius * np.sin(t), np.full(n + 1, z)]
+from conftest import ring
 
 
 def on_polyline(point: np.ndarray, polyline: np.ndarray) -> bool:

@@ -6,7 +6,7 @@ import * as THREE from 'three';
 
 export const VR_SCALE = 0.08;  // a 15 m tree stands 1.2 m tall in the room
 const PANEL_W = 512, PANEL_H = 640;
-const MENU = ['stroke', 'lobe', 'branch', 'brush', 'move', 'grow', 'undo', 'redo', 'save', 'send'];
+const MENU = ['stroke', 'lobe', 'branch', 'brush', 'move', 'grow', 'undo', 'redo', 'save', 'load', 'send', 'exit'];
 const GRAB_REACH_M = 0.12;  // room metres from the hand to the nearest branch point a squeeze grabs
 const STICK_DEAD = 0.5;
 
@@ -110,9 +110,9 @@ export class ModelVR {
     this.refresh();
   }
 
-  // Menu buttons in canvas pixels: two columns of five below a status line.
+  // Menu buttons in canvas pixels: two columns of six below a status line.
   buttonAt(index) {
-    return [16 + (index % 2) * 248, 120 + Math.floor(index / 2) * 100, 232, 88];
+    return [16 + (index % 2) * 248, 116 + Math.floor(index / 2) * 86, 232, 74];
   }
 
   refresh() {
@@ -132,7 +132,7 @@ export class ModelVR {
       g.fillRect(x, y, w, h);
       g.fillStyle = '#ffffff';
       g.font = 'bold 34px sans-serif';
-      g.fillText(name, x + 20, y + 56);
+      g.fillText(name, x + 20, y + 50);
     });
     this.menuTexture.needsUpdate = true;
   }
@@ -144,7 +144,9 @@ export class ModelVR {
     else if (name === 'grow') app.grow();
     else if (name === 'undo' || name === 'redo') app.edit(name);
     else if (name === 'save') app.save();
+    else if (name === 'load') app.load({ name: app.$('session-name').value });
     else if (name === 'send') app.sendToLibrary();
+    else if (name === 'exit') this.session.end();
     this.refresh();
   }
 
