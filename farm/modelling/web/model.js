@@ -21,7 +21,7 @@ export class ModelApp {
     this.viewer.ground.scale.setScalar(14);
     this.view = new SessionView();
     this.viewer.scene.add(this.view.root);
-    this.plane = new THREE.Mesh(new THREE.PlaneGeometry(30, 30),
+    this.plane = new THREE.Mesh(new THREE.PlaneGeometry(30, 34),
                                 new THREE.MeshBasicMaterial({ color: 0x58a6ff, transparent: true, opacity: 0.08,
                                                               side: THREE.DoubleSide, depthWrite: false }));
     this.plane.add(new THREE.LineSegments(new THREE.EdgesGeometry(this.plane.geometry),
@@ -101,7 +101,8 @@ export class ModelApp {
     this.$('counts').textContent = `${state.strokes.length} strokes · ${state.lobes.length} lobes · `
       + `${state.branches.length} branches · ${state.marker_count} markers`;
     this.vr.refresh();
-    if (this.$('auto-grow').checked) this.grow();
+    // Live growth needs somewhere to grow: a lobe or painted markers.
+    if (this.$('auto-grow').checked && (state.lobes.length || state.marker_count)) this.grow();
   }
 
   async edit(tool, body = {}) {
@@ -117,7 +118,7 @@ export class ModelApp {
     if (!grown) return false;
     if (await this.view.showTree(grown.glb, grown.version)) {
       this.viewer.justLoaded = true;  // TreeViewer counts the drawn trees (window.treesDrawn)
-      this.setStatus(`tree of version ${grown.version}`);
+      if (!this.$('status').classList.contains('error')) this.setStatus(`tree of version ${grown.version}`);
     }
     return true;
   }
@@ -135,7 +136,7 @@ export class ModelApp {
   placePlane() {
     const angle = THREE.MathUtils.degToRad(this.planeTurn);
     const normal = new THREE.Vector3(Math.sin(angle), 0, Math.cos(angle));
-    this.plane.position.copy(normal.clone().multiplyScalar(this.planeDepth)).add(new THREE.Vector3(0, 15, 0));
+    this.plane.position.copy(normal.clone().multiplyScalar(this.planeDepth)).add(new THREE.Vector3(0, 15, 0));  // from 2 m below the ground to 32 m up
     this.plane.rotation.set(0, angle, 0);
     this.plane.updateMatrixWorld(true);
     this.$('plane-turn-value').textContent = `${Math.round(this.planeTurn)}°`;
