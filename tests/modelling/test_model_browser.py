@@ -39,8 +39,8 @@ VR_SCALE, VR_ROOT = 0.08, np.array([0.0, 0.0, -0.9])  # vr.js: the model root in
 # trigger and squeeze the test presses with __xrPress(hand, 'selectstart' | 'selectend' | 'squeezestart' | ...).
 FAKE_XR = """
 (() => {
-  const identity = () => new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, 0,1.2,0,1]);
-  window.__xrPoses = { left: identity(), right: identity() };
+  const at = (x, y, z) => new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, x,y,z,1]);
+  window.__xrPoses = { left: at(-0.35, 1.1, -0.3), right: at(0.2, 1.1, -0.3) };
   const source = (hand) => ({ handedness: hand, targetRayMode: 'tracked-pointer', profiles: [],
                               targetRaySpace: { hand }, gripSpace: null,
                               gamepad: { axes: [0, 0, 0, 0], buttons: [] } });
@@ -57,7 +57,8 @@ FAKE_XR = """
     cancelAnimationFrame() {}
     async end() { this.dispatchEvent(new Event('end')); }
   }
-  const eye = { eye: 'left', transform: { matrix: new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, 0,1.6,0,1]) },
+  // The eye 1.5 m up, 0.4 m behind the room's origin, looking 35 degrees down at the model.
+  const eye = { eye: 'left', transform: { matrix: new Float32Array([1,0,0,0, 0,0.819,-0.574,0, 0,0.574,0.819,0, 0,1.5,0.4,1]) },
                 projectionMatrix: new Float32Array([1,0,0,0, 0,1.33,0,0, 0,0,-1.002,-1, 0,0,-0.2,0]) };
   const frame = (session) => ({ session, getViewerPose: () => ({ views: [eye] }),
                                 getPose: (space) => (space && space.hand ? { transform: { matrix: window.__xrPoses[space.hand] } } : null) });
@@ -126,7 +127,7 @@ def site(tmp_path_factory):
 
 def open_page(browser, site, init_script: str | None = None):
     base, token, service, _ = site
-    page = browser.new_page(viewport={"width": 960, "height": 600})
+    page = browser.new_page(viewport={"width": 880, "height": 540})
     problems = []
     page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
     page.on("console", lambda message: problems.append(f"console: {message.text}")
@@ -187,7 +188,7 @@ def small_and_still(page) -> int:
     """A small tree (the test's pace on a CPU renderer) grown when asked, not after every edit; the version."""
     page.locator("#auto-grow").uncheck()
     version = page.evaluate("window.modelApp.version") + 1
-    page.evaluate("window.modelApp.edit('growth', { parameters: { max_markers: 1500 } })")
+    page.evaluate("window.modelApp.edit('growth', { parameters: { iterations: 12 } })")
     wait_for_version(page, version)
     return version
 
@@ -218,6 +219,7 @@ def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(browser,
     version += 1
     wait_for_version(page, version)
     assert len(service.history.present.lobes) == 1 and service.history.present.strokes == ()
+    screenshot(page, "lobe")
     page.keyboard.press("b")
     set_plane_depth(page, 0.0)
     drag(page, [[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.1, 4.0, 0.0], [0.2, 6.0, 0.0]])
@@ -380,6 +382,8 @@ def test_vr_mode_models_with_scripted_controllers(browser, site, tmp_path):
     press_menu(page, "grow")
     page.evaluate("window.__xrStep(2)")
     wait_for_tree(page)
+    page.evaluate("window.__xrStep(1)")
+    screenshot(page, "vr")
     assert_valid_glb(grown_glb(site), tmp_path, "vr.glb")
     press_menu(page, "undo")
     version += 1
