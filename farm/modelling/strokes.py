@@ -61,13 +61,17 @@ def stroke_is_closed(points) -> bool:
 
 
 def _sparse_controls(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Control points: the mean of the raw samples in each `spacing`-long stretch of arc (averaging damps hand
-    jitter), with the stroke's first and last samples kept as its ends."""
-    arc = arc_lengths(points)
-    bins = np.minimum((arc / spacing).astype(np.int64), max(int(arc[-1] / spacing) - 1, 0))
-    count = np.bincount(bins)
-    used = count > 0
-    means = np.stack([np.bincount(bins, points[:, d])[used] for d in range(3)], axis=1) / count[used, None]
+    """Control points: the raw samples cut into runs that each reach `spacing` metres from their first sample, and
+    each run replaced by its mean (averaging damps hand jitter; cutting by distance, not by the jittery arc
+    length, keeps many samples per run), with the stroke's first and last samples kept as its ends."""
+    starts, start = [], 0
+    while start < len(points):  # one pass per run, each a vectorized search over the samples left
+        starts.append(start)
+        far = np.flatnonzero(row_norms(points[start:] - points[start]) >= spacing)
+        start = start + int(far[0]) if len(far) else len(points)
+    runs = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, len(points))))
+    count = np.bincount(runs)
+    means = np.stack([np.bincount(runs, points[:, d]) for d in range(3)], axis=1) / count[:, None]
     controls = np.concatenate([points[:1], means[1:-1], points[-1:]]) if len(means) > 2 else points[[0, -1]]
     keep = np.concatenate([[True], row_norms(np.diff(controls, axis=0)) > 1e-9 * spacing])
     return controls[keep]
