@@ -92,7 +92,7 @@ def _ring_strip(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     # pairs rather than the single best pair, which is steadier on evenly sampled rings).
     agreement = barycentric_directions(a) @ barycentric_directions(b).T
     k = np.arange(count)
-    shift = int(np.argmax([agreement[k, (k + s) % count].sum() for s in range(count)]))
+    shift = int(np.argmax(agreement[k[None, :], (k[None, :] + k[:, None]) % count].sum(axis=1)))
     return _strip(a_map, len(lower) + b_map[(k + shift) % count], cyclic=True)
 
 
