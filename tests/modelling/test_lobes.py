@@ -116,3 +116,16 @@ def test_replacing_a_stroke_keeps_the_far_strip():
 def test_strokes_that_cannot_make_a_lobe_are_refused(strokes, message):
     with pytest.raises(LobeError, match=message):
         lobe_mesh(strokes)
+
+
+def test_a_surface_edit_is_written_back_into_the_strokes():
+    strokes = [_ring(0.8, 0.0, 40), _ring(1.0, 1.0, 40)[::-1], _ring(0.6, 2.0, 40), _arch(0.6, 2.0, 10)]
+    lobe = Lobe.from_strokes(strokes)
+    before = lobe.mesh()
+    edited = lobe.edit_surface([1.0, 0.0, 1.0], [1.4, 0.0, 1.1], radius=0.8)
+    after = edited.mesh()
+    _assert_closed_lobe(after)
+    assert after.volume > before.volume and np.array_equal(after.faces, before.faces)
+    assert np.any(np.all(np.isclose(edited.strokes[1], [1.4, 0.0, 1.1]), axis=1))  # the grabbed sample moved
+    assert np.array_equal(edited.strokes[0], strokes[0])  # the far ring did not
+    assert np.array_equal(Lobe.from_strokes(edited.strokes).mesh().vertices, after.vertices)  # strokes are the state
