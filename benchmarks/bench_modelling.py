@@ -5,7 +5,8 @@ The model is synthetic and drawn the way the thesis's users drew: per lobe a few
 stroke arching over its top (5, 16 and 22 strokes for 1, 3 and 4 lobes, as in Table 5.1), jittered like a hand
 and sampled by `sample_stroke`; a trunk and one main branch into each lobe. Growth uses sc_round_maple's
 parameters with the modelling marker budget (`farm.modelling.grow.MODEL_DEFAULTS`).
-Run: python -m benchmarks.bench_modelling [--repeats 5] [--profile]
+A last case adds a brush stroke out of the crown (painted markers, steering). Front views go to a PNG.
+Run: python -m benchmarks.bench_modelling [--repeats 5] [--profile] [--png out/bench_modelling.png]
 """
 from __future__ import annotations
 
@@ -15,9 +16,12 @@ pin_threads(one_core=True)
 
 import cProfile  # noqa: E402
 import pstats  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from benchmarks.skeleton_drawing import front_view, save_sheet  # noqa: E402
+from farm.modelling.brush import brush_markers  # noqa: E402
 from farm.modelling.grow import grow_model  # noqa: E402
 from farm.modelling.lobes import Lobe, lobe_mesh  # noqa: E402
 from farm.modelling.strokes import sample_stroke  # noqa: E402
@@ -28,6 +32,8 @@ THESIS = {1: 0.096, 3: 0.172, 4: 0.310}        # Table 5.1, growth per tree, sec
 STROKES = {1: (5,), 3: (5, 5, 6), 4: (5, 5, 6, 6)}  # strokes per lobe: Table 5.1's 5, 16 and 22 in all
 # Lobe centres and radii (metres): a crown about 4 m wide on a trunk, lobes overlapping a little.
 LOBES = [((0.0, 0.0, 3.2), 1.1), ((1.3, 0.4, 2.6), 0.8), ((-1.2, 0.5, 2.8), 0.8), ((0.1, -1.2, 2.7), 0.75)]
+BRUSH_PATH = np.array([[1.2, 0.0, 3.5], [2.2, 0.0, 4.2], [2.8, 0.0, 4.0]])  # out of the crown, to the right
+BRUSH_RADIUS, BRUSH_DENSITY = 0.25, 1500.0                                  # metres, markers per cubic metre
 
 
 def edit_round_trip_seconds() -> float | None:
@@ -72,6 +78,7 @@ def model(lobe_count: int, rng: np.random.Generator):
 def main() -> None:
     parser = arguments(__doc__, repeats=5)
     parser.add_argument("--profile", action="store_true", help="print the top functions of the 4-lobe growth")
+    parser.add_argument("--png", type=Path, default=Path("out/bench_modelling.png"))
     args = parser.parse_args()
     bench = Benchmark("modelling", "Hand modelling on one core: lobes, a surface edit, growth (Table 5.1)", args)
     rng = np.random.default_rng(0)
@@ -99,16 +106,21 @@ def main() -> None:
     rows.append((f"Laplacian edit ({len(mesh.vertices)} vertices, radius {radius:.2f} m)", edit.ms(), ""))
     bench.table(f"strokes, lobes and edits: median of {args.repeats}, ms", ["step", "ms", "size"], rows)
 
-    growth_rows = []
-    for count in STROKES:
+    growth_rows, tiles = [], []
+    painted = brush_markers(BRUSH_PATH, BRUSH_RADIUS, BRUSH_DENSITY, np.random.default_rng(0))
+    cases = [(count, f"{count}", None, ()) for count in STROKES] + [(4, "4 + brush", painted, [BRUSH_PATH])]
+    for count, name, markers, paths in cases:
         lobes, branches = lobes_by_count[count], branches_by_count[count]
         seeds = iter(range(10 ** 6))
-        timing = time_case(lambda: grow_model(lobes, branches, None, PRESET, None,
-                                              np.random.default_rng(next(seeds))), args.repeats, warmup=1)
+        timing = time_case(lambda: grow_model(lobes, branches, markers, PRESET, None,
+                                              np.random.default_rng(next(seeds)), brush_paths=paths),
+                           args.repeats, warmup=1)
         nodes = len(timing.result)
-        growth_rows.append((count, sum(STROKES[count]), nodes, timing.median, timing.cpu_median, THESIS[count],
+        growth_rows.append((name, sum(STROKES[count]), nodes, timing.median, timing.cpu_median, THESIS[count],
                             "yes" if timing.cpu_median <= THESIS[count] else "no"))
-        bench.figure(f"growth, {count} lobe(s)", timing.cpu_median, "s (CPU)", f"thesis {THESIS[count]} s")
+        tiles.append(front_view(timing.result, f"{name} lobe(s): {nodes} nodes", size=400, leaves=False))
+        if markers is None:
+            bench.figure(f"growth, {count} lobe(s)", timing.cpu_median, "s (CPU)", f"thesis {THESIS[count]} s")
     bench.table(f"growth inside the lobes ({PRESET}), median of {args.repeats}",
                 ["lobes", "strokes", "nodes", "wall s", "cpu s", "thesis s", "at or under thesis"], growth_rows,
                 notes=["thesis 000, Table 5.1: 0.096 s (1 lobe, 5 strokes), 0.172 s (3 lobes, 16 strokes), "
@@ -122,6 +134,8 @@ def main() -> None:
         profiler.runcall(grow_model, lobes_by_count[4], branches_by_count[4], None, PRESET, None,
                          np.random.default_rng(0))
         pstats.Stats(profiler).sort_stats("tottime").print_stats(15)
+    save_sheet(tiles, len(tiles), args.png)
+    bench.note(f"front views: {args.png}")
     bench.write()
 
 

@@ -298,8 +298,9 @@ class Lobe:
                                   cap_faces - len(ring) + total))
             vertices.append(extra)
             total += len(extra)
-        self.parts.clear()
-        self.parts.update(used)  # keep only what this mesh uses, so the cache follows the strokes
+        # Keep only what this mesh uses, so the cache follows the strokes; swapped whole, never changed in place,
+        # so a Lobe shared between threads is always read whole.
+        object.__setattr__(self, "parts", used)
         mesh = trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
         if not (mesh.is_watertight and mesh.is_winding_consistent):
             raise LobeError("the strokes do not make a closed surface (they fold over or cross each other); "
