@@ -129,13 +129,13 @@ def main() -> None:
     round_trip = edit_round_trip_seconds()
     bench.note("edit to redrawn tree in the page: " + ("not measured here (the page's benchmark adds it)"
                                                       if round_trip is None else f"{round_trip:.3f} s"))
+    save_sheet(tiles, len(tiles), args.png)
+    bench.note(f"front views: {args.png}")
     if args.profile:
         profiler = cProfile.Profile()
         profiler.runcall(grow_model, lobes_by_count[4], branches_by_count[4], None, PRESET, None,
                          np.random.default_rng(0))
         pstats.Stats(profiler).sort_stats("tottime").print_stats(15)
-    save_sheet(tiles, len(tiles), args.png)
-    bench.note(f"front views: {args.png}")
     bench.write()
 
 

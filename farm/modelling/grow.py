@@ -138,9 +138,12 @@ def grow_model(lobes: list[trimesh.Trimesh], branches: list[tuple[np.ndarray, in
     if not (np.isfinite(internode_length) and internode_length > 0):
         raise ModelError(f"internode length is {internode_length!r}; allowed: a finite length > 0 metres")
     p = model_params(preset, params)
-    markers = np.zeros((0, 3)) if markers is None else np.asarray(markers, np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(markers)):
-        raise ModelError("the painted markers have non-finite coordinates; allowed: finite metres")
+    markers = np.zeros((0, 3)) if markers is None else np.asarray(markers, np.float64)
+    if markers.size == 0:
+        markers = np.zeros((0, 3))
+    if markers.ndim != 2 or markers.shape[1] != 3 or not np.all(np.isfinite(markers)):
+        raise ModelError(f"the painted markers must be finite points of shape (M, 3) metres; got shape "
+                         f"{markers.shape}")
     lobes = list(lobes)
     for index, mesh in enumerate(lobes):
         if not isinstance(mesh, trimesh.Trimesh):

@@ -104,7 +104,8 @@ def test_brush_markers_fill_balls_along_the_path():
     ("lobe", [TRUNK, (LIMB[0], 2), (LIMB[0], 1)], None, "sc_round_maple", "loop"),
     ("lobe", [TRUNK, (LIMB[0], 7)], None, "sc_round_maple", "parent 7"),
     ("lobe", [(np.zeros((1, 3)), -1)], None, "sc_round_maple", "K >= 2"),
-    ("lobe", [TRUNK], np.array([[np.nan, 0, 0]]), "sc_round_maple", "non-finite"),
+    ("lobe", [TRUNK], np.array([[np.nan, 0, 0]]), "sc_round_maple", "finite points"),
+    ("lobe", [TRUNK], np.zeros((4, 2)), "sc_round_maple", r"shape \(M, 3\)"),
 ])
 def test_models_that_cannot_grow_are_refused(lobe, lobes, branches, markers, preset, message):
     with pytest.raises(ModelError, match=message):
