@@ -4,6 +4,7 @@ from it, unless the convex hulls of the moved branches would touch a branch that
 In: main branches as `grow.grow_model` takes them, [(polyline (K, 3) float metres, parent branch index), ...]
 (-1 for the trunk), the grabbed branch's index and the move: rotation (3, 3), pivot (3,), translation (3,)
 metres, p' = R (p - pivot) + pivot + t. Out: the moved branch list, or MoveRefused naming the branches in the way.
+The turn a thumb swipe asks for (eq. 4.1, the touchpad of the thesis, a thumbstick here) is `swipe_angle`.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from species.errors import TreefarmError
 
 from .hull_contact import hulls_overlap
 
-__all__ = ["MoveRefused", "subtree_branches", "move_branches", "move_contacts", "guarded_move"]
+__all__ = ["MoveRefused", "subtree_branches", "move_branches", "move_contacts", "guarded_move", "swipe_angle"]
 
 
 class MoveRefused(TreefarmError):
@@ -86,3 +87,21 @@ def guarded_move(branches, index: int, rotation=np.eye(3), pivot=(0.0, 0.0, 0.0)
         raise MoveRefused(f"the move would make branches touch ({pairs}); allowed: a move that keeps the moved "
                           "branches' convex hulls apart from the others")
     return moved
+
+
+def swipe_angle(before, after, centre=(0.0, 0.0)) -> float:
+    """Radians, counter-clockwise positive: the turn of a thumb from `before` to `after` (2D pad or stick
+    positions) about `centre` (eq. 4.1: theta = tau arccos of the cosine between P1 - u and P2 - u, tau the sign
+    of their cross product's z; u = (127.5, 127.5) on the thesis's 256-pixel touchpad, (0, 0) on a thumbstick).
+    0.0 when either position sits on the centre."""
+    u = np.asarray(centre, np.float64).reshape(2)
+    p1, p2 = np.asarray(before, np.float64).reshape(2) - u, np.asarray(after, np.float64).reshape(2) - u
+    lengths = np.linalg.norm(p1) * np.linalg.norm(p2)
+    if not np.isfinite(lengths):
+        raise MoveRefused(f"swipe positions {np.asarray(before).tolist()} and {np.asarray(after).tolist()}; "
+                          "allowed: finite 2D positions")
+    if lengths < 1e-12:
+        return 0.0
+    cosine = float(np.clip(p1 @ p2 / lengths, -1.0, 1.0))
+    tau = 1.0 if p1[0] * p2[1] - p1[1] * p2[0] >= 0 else -1.0
+    return tau * float(np.arccos(cosine))

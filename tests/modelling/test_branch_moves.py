@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from farm.modelling.branch_moves import guarded_move, move_branches, MoveRefused, subtree_branches
+from farm.modelling.branch_moves import guarded_move, move_branches, MoveRefused, subtree_branches, swipe_angle
+from species.geometry.rotations import rot_axis
 
 TRUNK = (np.linspace([0, 0, 0], [0, 0, 3.0], 31), -1)
 LEFT = (np.linspace([0, 0, 1.5], [-1.0, 0, 2.5], 15), 0)
@@ -15,8 +16,7 @@ BRANCHES = [TRUNK, LEFT, LEFT_TWIG, RIGHT]
 
 
 def _turn_about_z(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    return rot_axis(np.array([0.0, 0.0, 1.0]), angle)[0]
 
 
 def test_a_subtree_is_the_branch_and_all_that_grows_from_it():
@@ -50,3 +50,11 @@ def test_bad_moves_are_refused(kwargs, message):
         move_branches(BRANCHES, 1, **kwargs)
     with pytest.raises(MoveRefused, match="does not exist"):
         subtree_branches(BRANCHES, 9)
+
+
+def test_a_thumb_swipe_turns_by_the_angle_it_sweeps_round_the_centre():
+    assert swipe_angle([1, 0], [0, 1]) == pytest.approx(np.pi / 2)
+    assert swipe_angle([0, 1], [1, 0]) == pytest.approx(-np.pi / 2)
+    assert swipe_angle([255, 127.5], [127.5, 255], centre=(127.5, 127.5)) == pytest.approx(np.pi / 2)  # the pad
+    assert swipe_angle([0.5, 0.5], [-0.5, -0.5]) == pytest.approx(np.pi)
+    assert swipe_angle([0, 0], [1, 0]) == 0.0
