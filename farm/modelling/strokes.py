@@ -13,11 +13,13 @@ from species.errors import TreefarmError
 from species.geometry.vectors import row_norms
 
 __all__ = ["StrokeError", "sample_stroke", "stroke_is_closed", "resample_polyline", "arc_lengths", "CLOSED_GAP",
-           "MIN_RAW_POINTS"]
+           "MIN_RAW_POINTS", "MIN_RING_POINTS"]
 
 CLOSED_GAP = 0.10          # a stroke is closed when its endpoint gap is under this share of its arc length
 MIN_RAW_POINTS = 2         # raw samples a stroke needs at the least
 _HERMITE_SAMPLES = 4       # curve samples per Hermite segment before the even resampling
+# A ring of n even samples has an end gap of 1 / (n - 1) of its open arc: from 12 samples on it stays closed.
+MIN_RING_POINTS = 12
 
 
 class StrokeError(TreefarmError):
@@ -105,6 +107,6 @@ def sample_stroke(points, spacing: float = 0.05) -> np.ndarray:
         curve = hermite_curve(padded, _HERMITE_SAMPLES)
         ring = curve[_HERMITE_SAMPLES: _HERMITE_SAMPLES * (len(controls) + 1)]
         perimeter = arc_lengths(ring, closed=True)[-1]
-        return resample_polyline(ring, max(3, int(round(perimeter / spacing))), closed=True)
+        return resample_polyline(ring, max(MIN_RING_POINTS, int(round(perimeter / spacing))), closed=True)
     curve = hermite_curve(controls, _HERMITE_SAMPLES)
     return resample_polyline(curve, max(2, int(round(arc_lengths(curve)[-1] / spacing)) + 1))

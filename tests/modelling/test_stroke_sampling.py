@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from farm.modelling.strokes import (arc_lengths, resample_polyline, sample_stroke, stroke_is_closed, StrokeError)
+from farm.modelling.strokes import (arc_lengths, MIN_RING_POINTS, resample_polyline, sample_stroke, stroke_is_closed,
+                                    StrokeError)
 
 
 def _circle(count: int = 200, radius: float = 1.0, jitter: float = 0.0, seed: int = 0) -> np.ndarray:
@@ -22,6 +23,11 @@ def test_a_drawn_loop_comes_back_a_smooth_evenly_spaced_ring():
     assert np.linalg.norm(ring[-1] - ring[0]) == pytest.approx(steps.mean(), rel=0.05)  # no repeated start
     assert steps.mean() == pytest.approx(0.05, rel=0.05) and steps.std() < 0.05 * steps.mean()
     assert np.abs(np.hypot(ring[:, 0], ring[:, 1]) - 1.0).max() < 0.01
+
+
+def test_a_small_loop_stays_closed_after_sampling():
+    ring = sample_stroke(_circle(count=60, radius=0.05), spacing=0.05)
+    assert stroke_is_closed(ring) and len(ring) == MIN_RING_POINTS
 
 
 def test_sampling_damps_hand_jitter():
