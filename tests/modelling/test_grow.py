@@ -64,6 +64,13 @@ def test_painted_markers_outside_the_lobe_are_reached(lobe):
     assert (brushed.positions[:, 0] > 0.95).sum() >= 5
 
 
+def test_branches_drawn_either_way_make_the_same_guide():
+    forward = branch_guide([TRUNK, LIMB], 0.1)
+    backward = branch_guide([(TRUNK[0][::-1], -1), (LIMB[0][::-1], 0)], 0.1)
+    assert np.allclose(forward.positions, backward.positions) and np.array_equal(forward.parent, backward.parent)
+    assert np.allclose(forward.positions[0], 0.0) and forward.order.max() == 1
+
+
 def test_without_branches_a_trunk_runs_from_the_origin_into_the_lowest_lobe(lobe):
     skeleton = grow_model([lobe], [], None, "sc_round_maple", FAST, np.random.default_rng(0))
     assert np.allclose(skeleton.positions[0], 0.0) and len(skeleton) > 100
