@@ -230,6 +230,12 @@ def _disc_crossed(ring: np.ndarray, other: np.ndarray) -> bool:
     return bool(inside.any())
 
 
+def _read_only(stroke) -> np.ndarray:
+    points = np.array(stroke, np.float64)
+    points.setflags(write=False)
+    return points
+
+
 def _key(*arrays) -> tuple:
     return tuple(np.ascontiguousarray(a).tobytes() for a in arrays)
 
@@ -248,7 +254,8 @@ class Lobe:
 
     @classmethod
     def from_strokes(cls, strokes, reuse: "Lobe | None" = None) -> "Lobe":
-        return cls(tuple(np.asarray(s, np.float64) for s in strokes), dict(reuse.parts) if reuse else {})
+        """A lobe of these strokes (copied, read-only), reusing the strips and caps `reuse` built."""
+        return cls(tuple(_read_only(s) for s in strokes), dict(reuse.parts) if reuse else {})
 
     def add_stroke(self, stroke) -> "Lobe":
         return Lobe.from_strokes(self.strokes + (stroke,), reuse=self)
