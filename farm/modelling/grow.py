@@ -56,10 +56,16 @@ def _polyline(points, what: str) -> np.ndarray:
     return points
 
 
+def _distance_to(points: np.ndarray, point: np.ndarray) -> float:
+    return float(np.linalg.norm(points - point, axis=1).min())
+
+
 def branch_guide(branches, internode_length: float) -> Skeleton:
     """The drawn main branches as one guide skeleton: each polyline resampled every internode length; a branch
     starts at the node of its parent branch nearest its first point (its own first point dropped when it lies
-    within half an internode of there). Exactly one branch is the trunk (parent -1); order = nesting depth."""
+    within half an internode of there). Exactly one branch is the trunk (parent -1); order = nesting depth.
+    Strokes may be drawn either way: the trunk is turned to start at its lower end, a branch at its end nearer
+    its parent branch."""
     lines, parents = [], []
     for index, entry in enumerate(branches):
         if not isinstance(entry, (tuple, list)) or len(entry) != 2:
@@ -81,6 +87,12 @@ def branch_guide(branches, internode_length: float) -> Skeleton:
     while pending:  # a handful of drawn branches, parents before children
         index = pending.pop(0)
         line = lines[index]
+        if parents[index] < 0 and line[-1, 2] < line[0, 2]:
+            line = line[::-1]
+        elif parents[index] >= 0:
+            host_points = np.concatenate(positions)[nodes_of[parents[index]]]
+            if _distance_to(host_points, line[-1]) < _distance_to(host_points, line[0]):
+                line = line[::-1]
         k = max(2, int(np.ceil(arc_lengths(line)[-1] / internode_length)) + 1)
         points = resample_polyline(line, k)
         ids = count + np.arange(k)
@@ -138,9 +150,12 @@ def grow_model(lobes: list[trimesh.Trimesh], branches: list[tuple[np.ndarray, in
     if not (np.isfinite(internode_length) and internode_length > 0):
         raise ModelError(f"internode length is {internode_length!r}; allowed: a finite length > 0 metres")
     p = model_params(preset, params)
-    markers = np.zeros((0, 3)) if markers is None else np.asarray(markers, np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(markers)):
-        raise ModelError("the painted markers have non-finite coordinates; allowed: finite metres")
+    markers = np.zeros((0, 3)) if markers is None else np.asarray(markers, np.float64)
+    if markers.size == 0:
+        markers = np.zeros((0, 3))
+    if markers.ndim != 2 or markers.shape[1] != 3 or not np.all(np.isfinite(markers)):
+        raise ModelError(f"the painted markers must be finite points of shape (M, 3) metres; got shape "
+                         f"{markers.shape}")
     lobes = list(lobes)
     for index, mesh in enumerate(lobes):
         if not isinstance(mesh, trimesh.Trimesh):

@@ -10,7 +10,8 @@ barycentric directions (eq. 5.1) agree best, and every inserted point is merged 
 sample (the strip then uses only the strokes' own samples, so neighbouring strips share them). An open stroke caps
 the end ring it lies beyond: the ring is resampled to 2 n_open + 2 points, split at the two points its ends point
 at, and each half stitched to it. An end ring without an open stroke gets a fan to a point above its centre.
-`Lobe` keeps each strip and cap keyed by its strokes, so a new or edited stroke rebuilds only its neighbours.
+`Lobe` keeps each strip and cap keyed by its strokes, so a new or edited stroke rebuilds only its neighbours, and
+writes a Laplacian surface edit back into its strokes, so the strokes are always the lobe's whole state.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from species.errors import TreefarmError
 from species.geometry.vectors import row_norms, unit_vectors
 
 from .strokes import resample_polyline, stroke_is_closed
+from .surface_edit import laplacian_edit
 
 __all__ = ["LobeError", "Lobe", "lobe_mesh", "barycentric_directions", "FAN_CAP_RISE"]
 
@@ -92,7 +94,7 @@ def _ring_strip(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     # pairs rather than the single best pair, which is steadier on evenly sampled rings).
     agreement = barycentric_directions(a) @ barycentric_directions(b).T
     k = np.arange(count)
-    shift = int(np.argmax([agreement[k, (k + s) % count].sum() for s in range(count)]))
+    shift = int(np.argmax(agreement[k[None, :], (k[None, :] + k[:, None]) % count].sum(axis=1)))
     return _strip(a_map, len(lower) + b_map[(k + shift) % count], cyclic=True)
 
 
@@ -139,6 +141,8 @@ class _Layout:
     rings: tuple          # closed strokes, (n, 3) each, ordered up the axis, each turning positively about it
     caps: tuple           # (bottom, top): the open stroke capping that end, or None
     axis: np.ndarray      # (3,) unit
+    ring_strokes: tuple   # the index in the lobe's strokes of each ring
+    cap_strokes: tuple    # the index of each cap's open stroke, or None
 
 
 def _as_polyline(stroke, index: int) -> np.ndarray:
@@ -199,7 +203,8 @@ def _layout(strokes: tuple) -> _Layout:
             raise LobeError(f"open stroke {index} caps the {('bottom', 'top')[end]} of the lobe, which open stroke "
                             f"{caps[end][0]} already caps; allowed: one open stroke per end")
         caps[end] = (index, points)
-    return _Layout(tuple(rings), tuple(None if c is None else c[1] for c in caps), axis)
+    return _Layout(tuple(rings), tuple(None if c is None else c[1] for c in caps), axis,
+                   tuple(closed[k][0] for k in order), tuple(None if c is None else c[0] for c in caps))
 
 
 def _disc_crossed(ring: np.ndarray, other: np.ndarray) -> bool:
@@ -225,6 +230,12 @@ def _disc_crossed(ring: np.ndarray, other: np.ndarray) -> bool:
     return bool(inside.any())
 
 
+def _read_only(stroke) -> np.ndarray:
+    points = np.array(stroke, np.float64)
+    points.setflags(write=False)
+    return points
+
+
 def _key(*arrays) -> tuple:
     return tuple(np.ascontiguousarray(a).tobytes() for a in arrays)
 
@@ -243,7 +254,8 @@ class Lobe:
 
     @classmethod
     def from_strokes(cls, strokes, reuse: "Lobe | None" = None) -> "Lobe":
-        return cls(tuple(np.asarray(s, np.float64) for s in strokes), dict(reuse.parts) if reuse else {})
+        """A lobe of these strokes (copied, read-only), reusing the strips and caps `reuse` built."""
+        return cls(tuple(_read_only(s) for s in strokes), dict(reuse.parts) if reuse else {})
 
     def add_stroke(self, stroke) -> "Lobe":
         return Lobe.from_strokes(self.strokes + (stroke,), reuse=self)
@@ -265,10 +277,16 @@ class Lobe:
 
     def mesh(self) -> trimesh.Trimesh:
         """The closed, manifold lobe, faces wound outward (positive volume)."""
+        return self._assemble()[0]
+
+    def _assemble(self) -> tuple[trimesh.Trimesh, list]:
+        """The mesh, and for each stroke it holds (stroke index, first vertex, count): its samples as meshed
+        (a ring in the lobe's turning sense, an open stroke resampled where its ring is the denser)."""
         layout = _layout(self.strokes)
         rings = layout.rings
         offsets = np.concatenate([[0], np.cumsum([len(r) for r in rings])])
         vertices, faces, used = list(rings), [], {}
+        sources = [(stroke, int(offsets[k]), len(rings[k])) for k, stroke in enumerate(layout.ring_strokes)]
         for k in range(len(rings) - 1):
             strip = self._part(used, ("strip",) + _key(rings[k], rings[k + 1]),
                                lambda: (np.zeros((0, 3)), _ring_strip(rings[k], rings[k + 1])))[1]
@@ -279,6 +297,7 @@ class Lobe:
             if cap is not None:
                 extra, cap_faces = self._part(used, ("open", top) + _key(ring, cap),
                                               lambda: _open_cap(ring, cap, top))
+                sources.append((layout.cap_strokes[end], total, len(extra)))
             else:
                 extra, cap_faces = self._part(used, ("fan", top) + _key(ring, layout.axis),
                                               lambda: _fan_cap(ring, layout.axis, top))
@@ -286,8 +305,9 @@ class Lobe:
                                   cap_faces - len(ring) + total))
             vertices.append(extra)
             total += len(extra)
-        self.parts.clear()
-        self.parts.update(used)  # keep only what this mesh uses, so the cache follows the strokes
+        # Keep only what this mesh uses, so the cache follows the strokes; swapped whole, never changed in place,
+        # so a Lobe shared between threads is always read whole.
+        object.__setattr__(self, "parts", used)
         mesh = trimesh.Trimesh(np.concatenate(vertices), np.concatenate(faces), process=False)
         if not (mesh.is_watertight and mesh.is_winding_consistent):
             raise LobeError("the strokes do not make a closed surface (they fold over or cross each other); "
@@ -295,7 +315,25 @@ class Lobe:
         if mesh.volume <= 0:
             raise LobeError("the strokes make a surface turned inside out (strokes fold back past each other); "
                             "allowed: closed strokes stacked one above the other, open strokes arching over an end")
-        return mesh
+        return mesh, sources
+
+    def edit_surface(self, grab, target, radius: float) -> "Lobe":
+        """The lobe with its surface dragged from `grab` to `target` ((3,) metres) by Laplacian editing
+        (`surface_edit.laplacian_edit`, within `radius` metres along the surface), written back into the strokes:
+        the handle is the stroke sample nearest `grab`, and every moved sample moves its stroke, so the strokes
+        stay the lobe's whole state (an automatic cap's apex is rebuilt from its ring)."""
+        mesh, sources = self._assemble()
+        grab = np.asarray(grab, np.float64).reshape(-1)
+        target = np.asarray(target, np.float64).reshape(-1)
+        if grab.shape != (3,) or not np.all(np.isfinite(grab)):
+            raise LobeError(f"the grabbed point is {grab.tolist()}; allowed: three finite coordinates (metres)")
+        on_strokes = np.concatenate([np.arange(start, start + count) for _, start, count in sources])
+        handle = int(on_strokes[np.argmin(row_norms(mesh.vertices[on_strokes] - grab))])
+        moved = laplacian_edit(mesh.vertices, mesh.faces, handle, mesh.vertices[handle] + (target - grab), radius)
+        strokes = list(self.strokes)
+        for stroke, start, count in sources:
+            strokes[stroke] = moved[start: start + count]
+        return Lobe.from_strokes(strokes, reuse=self)
 
 
 def lobe_mesh(strokes) -> trimesh.Trimesh:

@@ -13,11 +13,13 @@ from species.errors import TreefarmError
 from species.geometry.vectors import row_norms
 
 __all__ = ["StrokeError", "sample_stroke", "stroke_is_closed", "resample_polyline", "arc_lengths", "CLOSED_GAP",
-           "MIN_RAW_POINTS"]
+           "MIN_RAW_POINTS", "MIN_RING_POINTS"]
 
 CLOSED_GAP = 0.10          # a stroke is closed when its endpoint gap is under this share of its arc length
 MIN_RAW_POINTS = 2         # raw samples a stroke needs at the least
 _HERMITE_SAMPLES = 4       # curve samples per Hermite segment before the even resampling
+# A ring of n even samples has an end gap of 1 / (n - 1) of its open arc: from 12 samples on it stays closed.
+MIN_RING_POINTS = 12
 
 
 class StrokeError(TreefarmError):
@@ -61,13 +63,17 @@ def stroke_is_closed(points) -> bool:
 
 
 def _sparse_controls(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Control points: the mean of the raw samples in each `spacing`-long stretch of arc (averaging damps hand
-    jitter), with the stroke's first and last samples kept as its ends."""
-    arc = arc_lengths(points)
-    bins = np.minimum((arc / spacing).astype(np.int64), max(int(arc[-1] / spacing) - 1, 0))
-    count = np.bincount(bins)
-    used = count > 0
-    means = np.stack([np.bincount(bins, points[:, d])[used] for d in range(3)], axis=1) / count[used, None]
+    """Control points: the raw samples cut into runs that each reach `spacing` metres from their first sample, and
+    each run replaced by its mean (averaging damps hand jitter; cutting by distance, not by the jittery arc
+    length, keeps many samples per run), with the stroke's first and last samples kept as its ends."""
+    starts, start = [], 0
+    while start < len(points):  # one pass per run, each a vectorized search over the samples left
+        starts.append(start)
+        far = np.flatnonzero(row_norms(points[start:] - points[start]) >= spacing)
+        start = start + int(far[0]) if len(far) else len(points)
+    runs = np.repeat(np.arange(len(starts)), np.diff(np.append(starts, len(points))))
+    count = np.bincount(runs)
+    means = np.stack([np.bincount(runs, points[:, d]) for d in range(3)], axis=1) / count[:, None]
     controls = np.concatenate([points[:1], means[1:-1], points[-1:]]) if len(means) > 2 else points[[0, -1]]
     keep = np.concatenate([[True], row_norms(np.diff(controls, axis=0)) > 1e-9 * spacing])
     return controls[keep]
@@ -101,6 +107,6 @@ def sample_stroke(points, spacing: float = 0.05) -> np.ndarray:
         curve = hermite_curve(padded, _HERMITE_SAMPLES)
         ring = curve[_HERMITE_SAMPLES: _HERMITE_SAMPLES * (len(controls) + 1)]
         perimeter = arc_lengths(ring, closed=True)[-1]
-        return resample_polyline(ring, max(3, int(round(perimeter / spacing))), closed=True)
+        return resample_polyline(ring, max(MIN_RING_POINTS, int(round(perimeter / spacing))), closed=True)
     curve = hermite_curve(controls, _HERMITE_SAMPLES)
     return resample_polyline(curve, max(2, int(round(arc_lengths(curve)[-1] / spacing)) + 1))
