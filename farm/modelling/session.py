@@ -15,16 +15,16 @@ import numpy as np
 
 from species.errors import TreefarmError
 
+from .branch_moves import guarded_move
 from .brush import brush_markers
 from .grow import colonization_presets, model_params
-from .hull_contact import hulls_overlap
 from .lobes import lobe_mesh
 from .strokes import sample_stroke
 from .surface_edit import bezier_drag, laplacian_edit
 
 __all__ = ["SessionError", "DrawnLobe", "Branch", "BrushStroke", "ModelSession", "History", "new_session",
            "add_stroke", "make_lobe", "drag_stroke", "drag_surface", "add_branch", "move_subtree", "paint",
-           "set_growth", "subtree", "session_to_json", "session_from_json", "FORMAT", "FORMAT_VERSION",
+           "set_growth", "session_to_json", "session_from_json", "FORMAT", "FORMAT_VERSION",
            "GROW_LIMITS", "MAX_PAINTED_MARKERS", "DEFAULT_PRESET"]
 
 FORMAT = "treefarm-model-session"
@@ -215,40 +215,20 @@ def add_branch(session: ModelSession, points) -> ModelSession:
     return replace(session, branches=session.branches + (Branch(sampled, parent),))
 
 
-def subtree(session: ModelSession, branch: int) -> list[int]:
-    """Indices of `branch` and every branch growing from it, directly or not (sorted)."""
-    members = {branch}
-    changed = True
-    while changed:
-        grown = {i for i, b in enumerate(session.branches) if b.parent in members}
-        changed = not grown <= members
-        members |= grown
-    return sorted(members)
-
-
 def move_subtree(session: ModelSession, branch: int, rotation, translation) -> ModelSession:
     """Turn a branch and everything growing from it rigidly about its base (`rotation`: (3, 3) proper rotation)
-    and move it by `translation` (3,) metres. Refused when the moved subtree's convex hull would overlap the hull
-    of another branch it did not overlap before (a branch touches the one it grows from where it starts, and
-    may lie in a curved parent's hull: contact that was there already is not the move's doing)."""
+    and move it by `translation` (3,) metres; refused (`branch_moves.guarded_move`) when the moved branches'
+    convex hulls would touch a branch that stays."""
     _index(branch, len(session.branches), "branch")
-    turn = _frozen(rotation, columns=3)
-    if turn.shape != (3, 3) or not np.allclose(turn @ turn.T, np.eye(3), atol=1e-6) or np.linalg.det(turn) < 0:
-        raise SessionError("rotation is not a rotation: allowed a proper orthonormal 3 x 3 matrix")
-    shift = _frozen([translation])[0]
-    pivot = session.branches[branch].points[0]
-    members = subtree(session, branch)
-    branches = list(session.branches)
-    for i in members:
-        old = branches[i]
-        branches[i] = Branch(_frozen((old.points - pivot) @ turn.T + pivot + shift), old.parent)
-    before = np.vstack([session.branches[i].points for i in members])
-    moved = np.vstack([branches[i].points for i in members])
-    for i, other in enumerate(branches):
-        if i not in members and hulls_overlap(moved, other.points) and not hulls_overlap(before, other.points):
-            raise SessionError(f"move refused: branch {branch}'s subtree would touch branch {i} (their convex hulls "
-                               "overlap); move it less or turn it away")
-    return replace(session, branches=tuple(branches))
+    drawn = [(np.array(b.points), b.parent) for b in session.branches]
+    try:
+        moved = guarded_move(drawn, branch, np.asarray(rotation, np.float64), session.branches[branch].points[0],
+                             _frozen([translation])[0])
+    except TreefarmError as exc:
+        raise SessionError(f"move refused: {exc}") from None
+    branches = tuple(old if np.array_equal(old.points, points) else Branch(_frozen(points), old.parent)
+                     for old, (points, _) in zip(session.branches, moved))
+    return replace(session, branches=branches)
 
 
 def paint(session: ModelSession, path, radius: float, density: float) -> ModelSession:

@@ -64,7 +64,7 @@ def test_a_bad_edit_raises_a_named_error_and_the_session_stays(modelled, edit, m
     assert session_to_json(modelled) == before
 
 
-def test_a_subtree_move_turns_children_along_and_the_guard_refuses_new_contact(modelled):
+def test_a_subtree_move_turns_it_rigidly_and_the_guard_refuses_contact(modelled):
     # Branch 1 (with nothing on it) turned a quarter about its base on the trunk: its tip goes from +x to +y.
     quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     turned = edits.move_subtree(modelled, 1, quarter, [0, 0, 0])
@@ -73,12 +73,11 @@ def test_a_subtree_move_turns_children_along_and_the_guard_refuses_new_contact(m
     assert turned.branches[0] is modelled.branches[0] and turned.branches[2] is modelled.branches[2]
     # Flipped to point down to -x and lifted, branch 1 would cross branch 2: refused, naming both.
     flip = np.diag([-1.0, 1.0, -1.0])
-    with pytest.raises(SessionError, match="branch 1's subtree would touch branch 2"):
+    with pytest.raises(SessionError, match=r"move refused: .*touch \(1 with 2\)"):
         edits.move_subtree(modelled, 1, flip, [0, 0, 3.5])
     assert len(edits.move_subtree(modelled, 1, flip, [0, 2.0, 3.5]).branches) == 3  # beside it: allowed
     # Moving the trunk moves every branch growing from it (its subtree) by the same amount.
     shifted = edits.move_subtree(modelled, 0, np.eye(3), [1.0, 0.0, 0.0])
-    assert edits.subtree(modelled, 0) == [0, 1, 2]
     assert all(np.allclose(a.points + [1, 0, 0], b.points) for a, b in zip(modelled.branches, shifted.branches))
 
 
