@@ -220,6 +220,19 @@ def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(browser,
     wait_for_version(page, version)
     assert len(service.history.present.lobes) == 1 and service.history.present.strokes == ()
     screenshot(page, "lobe")
+    # Shape: press on the lobe's surface where it faces the camera and pull it a metre up.
+    page.keyboard.press("h")
+    before = np.array(service.history.present.lobes[0].vertices)
+    front = page.evaluate("""() => {
+        const app = window.modelApp, camera = app.viewer.camera.position;
+        const vertices = app.state.lobes[0].vertices;
+        return vertices.reduce((a, b) => camera.distanceTo({ x: a[0], y: a[1], z: a[2] }) <= camera.distanceTo({ x: b[0], y: b[1], z: b[2] }) ? a : b);
+    }""")
+    drag(page, [front, [front[0], front[1] + 0.5, front[2]], [front[0], front[1] + 1.0, front[2]]])
+    version += 1
+    wait_for_version(page, version)
+    moved = np.linalg.norm(np.array(service.history.present.lobes[0].vertices) - before, axis=1)
+    assert 0.5 < moved.max() and (moved < 1e-9).sum() > len(moved) // 2  # the handle pulled, far vertices pinned
     page.keyboard.press("b")
     set_plane_depth(page, 0.0)
     drag(page, [[0.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.1, 4.0, 0.0], [0.2, 6.0, 0.0]])
@@ -346,6 +359,15 @@ def test_vr_mode_models_with_scripted_controllers(browser, site, tmp_path):
     press_menu(page, "lobe")
     version += 1
     wait_for_version(page, version)
+    # Squeeze at the lobe's widest point, away from any branch, and pull outwards: the surface follows the hand.
+    before = np.array(service.history.present.lobes[0].vertices)
+    widest = before[np.argmax(before[:, 0])]
+    widest_page = np.array([widest[0], widest[2], -widest[1]])
+    trace(page, to_room([widest_page, widest_page + [0.5, 0.0, 0.0], widest_page + [1.0, 0.0, 0.0]]), button="squeeze")
+    version += 1
+    wait_for_version(page, version)
+    pulled = np.array(service.history.present.lobes[0].vertices)
+    assert np.linalg.norm(pulled - before, axis=1).max() > 0.5 and pulled[:, 0].max() > before[:, 0].max() + 0.5
     press_menu(page, "branch")
     trace(page, to_room([[0.0, y, 0.0] for y in np.linspace(0, 6, 13)]))
     trace(page, to_room([[x, 3.0 + x, 0.0] for x in np.linspace(0, 2.5, 8)]))

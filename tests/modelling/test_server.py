@@ -129,6 +129,27 @@ def test_grow_serves_the_current_version_and_drops_an_overtaken_one(site, monkey
         service.grow(service.version)
 
 
+def test_a_surface_drag_moves_the_handle_to_its_target_and_leaves_far_vertices(site):
+    base, token, service = site
+    api = client(base, token)
+    api.post("/api/stroke", json={"points": y_up(ring(2.0, 2.0))})
+    api.post("/api/stroke", json={"points": y_up(ring(5.0, 2.0))})
+    api.post("/api/lobe")
+    lobe = len(service.history.present.lobes) - 1
+    before = np.array(service.history.present.lobes[lobe].vertices)
+    handle = int(np.argmax(before[:, 0]))
+    target = before[handle] + [0.8, 0.0, 0.0]
+    state = api.post("/api/drag-surface", json={"lobe": lobe, "handle": handle, "target": y_up([target])[0],
+                                                "radius": 1.5}).json()
+    after = np.array(service.history.present.lobes[lobe].vertices)
+    assert np.linalg.norm(after[handle] - target) < 1e-3
+    far = np.linalg.norm(before - before[handle], axis=1) > 1.5
+    assert far.any() and np.allclose(after[far], before[far], atol=1e-9)
+    assert np.allclose(np.array(state["lobes"][lobe]["vertices"])[handle], y_up([target])[0], atol=1e-3)
+    bad = api.post("/api/drag-surface", json={"lobe": lobe, "handle": 10**6, "target": [0, 0, 0], "radius": 1})
+    assert bad.status_code == 400 and "lobe vertex" in bad.json()["error"]
+
+
 def test_save_and_load_return_the_session_and_refuse_what_is_not_one(site):
     base, token, service = site
     api = client(base, token)

@@ -130,6 +130,7 @@ export class ModelApp {
     this.viewer.controls.mouseButtons = { LEFT: orbit ? THREE.MOUSE.ROTATE : -1, MIDDLE: THREE.MOUSE.DOLLY,
                                           RIGHT: orbit ? THREE.MOUSE.PAN : THREE.MOUSE.ROTATE };
     this.plane.visible = DRAWING.has(tool) || tool === 'move';
+    if (this.handle) this.handle.visible = false;
     this.vr.refresh();
   }
 
@@ -168,6 +169,8 @@ export class ModelApp {
       if (!point) return;
       this.stroke = [point];
       this.showPreview();
+    } else if (this.tool === 'shape') {
+      this.startShape(event);
     } else if (this.tool === 'move') {
       const hit = this.pointer(event).intersectObjects(this.view.branchMeshes, false)[0];
       const point = this.planePoint(event);
@@ -187,6 +190,9 @@ export class ModelApp {
         this.stroke.push(point);
         this.showPreview();
       }
+    } else if (this.shaping) {
+      const target = this.pointer(event).ray.intersectPlane(this.shaping.plane, new THREE.Vector3());
+      if (target) { this.shaping.target = target; this.handle.position.copy(target); }
     } else if (this.dragging) {
       const drag = this.dragging, point = this.planePoint(event);
       if (event.shiftKey) {
@@ -204,8 +210,49 @@ export class ModelApp {
     }
   }
 
+  // Shape tool: press on a lobe and drag its surface (Laplacian edit), or with shift a point of one of its strokes
+  // (a quadratic Bezier span); the point moves on a plane facing the camera.
+  startShape(event) {
+    const ray = this.pointer(event);
+    let grabbed = null;
+    if (event.shiftKey) {  // the lobe stroke point nearest the pointer's ray, within half a metre of it
+      let best = null;
+      this.state.lobes.forEach((lobe, i) => lobe.strokes.forEach((stroke, k) => stroke.forEach((p, j) => {
+        const d = ray.ray.distanceSqToPoint(new THREE.Vector3(...p));
+        if (!best || d < best.d) best = { d, kind: 'stroke', lobe: i, stroke: k, index: j, point: p };
+      })));
+      if (best && best.d < 0.25) grabbed = best;
+    } else {
+      const hit = ray.intersectObjects(this.view.lobeMeshes, false)[0];
+      if (hit) {
+        const lobe = hit.object.userData.lobe, vertices = this.state.lobes[lobe].vertices;
+        const handle = [hit.face.a, hit.face.b, hit.face.c].reduce((a, b) =>
+          hit.point.distanceTo(new THREE.Vector3(...vertices[a])) <= hit.point.distanceTo(new THREE.Vector3(...vertices[b])) ? a : b);
+        grabbed = { kind: 'surface', lobe, handle, point: vertices[handle] };
+      }
+    }
+    if (!grabbed) return;
+    const start = new THREE.Vector3(...grabbed.point);
+    const facing = this.viewer.camera.getWorldDirection(new THREE.Vector3());
+    if (!this.handle) {
+      this.handle = new THREE.Mesh(new THREE.SphereGeometry(0.15, 12, 8), new THREE.MeshBasicMaterial({ color: 0xff7b72 }));
+      this.viewer.scene.add(this.handle);
+    }
+    this.handle.visible = true;
+    this.handle.position.copy(start);
+    this.shaping = { ...grabbed, target: start, plane: new THREE.Plane().setFromNormalAndCoplanarPoint(facing, start) };
+  }
+
   async up() {
-    if (this.stroke) {
+    if (this.shaping) {
+      const shape = this.shaping, target = shape.target.toArray();
+      this.shaping = null;
+      this.handle.visible = false;
+      if (shape.kind === 'surface') {
+        await this.edit('drag-surface', { lobe: shape.lobe, handle: shape.handle, target,
+                                          radius: this.view.dragRadius(this.state, shape.lobe) });
+      } else await this.edit('drag-stroke', { lobe: shape.lobe, stroke: shape.stroke, index: shape.index, target });
+    } else if (this.stroke) {
       const points = this.stroke.map((p) => p.toArray());
       this.stroke = null;
       this.showPreview();
@@ -271,7 +318,7 @@ export class ModelApp {
     this.$('seed').onchange = (e) => this.edit('growth', { seed: Number(e.target.value) });
     this.$('plane-turn').oninput = (e) => { this.planeTurn = Number(e.target.value); this.placePlane(); };
     this.$('plane-depth').oninput = (e) => { this.planeDepth = Number(e.target.value); this.placePlane(); };
-    const keys = { v: 'view', s: 'stroke', b: 'branch', p: 'brush', m: 'move' };
+    const keys = { v: 'view', s: 'stroke', b: 'branch', p: 'brush', m: 'move', h: 'shape' };
     window.addEventListener('keydown', (e) => {
       if (e.target.tagName === 'INPUT' || e.target.tagName === 'SELECT') return;
       if (e.ctrlKey && e.key === 'z') this.edit('undo');

@@ -29,20 +29,24 @@ export class SessionView {
     this.tree = null;
     this.treeVersion = -1;
     this.branchMeshes = [];
+    this.lobeMeshes = [];
     this.selected = -1;
   }
 
   show(state) {
     for (const child of [...this.drawn.children]) { this.drawn.remove(child); disposeObject(child); }
     for (const stroke of state.strokes) this.drawn.add(line(stroke, STROKE));
-    for (const lobe of state.lobes) {
+    this.lobeMeshes = state.lobes.map((lobe, i) => {
       const geometry = new THREE.BufferGeometry();
       geometry.setAttribute('position', new THREE.Float32BufferAttribute(lobe.vertices.flat(), 3));
       geometry.setIndex(lobe.faces.flat());
       geometry.computeVertexNormals();
-      this.drawn.add(new THREE.Mesh(geometry, LOBE));
+      const mesh = new THREE.Mesh(geometry, LOBE);
+      mesh.userData.lobe = i;
+      this.drawn.add(mesh);
       for (const stroke of lobe.strokes) this.drawn.add(line(stroke, LOBE_STROKE));
-    }
+      return mesh;
+    });
     this.branchMeshes = state.branches.map((branch, i) => {
       const tube = branchTube(branch.points);
       tube.userData.branch = i;
@@ -71,6 +75,28 @@ export class SessionView {
       state.branches.forEach((b, i) => { if (members.has(b.parent) && !members.has(i)) { members.add(i); grown = true; } });
     }
     return [...members];
+  }
+
+  // The lobe vertex or lobe stroke point nearest `point` (Y up): {kind: 'surface' | 'stroke', lobe, handle |
+  // (stroke, index), distance}, or null without lobes.
+  nearestLobePoint(state, point, strokes = false) {
+    let best = null;
+    const consider = (p, found) => {
+      const d = point.distanceTo(new THREE.Vector3(...p));
+      if (!best || d < best.distance) best = { ...found, distance: d };
+    };
+    state.lobes.forEach((lobe, i) => {
+      if (strokes) lobe.strokes.forEach((stroke, k) => stroke.forEach((p, j) => consider(p, { kind: 'stroke', lobe: i, stroke: k, index: j })));
+      else lobe.vertices.forEach((p, j) => consider(p, { kind: 'surface', lobe: i, handle: j }));
+    });
+    return best;
+  }
+
+  // The reach of a surface drag: 0.3 of the lobe's widest extent (vertices farther stay where they are).
+  dragRadius(state, lobe) {
+    const box = new THREE.Box3().setFromPoints(state.lobes[lobe].vertices.map((p) => new THREE.Vector3(...p)));
+    const size = box.getSize(new THREE.Vector3());
+    return 0.3 * Math.max(size.x, size.y, size.z);
   }
 
   // Show a grown tree (GLB bytes of `version`); an older version arriving late is not shown.

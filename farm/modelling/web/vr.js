@@ -1,6 +1,6 @@
 // VR mode (WebXR immersive-vr): the session at table scale in front of the modeller. Right hand: the trigger
 // draws with the current tool (stroke, branch, brush) or presses the menu; squeeze grabs the nearest branch and
-// moves and turns its subtree with the hand. Left hand: the tool menu; its thumbstick turns the model (the seed's
+// moves and turns its subtree with the hand, or, away from branches, pulls the lobe surface where the hand is. Left hand: the tool menu; its thumbstick turns the model (the seed's
 // touchpad rotation, eq. 4.1). Right thumbstick: brush size (sideways) and density (up and down).
 import * as THREE from 'three';
 
@@ -27,6 +27,7 @@ export class ModelVR {
     this.hands = {};  // handedness -> controller
     this.drawing = null;  // room points of the trigger stroke in progress, in model coordinates
     this.grab = null;
+    this.shaping = null;
     this.lastStick = null;
     this.raycaster = new THREE.Raycaster();
     window.modelVR = this;
@@ -188,16 +189,21 @@ export class ModelVR {
     return this.app.commitStroke(this.app.tool, points);
   }
 
+  // Squeeze: grab the branch nearest the hand (its subtree moves with it), or else the lobe surface there.
   squeezeStart(controller) {
     const state = this.app.state;
-    if (!state || !state.branches.length) return;
-    const hand = this.toModel(this.tip(controller));
+    if (!state) return;
+    const hand = this.toModel(this.tip(controller)), reach = GRAB_REACH_M / this.app.view.root.scale.x;
     let best = null;
     state.branches.forEach((branch, i) => branch.points.forEach((p) => {
       const d = hand.distanceTo(new THREE.Vector3(...p));
       if (!best || d < best.distance) best = { branch: i, distance: d };
     }));
-    if (best.distance * this.app.view.root.scale.x > GRAB_REACH_M) return;  // room metres
+    if (!best || best.distance > reach) {
+      const surface = this.app.view.nearestLobePoint(state, hand);
+      if (surface && surface.distance <= reach) this.shaping = { controller, ...surface };
+      return;
+    }  // room metres
     this.app.view.select(best.branch);
     controller.updateMatrixWorld(true);
     this.grab = { controller, branch: best.branch, start: hand, startTurn: this.modelTurn(controller),
@@ -224,6 +230,13 @@ export class ModelVR {
   }
 
   async squeezeEnd(controller) {
+    if (this.shaping && this.shaping.controller === controller) {
+      const { lobe, handle } = this.shaping;
+      this.shaping = null;
+      await this.app.edit('drag-surface', { lobe, handle, target: this.toModel(this.tip(controller)).toArray(),
+                                            radius: this.app.view.dragRadius(this.app.state, lobe) });
+      return;
+    }
     if (!this.grab || this.grab.controller !== controller) return;
     const { rotation, translation } = this.grabMotion();
     const branch = this.grab.branch;
