@@ -140,7 +140,7 @@ def open_page(browser, site, init_script: str | None = None):
 
 
 def wait_for_tree(page) -> None:
-    """Until the tree of the session's current version is drawn."""
+    """Until the tree of the session's current version is drawn (in VR, until it is in the scene)."""
     page.wait_for_function("window.modelApp.view.treeVersion === window.modelApp.version", timeout=60_000)
 
 

@@ -38,6 +38,14 @@ export class ModelApp {
     this.dragging = null;  // the move tool's drag
     this.preview = null;
     this.lastError = null;
+    // Desktop frames are drawn when something changed (an edit, a tree, the camera, the pointer), not sixty times
+    // a second: the page stays responsive on a slow GPU or a software renderer while the server grows.
+    this.dirty = true;
+    this.drawnVersion = -1;  // the session version whose tree the last drawn frame showed
+    this.viewer.controls.addEventListener('change', () => this.redraw());
+    new ResizeObserver(() => this.redraw()).observe(this.viewer.container);
+    this.desktopLoop = () => this.desktopFrame();
+    this.viewer.externalLoop = this.desktopLoop;
     this.vr = new ModelVR(this);
     window.modelApp = this;
     this.bind();
@@ -45,6 +53,16 @@ export class ModelApp {
   }
 
   $(id) { return document.getElementById(id); }
+
+  redraw() { this.dirty = true; }
+
+  desktopFrame() {
+    const moved = this.viewer.controls.update();  // true while the camera moves (damping included)
+    if (!moved && !this.dirty) return;
+    this.dirty = false;
+    this.viewer.renderer.render(this.viewer.scene, this.viewer.camera);
+    if (this.view.treeVersion > this.drawnVersion) this.drawnVersion = this.view.treeVersion;
+  }
 
   setStatus(message, error = false) {
     const status = this.$('status');
@@ -89,6 +107,7 @@ export class ModelApp {
     this.state = state;
     this.version = state.version;
     this.view.show(state);
+    this.redraw();
     this.$('version').textContent = `version ${state.version}`;
     this.$('undo').disabled = !state.can_undo;
     this.$('redo').disabled = !state.can_redo;
@@ -117,7 +136,7 @@ export class ModelApp {
     const grown = await this.call(() => api.grow(version));
     if (!grown) return false;
     if (await this.view.showTree(grown.glb, grown.version)) {
-      this.viewer.justLoaded = true;  // TreeViewer counts the drawn trees (window.treesDrawn)
+      this.redraw();
       if (!this.$('status').classList.contains('error')) this.setStatus(`tree of version ${grown.version}`);
     }
     return true;
@@ -301,6 +320,9 @@ export class ModelApp {
 
   bind() {
     const canvas = this.viewer.renderer.domElement;
+    for (const type of ['pointerdown', 'pointermove', 'pointerup', 'wheel', 'keydown', 'input', 'click']) {
+      window.addEventListener(type, () => this.redraw(), { capture: true, passive: true });
+    }
     canvas.addEventListener('pointerdown', (e) => this.down(e));
     canvas.addEventListener('pointermove', (e) => this.move(e));
     window.addEventListener('pointerup', () => this.up());

@@ -62,7 +62,7 @@ export class ModelVR {
     if (!this.session) return;
     this.session = null;
     const viewer = this.app.viewer;
-    viewer.externalLoop = null;
+    viewer.externalLoop = this.app.desktopLoop;
     viewer.renderer.xr.enabled = false;
     for (const controller of this.controllers) viewer.scene.remove(controller);
     const root = this.app.view.root;
@@ -73,6 +73,7 @@ export class ModelVR {
     this.app.setTool(this.app.tool);
     this.state = 'ended';
     viewer.resize();
+    this.app.redraw();
   }
 
   makeController(i) {
