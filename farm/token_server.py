@@ -146,6 +146,7 @@ def listen_socket(host: str, port: int) -> socket.socket:
         advice = ("choose another --port" if exc.errno in (errno.EADDRINUSE, errno.EACCES)
                   else "--host must be a name or address of this machine")
         raise ServerError(f"cannot listen on {host}:{port} ({exc.strerror}): {advice}") from None
+    sock.listen()  # connections wait in the backlog from now on, not refused until uvicorn has started
     return sock
 
 

@@ -47,8 +47,23 @@ def _tls(args: argparse.Namespace) -> tuple[tuple[str, str] | None, str | None]:
     if not args.tls_self_signed:
         return None, None
     folder = f"{args.out}/tls" if args.out else tempfile.mkdtemp(prefix="farm-model-tls-")
-    cert, key, fingerprint = self_signed_certificate(folder, [args.host])
+    cert, key, fingerprint = self_signed_certificate(folder, [args.host, *_network_names(args.host)])
     return (str(cert), str(key)), fingerprint
+
+
+def _network_names(host: str) -> list[str]:
+    """This machine's name and addresses, when the server listens on every address (0.0.0.0 or ::): the names a
+    headset on the network reaches it by."""
+    import socket
+
+    if host not in ("0.0.0.0", "::"):
+        return []
+    name = socket.gethostname()
+    try:
+        addresses = socket.gethostbyname_ex(name)[2]
+    except OSError:
+        addresses = []
+    return [name, *[a for a in addresses if not a.startswith("127.")]]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,6 +85,9 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
     if fingerprint:
         print(f"self-signed certificate SHA-256 {fingerprint}")
-    print(f"open {server.url(token)}", flush=True)
+    print(f"open {server.url(token)}")
+    for name in _network_names(args.host):
+        print(f"  from the network: {server.url(token).replace(f'//{args.host}:', f'//{name}:', 1)}")
+    sys.stdout.flush()
     server.run()
     return 0

@@ -25,7 +25,7 @@ from farm.token_server import TOKEN_HEADER
 from gltf_validator import assert_valid_glb
 from required_tools import missing_tool
 
-from conftest import model_server
+from model_site import model_server
 
 if shutil.which("chromium") is None:
     missing_tool("chromium is not installed: run `make browser-env`", allow_module_level=True)

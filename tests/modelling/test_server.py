@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import http.client
 import json
+import re
 import socket
 import ssl
+import subprocess
+import sys
+from pathlib import Path
 from urllib.parse import urlsplit
 
 import httpx
@@ -19,7 +23,7 @@ from farm.modelling.server import MAX_EDIT_BYTES
 from farm.modelling.service import Overtaken
 from farm.token_server import TOKEN_HEADER
 
-from conftest import model_server, ring
+from model_site import model_server, ring
 
 
 def y_up(points) -> list:
@@ -206,3 +210,20 @@ def test_https_with_a_self_signed_certificate_serves_the_page(tmp_path):
         assert response.status_code == 200 and response.json()["version"] == 0
         with pytest.raises(httpx.ConnectError):
             httpx.get(f"{base}/api/version", params={"token": token}, timeout=30)  # untrusted without the cert
+
+
+def test_farm_model_serves_https_with_the_printed_fingerprint_and_url(tmp_path):
+    process = subprocess.Popen([sys.executable, "-m", "farm.cli", "model", "--port", "0", "--tls-self-signed",
+                                "--out", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               cwd=Path(__file__).resolve().parents[2])
+    try:
+        fingerprint = re.search(r"SHA-256 ([0-9A-F:]+)", process.stdout.readline()).group(1)
+        url = re.search(r"open (https://127\.0\.0\.1:\d+/\?token=[A-Za-z0-9_-]+)", process.stdout.readline()).group(1)
+        cert = tmp_path / "tls" / "cert.pem"
+        assert fingerprint == certificate_fingerprint(cert.read_bytes())
+        context = ssl.create_default_context(cafile=str(cert))
+        assert httpx.get(url, verify=context, timeout=30).status_code == 200
+        assert httpx.get(url.split("?")[0], verify=context, timeout=30).status_code == 401
+    finally:
+        process.terminate()
+        process.wait(timeout=20)

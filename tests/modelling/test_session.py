@@ -11,7 +11,7 @@ from farm.modelling import session as edits
 from farm.modelling.modelled_tree import growth_parameters, session_glb
 from farm.modelling.session import FORMAT_VERSION, History, SessionError, session_from_json, session_to_json
 
-from conftest import ring
+from model_site import ring
 
 
 def on_polyline(point: np.ndarray, polyline: np.ndarray) -> bool:

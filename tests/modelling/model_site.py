@@ -1,4 +1,5 @@
-"""Modelling test fixtures: a modelling server on a free localhost port, and rings to draw lobes from."""
+"""Modelling test helpers (a module of its own: `conftest` is taken by tests/review, whose tests import it by name):
+a modelling server on a free localhost port, and rings to draw lobes from."""
 from __future__ import annotations
 
 from contextlib import contextmanager
