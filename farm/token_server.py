@@ -18,8 +18,9 @@ from urllib.parse import parse_qs
 
 from species.errors import TreefarmError
 
-__all__ = ["ServerError", "NotServed", "TOKEN_HEADER", "new_token", "check_token", "three_root", "TokenGuard",
-           "error_response", "safe_file", "static_response", "read_json_body", "listen_socket", "TokenServer"]
+__all__ = ["ServerError", "NotServed", "TOKEN_HEADER", "new_token", "check_token", "three_root", "page_head",
+           "TokenGuard", "error_response", "error_handlers", "safe_file", "static_response", "read_json_body",
+           "listen_socket", "TokenServer"]
 
 TOKEN_HEADER = "x-review-token"  # the header name the review client sends; the modelling client sends it too
 _TOKEN_PATTERN = re.compile(r"^[A-Za-z0-9_-]{16,128}$")
@@ -49,6 +50,30 @@ def three_root() -> Path:
     if not (three / "build" / "three.module.js").is_file():
         raise ServerError(f"three.js is not installed at {three}: run `make node-env` (npm ci) in the project root")
     return three
+
+
+def page_head(token: str, title: str, script: str) -> str:
+    """The <head> of a served page: the token (meta review-token, which the clients' api.js reads), the client's
+    style.css and module `script` under /static/TOKEN/web/, and the import map that resolves 'three' and
+    'three/addons/' to /static/TOKEN/three/."""
+    static = f"/static/{token}"
+    return (f'<head>\n<meta charset="utf-8">\n<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+            f'<meta name="review-token" content="{token}">\n<link rel="icon" href="data:,">\n<title>{title}</title>\n'
+            f'<link rel="stylesheet" href="{static}/web/style.css">\n<script type="importmap">\n'
+            f'{{"imports": {{"three": "{static}/three/build/three.module.js",\n'
+            f'             "three/addons/": "{static}/three/examples/jsm/"}}}}\n</script>\n'
+            f'<script type="module" src="{static}/web/{script}"></script>\n</head>')
+
+
+def error_handlers(statuses: dict) -> dict:
+    """Starlette exception handlers answering each exception class with {"error": message} and its HTTP status
+    ({ReviewError: 400, NotServed: 404, PermissionError: 403, ...}; the most specific class wins)."""
+    def handler(status: int):
+        async def answer(request, exc):
+            return error_response(status, str(exc))
+        return answer
+
+    return {kind: handler(status) for kind, status in statuses.items()}
 
 
 def error_response(status: int, message: str):

@@ -23,7 +23,8 @@ from species.studio.wind import WIND_LAYOUT, wind_attributes
 from ..tree_chain import stage_rngs
 from .lod_fit import drawn_cover, fit_impostor, fit_lods, settle_twigs
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "build_asset_from_tree", "leaf_instances", "leaf_alphas", "leaf_fractions",
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "build_asset_from_tree", "leaf_instances",
+           "leaf_alphas", "leaf_fractions",
            "measure_chain"]
 
 

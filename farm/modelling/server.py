@@ -12,7 +12,8 @@ from pathlib import Path
 
 from species.errors import TreefarmError
 
-from ..token_server import NotServed, TokenGuard, check_token, error_response, read_json_body, static_response, three_root
+from ..token_server import (NotServed, TokenGuard, check_token, error_handlers, error_response, page_head,
+                            read_json_body, static_response, three_root)
 from .service import TOOLS, ModelService, Overtaken
 
 __all__ = ["create_model_app", "WEB_FOLDER", "MAX_EDIT_BYTES", "MAX_SESSION_BYTES"]
@@ -35,7 +36,8 @@ def create_model_app(service: ModelService, token: str):
     roots = {"web": WEB_FOLDER, "three": three_root(), "review": WEB_FOLDER.parents[1] / "review" / "web"}
 
     def page(request: Request):
-        html = (WEB_FOLDER / "index.html").read_text().replace("{{TOKEN}}", token)
+        head = page_head(token, "treefarm model", "model.js")
+        html = (WEB_FOLDER / "index.html").read_text().replace("{{HEAD}}", head)
         return HTMLResponse(html, headers={"Cache-Control": "no-store"})
 
     def static(request: Request):
@@ -87,24 +89,12 @@ def create_model_app(service: ModelService, token: str):
     async def send(request: Request):
         return JSONResponse(await run_in_threadpool(service.send_to_library))
 
-    async def overtaken(request, exc):
-        return error_response(409, str(exc))
-
-    async def refused(request, exc):
-        return error_response(400, str(exc))
-
-    async def not_found(request, exc):
-        return error_response(404, str(exc))
-
-    async def forbidden(request, exc):
-        return error_response(403, str(exc))
-
     routes = [Route("/", page), Route("/static/{token}/{root}/{path:path}", static),
               *[tool_route(tool) for tool in TOOLS],
               Route("/api/undo", undo, methods=["POST"]), Route("/api/redo", redo, methods=["POST"]),
               Route("/api/version", version), Route("/api/grow", grow, methods=["POST"]),
               Route("/api/session", session_file), Route("/api/save", save, methods=["POST"]),
               Route("/api/load", load, methods=["POST"]), Route("/api/send-to-library", send, methods=["POST"])]
-    app = Starlette(routes=routes, exception_handlers={Overtaken: overtaken, TreefarmError: refused,
-                                                       NotServed: not_found, PermissionError: forbidden})
+    statuses = {Overtaken: 409, TreefarmError: 400, NotServed: 404, PermissionError: 403}
+    app = Starlette(routes=routes, exception_handlers=error_handlers(statuses))
     return TokenGuard(app, token, command="farm model")

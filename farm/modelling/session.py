@@ -12,6 +12,7 @@ import json
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import trimesh
 
 from species.errors import TreefarmError
 
@@ -64,9 +65,7 @@ class DrawnLobe:
     vertices: np.ndarray
     faces: np.ndarray
 
-    def mesh(self):
-        import trimesh  # the lobe's mesh for growth and hull tests (trimesh loads with the geometry modules anyway)
-
+    def mesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(np.array(self.vertices), np.array(self.faces), process=False)
 
 

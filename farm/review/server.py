@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..token_server import (TOKEN_HEADER, NotServed, TokenGuard, TokenServer, check_token, error_response,
-                            listen_socket, new_token, read_json_body, static_response, three_root)
+from ..token_server import (TOKEN_HEADER, NotServed, TokenGuard, TokenServer, check_token, error_handlers,
+                            listen_socket, new_token, page_head, read_json_body, static_response, three_root)
 from .index import NotFound
 from .report import EvaluationReport
 from .service import ReviewService, TreeQuery
@@ -41,25 +41,16 @@ def create_app(service: ReviewService | EvaluationReport, token: str, roots: dic
     mode, script = ("report", "report.js") if isinstance(service, EvaluationReport) else ("dataset", "review.js")
 
     def page(request: Request):
-        html = (WEB_FOLDER / "index.html").read_text().replace("{{MODE}}", mode).replace("{{SCRIPT}}", script)
-        return HTMLResponse(html.replace("{{TOKEN}}", token), headers={"Cache-Control": "no-store"})
+        html = (WEB_FOLDER / "index.html").read_text().replace("{{HEAD}}", page_head(token, "treefarm review", script))
+        return HTMLResponse(html.replace("{{MODE}}", mode), headers={"Cache-Control": "no-store"})
 
     def static(request: Request):
         return static_response(roots, request.path_params["root"], request.path_params["path"], WEB_FOLDER)
 
-    async def review_error(request, exc):
-        return error_response(400, str(exc))
-
-    async def not_found(request, exc):
-        return error_response(404, str(exc))
-
-    async def forbidden(request, exc):
-        return error_response(403, str(exc))
-
     routes = [Route("/", page), Route("/static/{token}/{root}/{path:path}", static)]
     routes += _report_routes(service) if mode == "report" else _dataset_routes(service)
-    app = Starlette(routes=routes, exception_handlers={ReviewError: review_error, NotFound: not_found,
-                                                       NotServed: not_found, PermissionError: forbidden})
+    app = Starlette(routes=routes, exception_handlers=error_handlers({ReviewError: 400, NotFound: 404, NotServed: 404,
+                                                                     PermissionError: 403}))
     return TokenGuard(app, token)
 
 

@@ -34,82 +34,16 @@ DOC_IMAGES = Path(__file__).resolve().parents[2] / "docs" / "images"
 SCREENSHOTS = os.environ.get("TREEFARM_DOC_SCREENSHOTS") == "1"
 VR_SCALE, VR_ROOT = 0.08, np.array([0.0, 0.0, -0.9])  # vr.js: the model root in the room
 
-# A WebXR device stand-in: immersive-vr, a session whose frames the test plays with __xrStep(), and two
-# controllers (left, right) whose target-ray poses are window.__xrPoses[hand] (column-major 4 x 4) and whose
-# trigger and squeeze the test presses with __xrPress(hand, 'selectstart' | 'selectend' | 'squeezestart' | ...).
-FAKE_XR = """
-(() => {
-  const at = (x, y, z) => new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, x,y,z,1]);
-  window.__xrPoses = { left: at(-0.35, 1.1, -0.3), right: at(0.2, 1.1, -0.3) };
-  const source = (hand) => ({ handedness: hand, targetRayMode: 'tracked-pointer', profiles: [],
-                              targetRaySpace: { hand }, gripSpace: null,
-                              gamepad: { axes: [0, 0, 0, 0], buttons: [] } });
-  class FakeSession extends EventTarget {
-    constructor() { super(); this.renderState = {}; this.inputSources = [source('left'), source('right')];
-                    this.enabledFeatures = ['local-floor']; this.environmentBlendMode = 'opaque';
-                    this.visibilityState = 'visible'; this.callbacks = []; }
-    updateRenderState(state) { Object.assign(this.renderState, state); }
-    async requestReferenceSpace(type) {
-      const space = { type, getOffsetReferenceSpace: () => space, addEventListener() {}, removeEventListener() {} };
-      return space;
-    }
-    requestAnimationFrame(callback) { this.callbacks.push(callback); return this.callbacks.length; }
-    cancelAnimationFrame() {}
-    async end() { this.dispatchEvent(new Event('end')); }
-  }
-  // The eye 1.5 m up, 0.4 m behind the room's origin, looking 35 degrees down at the model.
-  const eye = { eye: 'left', transform: { matrix: new Float32Array([1,0,0,0, 0,0.819,-0.574,0, 0,0.574,0.819,0, 0,1.5,0.4,1]) },
-                projectionMatrix: new Float32Array([1,0,0,0, 0,1.33,0,0, 0,0,-1.002,-1, 0,0,-0.2,0]) };
-  const frame = (session) => ({ session, getViewerPose: () => ({ views: [eye] }),
-                                getPose: (space) => (space && space.hand ? { transform: { matrix: window.__xrPoses[space.hand] } } : null) });
-  window.__xrStep = (n = 1) => {
-    for (let i = 0; i < n; i++) {
-      const session = window.__xrSession, pending = session.callbacks.splice(0);
-      for (const callback of pending) callback(performance.now(), frame(session));
-    }
-  };
-  window.__xrConnect = () => {
-    const session = window.__xrSession, event = new Event('inputsourceschange');
-    event.added = session.inputSources;
-    event.removed = [];
-    session.dispatchEvent(event);
-  };
-  window.__xrPress = (hand, type) => {
-    const session = window.__xrSession, event = new Event(type);
-    event.inputSource = session.inputSources.find((s) => s.handedness === hand);
-    event.frame = frame(session);
-    session.dispatchEvent(event);
-  };
-  window.XRWebGLLayer = class {
-    constructor() {
-      this.framebuffer = null; this.framebufferWidth = 640; this.framebufferHeight = 480; this.ignoreDepthValues = true;
-    }
-    getViewport() { return { x: 0, y: 0, width: 640, height: 480 }; }
-  };
-  delete window.XRWebGLBinding;
-  WebGL2RenderingContext.prototype.makeXRCompatible = async function () {};
-  const xr = new EventTarget();
-  xr.isSessionSupported = async (mode) => mode === 'immersive-vr';
-  xr.requestSession = async () => (window.__xrSession = new FakeSession());
-  Object.defineProperty(Navigator.prototype, 'xr', { get: () => xr, configurable: true });
-})();
-"""
+# The WebXR stand-in (tests/tools/fake_webxr.js), its eye 1.5 m up and 0.4 m behind the room's origin, looking 35
+# degrees down at the model.
+FAKE_XR = ("window.__xrEyeMatrix = [1,0,0,0, 0,0.819,-0.574,0, 0,0.574,0.819,0, 0,1.5,0.4,1];\n"
+           + (Path(__file__).resolve().parents[1] / "tools" / "fake_webxr.js").read_text())
 
 
 def loop(centre, radius: float, depth: float, n: int = 12) -> list:
     """A closed loop in the page's frame (Y up): centre (x, y) on a vertical plane at z = depth."""
     t = np.linspace(0, 2 * np.pi, n + 1)
     return [[centre[0] + radius * np.cos(a), centre[1] + radius * np.sin(a), depth] for a in t]
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from farm.review.browser import launch_chromium
-
-    with sync_api.sync_playwright() as playwright:
-        browser = launch_chromium(playwright)
-        yield browser
-        browser.close()
 
 
 @pytest.fixture(scope="module")
@@ -125,9 +59,9 @@ def site(tmp_path_factory):
         yield base, token, service, root
 
 
-def open_page(browser, site, init_script: str | None = None):
+def open_page(chromium_browser, site, init_script: str | None = None):
     base, token, service, _ = site
-    page = browser.new_page(viewport={"width": 880, "height": 540})
+    page = chromium_browser.new_page(viewport={"width": 880, "height": 540})
     problems = []
     page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
     page.on("console", lambda message: problems.append(f"console: {message.text}")
@@ -171,7 +105,8 @@ def drag(page, points) -> None:
     release: mouse events at the points' screen positions."""
     pixels = page.evaluate("""async (points) => {
         const THREE = await import('three');
-        const app = window.modelApp, camera = app.viewer.camera, rect = app.viewer.renderer.domElement.getBoundingClientRect();
+        const app = window.modelApp, camera = app.viewer.camera;
+        const rect = app.viewer.renderer.domElement.getBoundingClientRect();
         return points.map((p) => {
           const v = new THREE.Vector3(...p).project(camera);
           return [rect.left + (v.x + 1) / 2 * rect.width, rect.top + (1 - v.y) / 2 * rect.height];
@@ -202,9 +137,9 @@ def set_plane_depth(page, depth: float) -> None:
     page.locator("#plane-depth").fill(str(depth))
 
 
-def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(browser, site, tmp_path):
+def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(chromium_browser, site, tmp_path):
     base, token, service, root = site
-    page, problems = open_page(browser, site)
+    page, problems = open_page(chromium_browser, site)
     assert page.locator("#enter-vr").is_disabled()  # no WebXR in plain headless Chromium
     version = small_and_still(page)
     page.keyboard.press("s")
@@ -224,9 +159,9 @@ def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(browser,
     page.keyboard.press("h")
     before = np.array(service.history.present.lobes[0].vertices)
     front = page.evaluate("""() => {
-        const app = window.modelApp, camera = app.viewer.camera.position;
-        const vertices = app.state.lobes[0].vertices;
-        return vertices.reduce((a, b) => camera.distanceTo({ x: a[0], y: a[1], z: a[2] }) <= camera.distanceTo({ x: b[0], y: b[1], z: b[2] }) ? a : b);
+        const camera = window.modelApp.viewer.camera.position;
+        const away = (p) => camera.distanceTo({ x: p[0], y: p[1], z: p[2] });
+        return window.modelApp.state.lobes[0].vertices.reduce((a, b) => (away(a) <= away(b) ? a : b));
     }""")
     drag(page, [front, [front[0], front[1] + 0.5, front[2]], [front[0], front[1] + 1.0, front[2]]])
     version += 1
@@ -314,7 +249,8 @@ def press_menu(page, name: str) -> None:
         const [x, y, w, h] = vr.buttonAt(index);
         const width = menu.geometry.parameters.width, height = menu.geometry.parameters.height;
         menu.updateMatrixWorld(true);
-        const local = (d) => new THREE.Vector3(((x + w / 2) / 512 - 0.5) * width, (0.5 - (y + h / 2) / 640) * height, d);
+        const u = (x + w / 2) / 512 - 0.5, v = 0.5 - (y + h / 2) / 640;
+        const local = (d) => new THREE.Vector3(u * width, v * height, d);
         const target = menu.localToWorld(local(0)), eye = menu.localToWorld(local(0.1));
         const pose = new THREE.Matrix4().lookAt(eye, target, new THREE.Vector3(0, 1, 0)).setPosition(eye);
         window.__xrPoses.right = new Float32Array(pose.elements);
@@ -336,11 +272,11 @@ def trace(page, room_points, button: str = "select") -> None:
     }""", [np.asarray(room_points, float).tolist(), button])
 
 
-def test_vr_mode_models_with_scripted_controllers(browser, site, tmp_path):
+def test_vr_mode_models_with_scripted_controllers(chromium_browser, site, tmp_path):
     base, token, service, root = site
     fresh = httpx.post(f"{base}/api/load", content=session_to_json(new_session()), headers={TOKEN_HEADER: token})
     assert fresh.status_code == 200 and fresh.json()["lobes"] == []  # the desktop test's model set aside
-    page, problems = open_page(browser, site, FAKE_XR)
+    page, problems = open_page(chromium_browser, site, FAKE_XR)
     page.wait_for_function("!document.getElementById('enter-vr').disabled")
     page.locator("#enter-vr").click()
     page.wait_for_function("window.modelVR.state === 'presenting'")

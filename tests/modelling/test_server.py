@@ -42,7 +42,8 @@ def client(base: str, token: str | None) -> httpx.Client:
 
 
 @pytest.mark.parametrize("method, path", [("GET", "/"), ("GET", "/api/version"), ("POST", "/api/stroke"),
-                                          ("POST", "/api/grow"), ("GET", "/static/not-the-token-at-all-0000/web/model.js")])
+                                          ("POST", "/api/grow"),
+                                          ("GET", "/static/not-the-token-at-all-0000/web/model.js")])
 def test_requests_without_the_token_get_401(site, method, path):
     base, _, _ = site
     response = client(base, None).request(method, path)

@@ -1,20 +1,6 @@
-// The modelling server's JSON API: one POST per tool, every request carrying the access token in a header.
-const token = document.querySelector('meta[name="review-token"]').content;
-
-export class ApiError extends Error {
-  constructor(message, status) { super(message); this.status = status; }
-}
-
-async function request(path, options = {}) {
-  const headers = { 'X-Review-Token': token, ...(options.headers || {}) };
-  const response = await fetch(path, { ...options, headers });
-  if (!response.ok) {
-    let message = `${response.status} ${response.statusText}`;
-    try { message = (await response.json()).error || message; } catch (_) { /* body was not JSON */ }
-    throw new ApiError(message, response.status);
-  }
-  return response;
-}
+// The modelling server's JSON API: one POST per tool, every request carrying the access token in a header (the
+// review client's `request`).
+import { request, token } from '../review/api.js';
 
 export async function post(path, body = {}) {
   const options = { method: 'POST', body: typeof body === 'string' ? body : JSON.stringify(body),

@@ -3,6 +3,7 @@
 // moves and turns its subtree with the hand, or, away from branches, pulls the lobe surface where the hand is. Left hand: the tool menu; its thumbstick turns the model (the seed's
 // touchpad rotation, eq. 4.1). Right thumbstick: brush size (sideways) and density (up and down).
 import * as THREE from 'three';
+import { canvasPanel, controllerRay } from '../review/vr.js';
 
 export const VR_SCALE = 0.08;  // a 15 m tree stands 1.2 m tall in the room
 const PANEL_W = 512, PANEL_H = 640;
@@ -78,9 +79,7 @@ export class ModelVR {
 
   makeController(i) {
     const controller = this.app.viewer.renderer.xr.getController(i);
-    const ray = new THREE.Line(new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), new THREE.Vector3(0, 0, -1)]),
-                               new THREE.LineBasicMaterial({ color: 0x9fd3ff }));
-    ray.scale.z = 0.3;
+    const ray = controllerRay(0.3);
     controller.add(ray);
     controller.add(new THREE.Mesh(new THREE.SphereGeometry(0.01, 12, 8), new THREE.MeshBasicMaterial({ color: 0xffd33d })));
     controller.userData.ray = ray;
@@ -100,13 +99,7 @@ export class ModelVR {
   }
 
   buildMenu() {
-    this.menuCanvas = document.createElement('canvas');
-    this.menuCanvas.width = PANEL_W;
-    this.menuCanvas.height = PANEL_H;
-    this.menuTexture = new THREE.CanvasTexture(this.menuCanvas);
-    this.menuTexture.colorSpace = THREE.SRGBColorSpace;
-    this.menu = new THREE.Mesh(new THREE.PlaneGeometry(0.16, 0.16 * PANEL_H / PANEL_W),
-                               new THREE.MeshBasicMaterial({ map: this.menuTexture }));
+    ({ canvas: this.menuCanvas, texture: this.menuTexture, mesh: this.menu } = canvasPanel(PANEL_W, PANEL_H, 0.16));
     this.menu.position.set(0, 0.06, -0.08);
     this.menu.rotation.x = -0.9;
     this.refresh();
