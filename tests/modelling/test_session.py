@@ -81,6 +81,19 @@ def test_a_subtree_move_turns_it_rigidly_and_the_guard_refuses_contact(modelled)
     assert all(np.allclose(a.points + [1, 0, 0], b.points) for a, b in zip(modelled.branches, shifted.branches))
 
 
+def test_a_stroke_drag_reshapes_its_span_and_remeshes_the_lobe(modelled):
+    stroke = modelled.lobes[0].strokes[1]
+    index = len(stroke) // 2
+    target = stroke[index] + [0.0, 0.0, 1.0]
+    dragged = edits.drag_stroke(modelled, 0, 1, index, target)
+    moved = dragged.lobes[0].strokes[1]
+    assert np.allclose(moved[index], target, atol=1e-6) and np.array_equal(moved[0], stroke[0])
+    # The lobe is remeshed through the dragged stroke: closed, and its surface reaches the target.
+    lobe = dragged.lobes[0]
+    assert lobe.mesh().is_watertight and np.linalg.norm(lobe.vertices - target, axis=1).min() < 1e-6
+    assert dragged.lobes[0].strokes[0] is modelled.lobes[0].strokes[0]
+
+
 def test_undo_and_redo_walk_the_history_and_a_new_edit_drops_the_redo_stack():
     history = History(edits.new_session())
     first = history.apply(edits.add_stroke(history.present, ring(3.0, 1.0)))

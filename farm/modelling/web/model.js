@@ -75,6 +75,7 @@ export class ModelApp {
   async call(action, done) {
     try {
       const result = await action();
+      this.lastError = null;
       if (done) this.setStatus(done(result));
       return result;
     } catch (error) {
