@@ -61,7 +61,7 @@ def site(tmp_path_factory):
 
 def open_page(chromium_browser, site, init_script: str | None = None):
     base, token, service, _ = site
-    page = chromium_browser.new_page(viewport={"width": 880, "height": 540})
+    page = chromium_browser.new_page(viewport={"width": 960, "height": 580})
     problems = []
     page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
     page.on("console", lambda message: problems.append(f"console: {message.text}")
@@ -166,6 +166,7 @@ def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(chromium
     drag(page, [front, [front[0], front[1] + 0.5, front[2]], [front[0], front[1] + 1.0, front[2]]])
     version += 1
     wait_for_version(page, version)
+    screenshot(page, "shape")
     moved = np.linalg.norm(np.array(service.history.present.lobes[0].vertices) - before, axis=1)
     assert 0.5 < moved.max() and (moved < 1e-9).sum() > len(moved) // 2  # the handle pulled, far vertices pinned
     page.keyboard.press("b")
@@ -340,7 +341,8 @@ def test_vr_mode_models_with_scripted_controllers(chromium_browser, site, tmp_pa
     press_menu(page, "grow")
     page.evaluate("window.__xrStep(2)")
     wait_for_tree(page)
-    page.evaluate("window.__xrStep(1)")
+    page.evaluate("window.__xrPoses.right = new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, 0.3,0.75,-0.55,1]);"
+                  "window.__xrStep(1)")  # the right hand, with the brush round it, beside the tree
     screenshot(page, "vr")
     assert_valid_glb(grown_glb(site), tmp_path, "vr.glb")
     press_menu(page, "undo")

@@ -295,12 +295,15 @@ export class ModelApp {
                                 density: Number(this.$('brush-density').value) });
   }
 
-  showPreview() {
-    if (this.preview) { this.viewer.scene.remove(this.preview); this.preview.geometry.dispose(); this.preview = null; }
-    if (!this.stroke || this.stroke.length < 2) return;
-    this.preview = new THREE.Line(new THREE.BufferGeometry().setFromPoints(this.stroke),
+  // The stroke being drawn (points in the session's frame, Y up; none: remove it), in white under the model
+  // root, so VR mode's scaled room shows it too.
+  showPreview(points = this.stroke) {
+    const root = this.view.root;
+    if (this.preview) { root.remove(this.preview); this.preview.geometry.dispose(); this.preview = null; }
+    if (!points || points.length < 2) return;
+    this.preview = new THREE.Line(new THREE.BufferGeometry().setFromPoints(points),
                                   new THREE.LineBasicMaterial({ color: 0xffffff }));
-    this.viewer.scene.add(this.preview);
+    root.add(this.preview);
   }
 
   async save() {

@@ -45,8 +45,12 @@ export class ModelVR {
     const floor = !session.enabledFeatures || session.enabledFeatures.includes('local-floor');
     renderer.xr.setReferenceSpaceType(floor ? 'local-floor' : 'local');
     renderer.xr.enabled = true;
-    this.controllers = [0, 1].map((i) => this.makeController(i));
-    this.buildMenu();
+    if (this.controllers) {  // three.js keeps its controllers between sessions: so do their listeners
+      for (const controller of this.controllers) viewer.scene.add(controller);
+    } else {
+      this.controllers = [0, 1].map((i) => this.makeController(i));
+      this.buildMenu();
+    }
     session.addEventListener('end', () => this.exit());
     await renderer.xr.setSession(session);
     this.session = session;
@@ -66,6 +70,7 @@ export class ModelVR {
     viewer.externalLoop = this.app.desktopLoop;
     viewer.renderer.xr.enabled = false;
     for (const controller of this.controllers) viewer.scene.remove(controller);
+    this.app.showPreview(null);
     const root = this.app.view.root;
     root.scale.setScalar(1);
     root.position.set(0, 0, 0);
@@ -180,6 +185,7 @@ export class ModelVR {
     if (!this.drawing || this.drawing.controller !== controller) return;
     const points = this.drawing.points.map((p) => p.toArray());
     this.drawing = null;
+    this.app.showPreview(null);
     return this.app.commitStroke(this.app.tool, points);
   }
 
@@ -241,6 +247,19 @@ export class ModelVR {
     if (!state) this.app.view.show(this.app.state);
   }
 
+  // The brush's sphere round the right hand while the brush tool is chosen, at its size in the room.
+  showBrush() {
+    const hand = this.hands.right;
+    if (!hand) return;
+    if (!this.brushSphere) {
+      this.brushSphere = new THREE.Mesh(new THREE.SphereGeometry(1, 16, 12),
+                                        new THREE.MeshBasicMaterial({ color: 0xff7b72, wireframe: true, transparent: true, opacity: 0.4 }));
+      hand.add(this.brushSphere);
+    }
+    this.brushSphere.visible = this.app.tool === 'brush';
+    this.brushSphere.scale.setScalar(Number(this.app.$('brush-radius').value) * this.app.view.root.scale.x);
+  }
+
   sticks() {
     const left = this.hands.left?.userData.gamepad, right = this.hands.right?.userData.gamepad;
     const axes = (pad) => (pad && pad.axes.length >= 4 ? [pad.axes[2], pad.axes[3]] : pad ? [pad.axes[0] || 0, pad.axes[1] || 0] : [0, 0]);
@@ -260,8 +279,12 @@ export class ModelVR {
     const viewer = this.app.viewer;
     if (this.drawing) {
       const point = this.toModel(this.tip(this.drawing.controller));
-      if (point.distanceTo(this.drawing.points[this.drawing.points.length - 1]) >= 0.05) this.drawing.points.push(point);
+      if (point.distanceTo(this.drawing.points[this.drawing.points.length - 1]) >= 0.05) {
+        this.drawing.points.push(point);
+        this.app.showPreview(this.drawing.points);
+      }
     }
+    this.showBrush();
     if (this.grab) {
       const { rotation, translation } = this.grabMotion(), b = this.grab.base;
       const matrix = new THREE.Matrix4().makeTranslation(b.x + translation.x, b.y + translation.y, b.z + translation.z)
