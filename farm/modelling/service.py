@@ -185,10 +185,13 @@ class ModelService:
         """Write the session to OUT/NAME.json (whole or not at all); returns its path and size."""
         path = self._named(name)
         text = self.session_json()
-        path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_name(f".{path.name}.partial")
-        partial.write_text(text)
-        partial.replace(path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            partial.write_text(text)
+            partial.replace(path)
+        except OSError as exc:
+            raise SessionError(f"cannot save the session to {path}: {exc.strerror or exc}") from None
         return {"path": str(path), "bytes": len(text.encode())}
 
     def load(self, body: dict) -> dict:
@@ -196,9 +199,10 @@ class ModelService:
         anything else is the session record itself."""
         if isinstance(body, dict) and set(body) == {"name"}:
             path = self._named(body["name"])
-            if not path.is_file():
-                raise SessionError(f"no saved session {body['name']!r} in {self.out}")
-            loaded = session_from_json(path.read_bytes())
+            try:
+                loaded = session_from_json(path.read_bytes())
+            except OSError:
+                raise SessionError(f"no saved session {body['name']!r} in {self.out}") from None
         else:
             loaded = session_from_json(body)
         return self._commit(lambda history: history.apply(loaded))

@@ -174,10 +174,30 @@ def test_save_and_load_return_the_session_and_refuse_what_is_not_one(site):
     assert api.get("/api/version").json()["version"] == version and api.get("/api/session").text == text
 
 
+def test_saving_into_a_file_instead_of_a_folder_is_a_clear_error(tmp_path):
+    (tmp_path / "taken").write_text("not a folder")
+    with model_server(out=tmp_path / "taken") as (base, token, _):
+        response = client(base, token).post("/api/save", json={"name": "x"})
+    assert response.status_code == 400 and "cannot save the session" in response.json()["error"]
+
+
 def test_send_to_library_without_a_library_is_a_clear_error(site):
     base, token, _ = site
     response = client(base, token).post("/api/send-to-library")
     assert response.status_code == 400 and "--library DIR" in response.json()["error"]
+
+
+def test_send_to_a_folder_that_is_not_a_library_is_refused_and_writes_nothing(tmp_path):
+    folder = tmp_path / "not_a_library"
+    folder.mkdir()
+    with model_server(library=folder) as (base, token, _):
+        api = client(base, token)
+        api.post("/api/stroke", json={"points": y_up(ring(4.0, 2.5))})
+        api.post("/api/stroke", json={"points": y_up(ring(7.0, 2.0))})
+        api.post("/api/lobe")
+        response = api.post("/api/send-to-library")
+    assert response.status_code == 400 and "farm library --out DIR" in response.json()["error"]
+    assert list(folder.iterdir()) == []
 
 
 def test_a_taken_port_is_a_one_line_error(capsys):
