@@ -19,9 +19,9 @@ from species.errors import TreefarmError
 from .branch_moves import guarded_move
 from .brush import brush_markers
 from .grow import colonization_presets, model_params
-from .lobes import lobe_mesh
+from .lobes import Lobe
 from .strokes import sample_stroke
-from .surface_edit import bezier_drag, laplacian_edit
+from .surface_edit import bezier_drag
 
 __all__ = ["SessionError", "DrawnLobe", "Branch", "BrushStroke", "ModelSession", "History", "new_session",
            "add_stroke", "make_lobe", "drag_stroke", "drag_surface", "add_branch", "move_subtree", "paint",
@@ -55,15 +55,19 @@ def _frozen(values, columns: int | None = 3, dtype=np.float64) -> np.ndarray:
 
 @dataclass(frozen=True)
 class DrawnLobe:
-    """A crown lobe: the strokes it was made from and its closed mesh (edited surfaces keep their edits).
+    """A crown lobe: its strokes, which are its whole state (a surface drag moves their samples), and the closed
+    mesh they make.
 
-    strokes  : tuple of (k, 3) float64, metres, Z up (sampled strokes).
+    strokes  : tuple of (k, 3) float64, metres, Z up (sampled strokes, read-only).
     vertices : (V, 3) float64, metres, Z up; faces: (F, 3) int64, outward oriented.
+    builder  : the `lobes.Lobe` that meshed it, whose strips the next edit of this lobe reuses (an edit rebuilds
+               only the strips next to the stroke it changes); None for a loaded lobe.
     """
 
     strokes: tuple
     vertices: np.ndarray
     faces: np.ndarray
+    builder: object = field(default=None, compare=False, repr=False)
 
     def mesh(self) -> trimesh.Trimesh:
         return trimesh.Trimesh(np.array(self.vertices), np.array(self.faces), process=False)
@@ -125,12 +129,18 @@ def _index(value, count: int, what: str) -> int:
     return value
 
 
-def _meshed(strokes: tuple) -> DrawnLobe:
+def _builder(lobe: DrawnLobe) -> Lobe:
+    return lobe.builder if lobe.builder is not None else Lobe.from_strokes(lobe.strokes)
+
+
+def _meshed(change, refusal: str) -> DrawnLobe:
+    """The lobe `change()` (a `lobes.Lobe`) makes, meshed; SessionError starting with `refusal` when it cannot."""
     try:
-        mesh = lobe_mesh([np.array(s) for s in strokes])
+        builder = change()
+        mesh = builder.mesh()
     except TreefarmError as exc:
-        raise SessionError(f"these strokes cannot make a lobe: {exc}") from None
-    return DrawnLobe(tuple(strokes), _frozen(mesh.vertices), _frozen(mesh.faces, dtype=np.int64))
+        raise SessionError(f"{refusal}: {exc}") from None
+    return DrawnLobe(builder.strokes, _frozen(mesh.vertices), _frozen(mesh.faces, dtype=np.int64), builder)
 
 
 def add_stroke(session: ModelSession, points) -> ModelSession:
@@ -140,7 +150,7 @@ def add_stroke(session: ModelSession, points) -> ModelSession:
 
 def make_lobe(session: ModelSession, strokes=None, lobe: int | None = None) -> ModelSession:
     """Make a lobe from drawn strokes (indices; default all of them), or, with `lobe`, add them to that lobe
-    (remeshed from all its strokes). The strokes used leave the list of drawn strokes."""
+    (only the strips next to them are built). The strokes used leave the list of drawn strokes."""
     chosen = list(range(len(session.strokes))) if strokes is None else list(strokes)
     for i in chosen:
         _index(i, len(session.strokes), "stroke")
@@ -148,44 +158,42 @@ def make_lobe(session: ModelSession, strokes=None, lobe: int | None = None) -> M
         raise SessionError(f"strokes {chosen}: allowed distinct indices of drawn strokes, at least one")
     new = tuple(session.strokes[i] for i in chosen)
     kept = tuple(s for i, s in enumerate(session.strokes) if i not in chosen)
+    refusal = "these strokes cannot make a lobe"
     if lobe is None:
-        return replace(session, strokes=kept, lobes=session.lobes + (_meshed(new),))
+        return replace(session, strokes=kept, lobes=session.lobes + (_meshed(lambda: Lobe.from_strokes(new), refusal),))
     _index(lobe, len(session.lobes), "lobe")
     lobes = list(session.lobes)
-    lobes[lobe] = _meshed(lobes[lobe].strokes + new)
+    base = _builder(lobes[lobe])
+    lobes[lobe] = _meshed(lambda: Lobe.from_strokes(base.strokes + new, reuse=base), refusal)
     return replace(session, strokes=kept, lobes=tuple(lobes))
 
 
 def drag_stroke(session: ModelSession, lobe: int, stroke: int, index: int, target, span=None) -> ModelSession:
     """Drag point `index` of a lobe's stroke to `target`, the span reshaped as a quadratic Bezier (eq. 5.2); the
-    lobe is remeshed from its strokes (an earlier surface drag of that lobe is redone by meshing)."""
+    strips next to that stroke are rebuilt."""
     _index(lobe, len(session.lobes), "lobe")
-    strokes = list(session.lobes[lobe].strokes)
-    _index(stroke, len(strokes), "stroke")
-    _index(index, len(strokes[stroke]), "stroke point")
-    try:
-        strokes[stroke] = _frozen(bezier_drag(np.array(strokes[stroke]), index, _frozen([target])[0], span))
-    except TreefarmError as exc:
-        raise SessionError(f"stroke drag refused: {exc}") from None
+    base = _builder(session.lobes[lobe])
+    _index(stroke, len(base.strokes), "stroke")
+    _index(index, len(base.strokes[stroke]), "stroke point")
+    point = _frozen([target])[0]
     lobes = list(session.lobes)
-    lobes[lobe] = _meshed(tuple(strokes))
+    lobes[lobe] = _meshed(lambda: base.replace_stroke(stroke, bezier_drag(base.strokes[stroke], index, point, span)),
+                          "stroke drag refused")
     return replace(session, lobes=tuple(lobes))
 
 
 def drag_surface(session: ModelSession, lobe: int, handle: int, target, radius: float) -> ModelSession:
-    """Drag vertex `handle` of a lobe's surface to `target` by Laplacian editing (eq. 5.3-5.5); vertices farther
-    than `radius` (m) stay where they are."""
+    """Drag the lobe's surface at vertex `handle` (its nearest stroke sample) towards `target` by Laplacian
+    editing (eq. 5.3-5.5): the handle moves by (target - vertex), vertices farther than `radius` metres along the
+    surface stay, and the moved samples move their strokes (`lobes.Lobe.edit_surface`)."""
     _index(lobe, len(session.lobes), "lobe")
     old = session.lobes[lobe]
     _index(handle, len(old.vertices), "lobe vertex")
-    if not isinstance(radius, (int, float)) or not radius > 0:
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)) or not radius > 0:
         raise SessionError(f"radius {radius!r} is invalid: allowed a positive number of metres")
-    try:
-        moved = laplacian_edit(np.array(old.vertices), np.array(old.faces), handle, _frozen([target])[0], radius)
-    except TreefarmError as exc:
-        raise SessionError(f"surface drag refused: {exc}") from None
+    base, point = _builder(old), _frozen([target])[0]
     lobes = list(session.lobes)
-    lobes[lobe] = DrawnLobe(old.strokes, _frozen(moved), old.faces)
+    lobes[lobe] = _meshed(lambda: base.edit_surface(old.vertices[handle], point, float(radius)), "surface drag refused")
     return replace(session, lobes=tuple(lobes))
 
 

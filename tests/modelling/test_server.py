@@ -148,8 +148,11 @@ def test_a_surface_drag_moves_the_handle_to_its_target_and_leaves_far_vertices(s
                                                 "radius": 1.5}).json()
     after = np.array(service.history.present.lobes[lobe].vertices)
     assert np.linalg.norm(after[handle] - target) < 1e-3
-    far = np.linalg.norm(before - before[handle], axis=1) > 1.5
-    assert far.any() and np.allclose(after[far], before[far], atol=1e-9)
+    # Far samples of the strokes stay (a cap's apex, made from its ring, follows the ring's moved samples).
+    samples = np.vstack(service.history.present.lobes[lobe].strokes)
+    on_strokes = np.array([np.abs(samples - v).sum(axis=1).min() < 1e-12 for v in after])
+    far = (np.linalg.norm(before - before[handle], axis=1) > 1.5) & on_strokes
+    assert far.sum() > len(after) // 4 and np.allclose(after[far], before[far], atol=1e-9)
     assert np.allclose(np.array(state["lobes"][lobe]["vertices"])[handle], y_up([target])[0], atol=1e-3)
     bad = api.post("/api/drag-surface", json={"lobe": lobe, "handle": 10**6, "target": [0, 0, 0], "radius": 1})
     assert bad.status_code == 400 and "lobe vertex" in bad.json()["error"]

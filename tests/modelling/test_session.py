@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from farm.modelling import session as edits
+from farm.modelling.lobes import lobe_mesh
 from farm.modelling.modelled_tree import growth_parameters, session_glb
 from farm.modelling.session import FORMAT_VERSION, History, SessionError, session_from_json, session_to_json
 
@@ -91,7 +92,16 @@ def test_a_stroke_drag_reshapes_its_span_and_remeshes_the_lobe(modelled):
     # The lobe is remeshed through the dragged stroke: closed, and its surface reaches the target.
     lobe = dragged.lobes[0]
     assert lobe.mesh().is_watertight and np.linalg.norm(lobe.vertices - target, axis=1).min() < 1e-6
-    assert dragged.lobes[0].strokes[0] is modelled.lobes[0].strokes[0]
+    assert np.array_equal(dragged.lobes[0].strokes[0], modelled.lobes[0].strokes[0])  # the other stroke stays
+
+
+def test_a_stroke_added_to_a_lobe_gives_the_lobe_of_all_its_strokes(modelled):
+    extended = edits.make_lobe(edits.add_stroke(modelled, ring(10.0, 1.5)), lobe=0)
+    lobe = extended.lobes[0]
+    whole = lobe_mesh(list(lobe.strokes))  # from scratch: the local update must agree with it
+    assert len(lobe.strokes) == 3 and extended.strokes == ()
+    assert np.array_equal(lobe.vertices, whole.vertices) and np.array_equal(lobe.faces, whole.faces)
+    assert lobe.vertices[:, 2].max() > modelled.lobes[0].vertices[:, 2].max() + 1.0
 
 
 def test_undo_and_redo_walk_the_history_and_a_new_edit_drops_the_redo_stack():
