@@ -154,6 +154,16 @@ def test_desktop_mode_models_grows_saves_loads_and_sends_to_the_library(chromium
     version += 1
     wait_for_version(page, version)
     assert len(service.history.present.lobes) == 1 and service.history.present.strokes == ()
+    # A third loop drawn inside the lobe joins it (only the strips next to it are built).
+    page.keyboard.press("s")
+    set_plane_depth(page, 0.0)
+    drag(page, loop((0.0, 9.0), 3.3, 0.0))
+    version += 1
+    wait_for_version(page, version)
+    page.keyboard.press("l")
+    version += 1
+    wait_for_version(page, version)
+    assert len(service.history.present.lobes) == 1 and len(service.history.present.lobes[0].strokes) == 3
     screenshot(page, "lobe")
     # Shape: press on the lobe's surface where it faces the camera and pull it a metre up.
     page.keyboard.press("h")

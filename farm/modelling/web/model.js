@@ -306,6 +306,16 @@ export class ModelApp {
     root.add(this.preview);
   }
 
+  // Make a lobe of the drawn strokes, or, when they lie inside an existing lobe's box (and `fresh` is not asked),
+  // add them to that lobe: only the strips next to them are rebuilt.
+  makeLobe(fresh = false) {
+    const points = (this.state?.strokes || []).flat().map((p) => new THREE.Vector3(...p));
+    const centre = points.reduce((sum, p) => sum.add(p), new THREE.Vector3()).divideScalar(Math.max(points.length, 1));
+    const lobe = fresh || !points.length ? -1 : this.state.lobes.findIndex((l) =>
+      new THREE.Box3().setFromPoints(l.vertices.map((p) => new THREE.Vector3(...p))).containsPoint(centre));
+    return this.edit('lobe', lobe >= 0 ? { lobe } : {});
+  }
+
   async save() {
     const name = this.$('session-name').value;
     return this.call(() => api.post('save', { name }), (r) => `saved ${r.path} (${r.bytes} bytes)`);
@@ -331,7 +341,7 @@ export class ModelApp {
     canvas.addEventListener('pointermove', (e) => this.move(e));
     window.addEventListener('pointerup', () => this.up());
     for (const button of document.querySelectorAll('[data-tool]')) button.onclick = () => this.setTool(button.dataset.tool);
-    this.$('make-lobe').onclick = () => this.edit('lobe');
+    this.$('make-lobe').onclick = (e) => this.makeLobe(e.shiftKey);
     this.$('grow').onclick = () => this.grow();
     this.$('undo').onclick = () => this.edit('undo');
     this.$('redo').onclick = () => this.edit('redo');
@@ -350,7 +360,7 @@ export class ModelApp {
       if (e.ctrlKey && e.key === 'z') this.edit('undo');
       else if (e.ctrlKey && e.key === 'y') this.edit('redo');
       else if (keys[e.key]) this.setTool(keys[e.key]);
-      else if (e.key === 'l') this.edit('lobe');
+      else if (e.key === 'l' || e.key === 'L') this.makeLobe(e.shiftKey);
       else if (e.key === 'g') this.grow();
       else if (e.key === 'q' || e.key === 'e') this.turnPlane(e.key === 'q' ? -15 : 15);
     });

@@ -140,7 +140,7 @@ export class ModelVR {
   press(name) {
     const app = this.app;
     if (['stroke', 'branch', 'brush', 'move'].includes(name)) app.setTool(name);
-    else if (name === 'lobe') app.edit('lobe');
+    else if (name === 'lobe') app.makeLobe();
     else if (name === 'grow') app.grow();
     else if (name === 'undo' || name === 'redo') app.edit(name);
     else if (name === 'save') app.save();
