@@ -143,14 +143,20 @@ def static_response(roots: dict[str, Path], root_name: str, relative: str, fresh
                     headers={"Cache-Control": "max-age=3600" if root != fresh else "no-cache"})
 
 
-async def read_json_body(request, limit: int, what: str):
-    """The request's JSON body, or an error response: 413 over `limit` bytes (refused before parsing), 400 when
-    it is not JSON. Returns (parsed, None) or (None, response)."""
+async def read_json_body(request, limit: int, what: str, empty=None):
+    """The request's JSON body, or an error response: 413 over `limit` bytes (refused on its Content-Length before
+    it is read, else before parsing), 400 when it is not JSON. Returns (parsed, None) or (None, response); an
+    empty body is `empty` when that is given."""
     import json
 
+    declared = request.headers.get("content-length", "")
+    if declared.isdigit() and int(declared) > limit:
+        return None, error_response(413, f"{what} body of {int(declared)} bytes; allowed at most {limit}")
     body = await request.body()
     if len(body) > limit:
         return None, error_response(413, f"{what} body of {len(body)} bytes; allowed at most {limit}")
+    if empty is not None and not body.strip():
+        return empty, None
     try:
         return json.loads(body), None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

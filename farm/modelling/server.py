@@ -44,9 +44,12 @@ def create_model_app(service: ModelService, token: str):
         return static_response(roots, request.path_params["root"], request.path_params["path"], WEB_FOLDER)
 
     async def body_of(request: Request, limit: int = MAX_EDIT_BYTES):
-        if not (await request.body()).strip():
-            return {}, None
-        return await read_json_body(request, limit, request.url.path.rsplit("/", 1)[-1])
+        """(JSON object, None), or (None, an error response); an empty body is {}."""
+        what = request.url.path.rsplit("/", 1)[-1]
+        parsed, refused = await read_json_body(request, limit, what, empty={})
+        if refused is None and not isinstance(parsed, dict):
+            return None, error_response(400, f"{what} body is a JSON {type(parsed).__name__}; allowed an object")
+        return parsed, refused
 
     def tool_route(tool: str):
         async def apply(request: Request):

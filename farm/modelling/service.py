@@ -53,12 +53,10 @@ def _rotation_from_page(matrix) -> np.ndarray:
     return Z_UP_TO_Y_UP.T @ turn @ Z_UP_TO_Y_UP
 
 
-def _field(body: dict, key: str, default=None, required: bool = True):
-    if key in body:
-        return body[key]
-    if required and default is None:
+def _field(body: dict, key: str):
+    if key not in body:
         raise SessionError(f"request lacks {key!r}")
-    return default
+    return body[key]
 
 
 class ModelService:

@@ -83,6 +83,8 @@ def test_a_large_or_malformed_body_is_refused_and_the_session_stays(site):
     assert big.status_code == 413 and "allowed at most" in big.json()["error"]
     bad = api.post("/api/stroke", content=b"{not json")
     assert bad.status_code == 400 and "malformed JSON" in bad.json()["error"]
+    listed = api.post("/api/grow", content=b"[1, 2]")
+    assert listed.status_code == 400 and "allowed an object" in listed.json()["error"]
     assert api.get("/api/version").json()["version"] == version
 
 
