@@ -26,6 +26,7 @@ COMMANDS = {
     "export": "farm.commands.export",
     "render": "farm.commands.render",
     "review": "farm.commands.review",
+    "model": "farm.commands.model",
     "library": "farm.commands.library",
     "train": "farm.commands.train",
     "retrain": "farm.commands.train",

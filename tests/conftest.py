@@ -19,3 +19,23 @@ def ray_session():
                  logging_level="WARNING", runtime_env={"env_vars": {"PYOPENGL_PLATFORM": "egl"}})
     yield ray
     ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def chromium_browser():
+    """Headless Chromium for one test module (playwright's sync API runs one browser at a time); the module is
+    skipped (failed with CI=true) where chromium is not installed."""
+    import shutil
+
+    from required_tools import missing_tool
+
+    if shutil.which("chromium") is None:
+        missing_tool("chromium is not installed: run `make browser-env`")
+    from playwright import sync_api
+
+    from farm.review.browser import launch_chromium
+
+    with sync_api.sync_playwright() as playwright:
+        browser = launch_chromium(playwright)
+        yield browser
+        browser.close()

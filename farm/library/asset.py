@@ -23,7 +23,8 @@ from species.studio.wind import WIND_LAYOUT, wind_attributes
 from ..tree_chain import stage_rngs
 from .lod_fit import drawn_cover, fit_impostor, fit_lods, settle_twigs
 
-__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
+__all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "build_asset_from_tree", "leaf_instances",
+           "leaf_alphas", "leaf_fractions",
            "measure_chain"]
 
 
@@ -204,6 +205,13 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
         params = species.sample(species_name, sample_rng)
     with timer.stage("grow"):
         skeleton, lod0 = species.rebuild(params, name=ident)
+    return build_asset_from_tree(ident, species_name, seed, params, skeleton, lod0, spec, renderer, timer)
+
+
+def build_asset_from_tree(ident: str, species_name: str, seed: int, params: dict, skeleton, lod0, spec, renderer,
+                          timer) -> LibraryAsset:
+    """Simplify, texture and measure one asset from a grown tree (its skeleton and LOD0 mesh, e.g. a hand-modelled
+    one); `species_name` picks the bark and leaf textures (no files written)."""
     with timer.stage("textures"):  # cached per species, colour and size: most assets hit the cache
         maps = bark_maps(species_name, lod0.bark_color, spec.texture_size)
         atlases = {season: leaf_atlas(season_leaf_colour(season, lod0.leaf_color), spec.texture_size // 2)

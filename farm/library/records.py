@@ -18,12 +18,12 @@ from .spec import LibrarySpec, library_spec_from_record, species_of_trees
 
 __all__ = ["LibraryError", "LIBRARY_RECORD", "ASSETS", "ADDED", "BLENDER_PENDING", "BLENDER_FAILED",
            "asset_record_path", "write_library_record", "read_library_spec", "write_added_record",
-           "library_asset_ids"]
+           "library_asset_ids", "write_session_record"]
 
 LIBRARY_RECORD = "library.json"
 LIBRARY_FORMAT = "treefarm-library"  # library.json's "format"
 ASSETS = "assets"
-ADDED = "_added"  # one {species, seed} record per asset `farm library add` built
+ADDED = "_added"  # one {species, seed} record per asset `farm library add` built, {id, source} per session asset
 BLENDER_PENDING = "blender outputs pending (renderers.blender_assets is not available)"
 BLENDER_FAILED = "failed: "  # how an asset.json's "blender" starts when its FBX export failed
 
@@ -56,6 +56,12 @@ def write_added_record(location: Location, species_name: str, seed: int) -> None
                           to_json({"species": species_name, "seed": seed}).encode())
 
 
+def write_session_record(location: Location, ident: str) -> None:
+    """Record that an asset was built from a modelling session (`farm model`'s send to library), so the catalog
+    lists it beside the (species, seed) ones."""
+    location.write_atomic(f"{ADDED}/{ident}.json", to_json({"id": ident, "source": "session"}).encode())
+
+
 def library_asset_ids(location: Location, spec: LibrarySpec) -> list[str]:
     """Sorted ids of every asset a library holds or should hold: its spec's trees and those `farm library add`
     added (whether or not their asset.json was written)."""
@@ -63,5 +69,5 @@ def library_asset_ids(location: Location, spec: LibrarySpec) -> list[str]:
     for name in location.list(ADDED):
         if name.endswith(".json") and not name.startswith("."):
             added = json.loads(location.read_bytes(f"{ADDED}/{name}"))
-            ids.append(asset_id(added["species"], added["seed"]))
+            ids.append(added["id"] if "id" in added else asset_id(added["species"], added["seed"]))
     return sorted(set(ids))

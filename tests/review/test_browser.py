@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import io
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image
-from playwright import sync_api
 
 from conftest import running_server
 from required_tools import missing_tool
@@ -18,55 +18,9 @@ from required_tools import missing_tool
 if shutil.which("chromium") is None:
     missing_tool("chromium is not installed: run `make browser-env`", allow_module_level=True)
 
-# A WebXR device stand-in: immersive-vr supported, a session whose frames the test plays with __xrStep().
-FAKE_XR = """
-(() => {
-  class FakeSession extends EventTarget {
-    constructor() { super(); this.renderState = {}; this.inputSources = []; this.enabledFeatures = ['local-floor'];
-                    this.environmentBlendMode = 'opaque'; this.visibilityState = 'visible'; this.callbacks = []; }
-    updateRenderState(state) { Object.assign(this.renderState, state); }
-    async requestReferenceSpace(type) {
-      const space = { type, getOffsetReferenceSpace: () => space, addEventListener() {}, removeEventListener() {} };
-      return space;
-    }
-    requestAnimationFrame(callback) { this.callbacks.push(callback); return this.callbacks.length; }
-    cancelAnimationFrame() {}
-    async end() { this.dispatchEvent(new Event('end')); }
-  }
-  const eye = { eye: 'left', transform: { matrix: new Float32Array([1,0,0,0, 0,1,0,0, 0,0,1,0, 0,1.6,0,1]) },
-                projectionMatrix: new Float32Array([1,0,0,0, 0,1.33,0,0, 0,0,-1.002,-1, 0,0,-0.2,0]) };
-  window.__xrStep = (n = 1) => {
-    for (let i = 0; i < n; i++) {
-      const session = window.__xrSession, pending = session.callbacks.splice(0);
-      const frame = { session, getViewerPose: () => ({ views: [eye] }), getPose: () => null };
-      for (const callback of pending) callback(performance.now(), frame);
-    }
-  };
-  window.XRWebGLLayer = class {
-    constructor() {
-      this.framebuffer = null; this.framebufferWidth = 640; this.framebufferHeight = 480; this.ignoreDepthValues = true;
-    }
-    getViewport() { return { x: 0, y: 0, width: 640, height: 480 }; }
-  };
-  delete window.XRWebGLBinding;
-  WebGL2RenderingContext.prototype.makeXRCompatible = async function () {};
-  const xr = new EventTarget();
-  xr.isSessionSupported = async (mode) => mode === 'immersive-vr';
-  xr.requestSession = async () => (window.__xrSession = new FakeSession());
-  Object.defineProperty(Navigator.prototype, 'xr', { get: () => xr, configurable: true });
-})();
-"""
+# A WebXR device stand-in (shared with the modelling page's tests): frames played with __xrStep().
+FAKE_XR = (Path(__file__).resolve().parents[1] / "tools" / "fake_webxr.js").read_text()
 NO_XR = "Object.defineProperty(Navigator.prototype, 'xr', { get: () => undefined, configurable: true });"
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from farm.review.browser import launch_chromium
-
-    with sync_api.sync_playwright() as playwright:
-        browser = launch_chromium(playwright)
-        yield browser
-        browser.close()
 
 
 @pytest.fixture(scope="module")
@@ -76,13 +30,13 @@ def site(review_dataset, tmp_path_factory):
 
 
 @pytest.fixture
-def open_page(browser, site):
+def open_page(chromium_browser, site):
     """Opens the review page (with an optional init script); yields (page, problems, service)."""
     pages = []
 
     def opener(init_script: str | None = None, reviewer: str = "browser"):
         base, token, service = site
-        page = browser.new_page(viewport={"width": 1100, "height": 700})
+        page = chromium_browser.new_page(viewport={"width": 1100, "height": 700})
         problems = []
         page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
         page.on("console", lambda message: problems.append(f"console: {message.text}")

@@ -8,7 +8,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import shutil
 from pathlib import Path
 
 import httpx
@@ -24,7 +23,6 @@ from farm.review.report import EvaluationReport, is_report
 from farm.review.server import TOKEN_HEADER, ReviewServer, create_app, new_token
 from farm.review.store import ReviewError
 
-from required_tools import missing_tool
 
 NAN = math.nan
 # (method, source, tree_id, status, crown_iou_unseen, cloud_fit_10cm, silhouette_iou_input, node_hausdorff)
@@ -197,23 +195,9 @@ def test_farm_review_of_a_report_prints_its_rows_and_writes_nothing_there(fake_r
 
 
 # ------------------------------------------------------------------------------------------------ the page
-@pytest.fixture
-def browser():
-    if shutil.which("chromium") is None:
-        missing_tool("chromium is not installed: run `make browser-env`")
-    from playwright import sync_api
-
-    from farm.review.browser import launch_chromium
-
-    with sync_api.sync_playwright() as playwright:
-        browser = launch_chromium(playwright)
-        yield browser
-        browser.close()
-
-
-def test_the_report_page_lists_the_rows_and_shows_a_rows_panel_on_click(browser, report_server):
+def test_the_report_page_lists_the_rows_and_shows_a_rows_panel_on_click(chromium_browser, report_server):
     base, token, folder = report_server
-    page = browser.new_page(viewport={"width": 1200, "height": 700})
+    page = chromium_browser.new_page(viewport={"width": 1200, "height": 700})
     problems = []
     page.on("pageerror", lambda error: problems.append(f"page error: {error}"))
     page.on("console", lambda message: problems.append(f"console: {message.text}") if message.type == "error" else None)

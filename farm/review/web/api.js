@@ -1,13 +1,15 @@
 // The review server's HTTP API: every request carries the access token in the X-Review-Token header.
-const token = document.querySelector('meta[name="review-token"]').content;
+// `request` is the modelling page's too (farm/modelling/web/api.js).
+export const token = document.querySelector('meta[name="review-token"]').content;
 
-async function request(path, options = {}) {
+// A fetch with the token; a failed one throws an Error with the server's message and the HTTP `status`.
+export async function request(path, options = {}) {
   const headers = { 'X-Review-Token': token, ...(options.headers || {}) };
   const response = await fetch(path, { ...options, headers });
   if (!response.ok) {
     let message = `${response.status} ${response.statusText}`;
     try { message = (await response.json()).error || message; } catch (_) { /* body was not JSON */ }
-    throw new Error(message);
+    throw Object.assign(new Error(message), { status: response.status });
   }
   return response;
 }

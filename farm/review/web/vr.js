@@ -11,6 +11,27 @@ const PANEL_W = 800, PANEL_H = 440;
 const BUTTONS = [['approve', 'Approve', 30, 300, 230, 110, '#2e7d32'], ['reject', 'Reject', 285, 300, 230, 110, '#b71c1c'],
                  ['previous', '◀ page', 540, 300, 110, 110, '#39424e'], ['next', 'page ▶', 660, 300, 110, 110, '#39424e']];
 
+// A flat panel drawn from a canvas (widthPx x heightPx) as a mesh `metres` wide: {canvas, texture, mesh}; draw on
+// the canvas, then set texture.needsUpdate. The modelling page's tool menu is one too.
+export function canvasPanel(widthPx, heightPx, metres) {
+  const canvas = document.createElement('canvas');
+  canvas.width = widthPx;
+  canvas.height = heightPx;
+  const texture = new THREE.CanvasTexture(canvas);
+  texture.colorSpace = THREE.SRGBColorSpace;
+  const mesh = new THREE.Mesh(new THREE.PlaneGeometry(metres, metres * heightPx / widthPx),
+                              new THREE.MeshBasicMaterial({ map: texture }));
+  return { canvas, texture, mesh };
+}
+
+// A controller's pointing ray, `length` metres along its -z (the modelling page's controllers have one too).
+export function controllerRay(length) {
+  const ray = new THREE.Line(new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), new THREE.Vector3(0, 0, -1)]),
+                             new THREE.LineBasicMaterial({ color: 0x9fd3ff }));
+  ray.scale.z = length;
+  return ray;
+}
+
 export class VRMode {
   constructor(viewer, callbacks) {
     this.viewer = viewer;
@@ -66,13 +87,7 @@ export class VRMode {
     this.scene.add(floor);
     this.root = new THREE.Group();
     this.scene.add(this.root);
-    this.panelCanvas = document.createElement('canvas');
-    this.panelCanvas.width = PANEL_W;
-    this.panelCanvas.height = PANEL_H;
-    this.panelTexture = new THREE.CanvasTexture(this.panelCanvas);
-    this.panelTexture.colorSpace = THREE.SRGBColorSpace;
-    this.panel = new THREE.Mesh(new THREE.PlaneGeometry(0.8, 0.8 * PANEL_H / PANEL_W),
-                                new THREE.MeshBasicMaterial({ map: this.panelTexture }));
+    ({ canvas: this.panelCanvas, texture: this.panelTexture, mesh: this.panel } = canvasPanel(PANEL_W, PANEL_H, 0.8));
     this.panel.position.set(0, 1.0, -0.8);
     this.panel.rotation.x = -0.5;
     this.scene.add(this.panel);
@@ -82,9 +97,7 @@ export class VRMode {
 
   makeController(i) {
     const controller = this.viewer.renderer.xr.getController(i);
-    const ray = new THREE.Line(new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), new THREE.Vector3(0, 0, -1)]),
-                               new THREE.LineBasicMaterial({ color: 0x9fd3ff }));
-    ray.scale.z = 5;
+    const ray = controllerRay(5);
     controller.add(ray);
     controller.add(new THREE.Mesh(new THREE.BoxGeometry(0.03, 0.03, 0.1), new THREE.MeshLambertMaterial({ color: 0x8899aa })));
     controller.userData.ray = ray;
