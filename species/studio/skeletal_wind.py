@@ -63,7 +63,7 @@ class WindRig:
     names     : J joint names, `trunk_<k>` then `branch_<LOD0 branch index>`.
     parent    : (J,) int64, parent joint (-1 for trunk_0).
     position  : (J, 3) float64, metres, Z up: the joint's pivot.
-    level     : (J,) int64, branch order (0 on the trunk joints).
+    level     : (J,) int64, branch order (0 on the trunk's joints and on stems split off it).
     phase     : (J,) float64 in [0, 1), the branch's wind phase (`branch_phases`, the shader's w.z).
     direction : (J, 3) float64, unit vector from the pivot to the branch's farthest node (+z on the trunk).
     reach     : (J,) float64, metres from the pivot to the branch's farthest node.
@@ -184,9 +184,9 @@ def _weights_on(branch: np.ndarray, along: np.ndarray, own_joint, anchor_joints,
 
 
 def wind_rig(skeleton: Skeleton, joint_budget: int = DEFAULT_JOINT_BUDGET) -> WindRig:
-    """The joint hierarchy of a LOD0 skeleton: TRUNK_SEGMENTS joints up the trunk, then first- and second-order
-    branches by size (reach times base radius), a second-order branch only when its parent has a joint, until
-    `joint_budget` joints. Deterministic: ties go to the lower branch index."""
+    """The joint hierarchy of a LOD0 skeleton: TRUNK_SEGMENTS joints up the trunk, then stems split off it and
+    first- and second-order branches by size (reach times base radius), a branch only when its parent is the
+    trunk or has a joint, until `joint_budget` joints. Deterministic: ties go to the lower branch index."""
     if joint_budget < TRUNK_SEGMENTS:
         raise ValueError(f"joint_budget {joint_budget} is under the trunk's {TRUNK_SEGMENTS} segments")
     pivots = skeleton.positions[branch_pivots(skeleton)].astype(np.float64)
@@ -203,12 +203,13 @@ def wind_rig(skeleton: Skeleton, joint_budget: int = DEFAULT_JOINT_BUDGET) -> Wi
 
     chosen = np.zeros(skeleton.n_branches, bool)
     score = reaches * skeleton.radius[starts].astype(np.float64)
-    candidates = np.flatnonzero((level >= 1) & (level <= 2) & ~trunk_branch & (reaches > 0))
+    # Stems split off the trunk (order 0) lean with it; first- and second-order branches also sway.
+    candidates = np.flatnonzero((level <= 2) & ~trunk_branch & (reaches > 0))
     room = joint_budget - TRUNK_SEGMENTS
     for b in candidates[np.lexsort((candidates, -score[candidates]))]:  # at most B steps, stops at the budget
         if room == 0:
             break
-        if level[b] == 1 or chosen[parent[b]]:
+        if trunk_branch[parent[b]] or chosen[parent[b]]:
             chosen[b] = True
             room -= 1
     jointed = np.flatnonzero(chosen)
@@ -332,9 +333,10 @@ def wind_clip(rig: WindRig, settings: WindClipSettings) -> WindClip:
             h = np.clip(points[:, 2] / height, 0.0, 1.5)
             return gust[:, None, None] * height * (h * h)[None, :, None] * WIND_DIRECTION
 
-        amplitude = (SWING_BASE + SWING_PER_LEVEL * rig.level[branches]) * rig.reach[branches]
-        moved = arm + lean(tip) - lean(pivot) + _swing_offsets(rig.level[branches], rig.phase[branches],
-                                                               amplitude, times, settings, period)
+        level = rig.level[branches]
+        amplitude = np.where(level >= 1, (SWING_BASE + SWING_PER_LEVEL * level) * rig.reach[branches], 0.0)
+        moved = arm + lean(tip) - lean(pivot) + _swing_offsets(level, rig.phase[branches], amplitude, times,
+                                                               settings, period)
         world[:, branches] = _arc_quaternions(np.broadcast_to(arm, moved.shape), moved)
     parent_world = world[:, np.maximum(rig.parent, 0)]
     parent_world[:, rig.parent < 0] = [0.0, 0.0, 0.0, 1.0]
