@@ -23,6 +23,7 @@ from species.studio.wind import WIND_LAYOUT, wind_attributes
 
 from ..tree_chain import stage_rngs
 from .lod_fit import drawn_cover, fit_impostor, fit_lods, settle_twigs
+from .skinned_levels import level_skins
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "leaf_instances", "leaf_alphas", "leaf_fractions",
            "measure_chain"]
@@ -90,6 +91,7 @@ class LibraryAsset:
     twig_atlas: object = None  # renderers.twig_atlas.TwigAtlasImage, when a level draws twig cards
     wind_rig: object = None  # species.studio.skeletal_wind.WindRig, when the spec asks for skeletal wind
     wind_clip: object = None  # its WindClip
+    level_skins: list = field(default_factory=list)  # a skinned_levels.LevelSkin per level (None: impostor)
 
     @property
     def lod0(self):
@@ -266,5 +268,7 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
         measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas, points)
+    with timer.stage("wind"):
+        skins = level_skins(rig, levels)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
-                        levels, atlas, capsules, maps, atlases, twig_atlas, rig, clip)
+                        levels, atlas, capsules, maps, atlases, twig_atlas, rig, clip, skins)

@@ -21,7 +21,6 @@ from species.skeleton import LEAF_CARD_CORNERS
 
 from .asset import LibraryAsset, leaf_instances
 from .gltf_wind import add_skin_attributes, joint_nodes, skin_entry, wind_animation
-from .skinned_levels import level_skins
 from .png_cache import PngCache
 
 __all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
@@ -121,7 +120,7 @@ def _document(asset: LibraryAsset, instanced: bool, pngs: PngCache | None,
     writer = GlbWriter(keep_bytes)
     materials = _materials(writer, asset, PngCache() if pngs is None else pngs)
     variant_maps = [{"material": materials[season], "variants": [i]} for i, season in enumerate(SEASONS)]
-    skins = level_skins(asset)
+    skins = asset.level_skins
     level_nodes, level_joints, skin_entries, lean_node = [], [], [], None
     for k, level in enumerate(asset.levels):
         children = []

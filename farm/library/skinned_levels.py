@@ -1,7 +1,8 @@
 """Each level of an asset skinned to its one wind rig: the bark's and twig cards' skin weights and the joint
 each leaf card follows, every level on the same joints (`LibraryAsset.wind_rig`).
 
-In: a LibraryAsset with skeletal wind. Out: one `LevelSkin` per level (None for the impostor, which leans whole).
+In: a WindRig and the asset's levels (`farm.library.asset.LevelData`). Out: one `LevelSkin` per level (None for the
+impostor, which leans whole), made once per asset by `build_asset` (`LibraryAsset.level_skins`).
 """
 from __future__ import annotations
 
@@ -10,8 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from species.studio.skeletal_wind import follow_joints, skin_weights
-
-from .asset import LibraryAsset
 
 __all__ = ["LevelSkin", "level_skins", "skin_of"]
 
@@ -29,9 +28,9 @@ class LevelSkin:
     leaf_joint: np.ndarray
 
 
-def skin_of(asset: LibraryAsset, level) -> LevelSkin:
-    """The skin of one level (not the impostor)."""
-    rig, bark = asset.wind_rig, level.mesh.bark
+def skin_of(rig, level) -> LevelSkin:
+    """The skin of one level (not the impostor) on `rig`."""
+    bark = level.mesh.bark
     joints, weights = skin_weights(rig, bark.vertices, level.lod0_branches(bark.attributes["branch"]))
     twig_joints = twig_weights = None
     if level.twigs is not None:  # twig cards carry LOD0 branch ids already
@@ -45,8 +44,8 @@ def skin_of(asset: LibraryAsset, level) -> LevelSkin:
     return LevelSkin(joints, weights, twig_joints, twig_weights, leaf_joint)
 
 
-def level_skins(asset: LibraryAsset) -> list[LevelSkin | None]:
-    """One LevelSkin per level in order, None for the impostor; [] when the asset has no wind rig."""
-    if asset.wind_rig is None:
+def level_skins(rig, levels: list) -> list[LevelSkin | None]:
+    """One LevelSkin per level in order, None for the impostor; [] without a rig."""
+    if rig is None:
         return []
-    return [None if level.name == "IMPOSTOR" else skin_of(asset, level) for level in asset.levels]
+    return [None if level.name == "IMPOSTOR" else skin_of(rig, level) for level in levels]

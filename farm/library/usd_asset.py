@@ -20,7 +20,6 @@ from species.skeleton import LEAF_CARD_CORNERS
 from species.tree_mesh import MeshPart
 
 from .asset import LibraryAsset, leaf_instances
-from .skinned_levels import level_skins
 from .usd_wind import bind_skin, define_skeleton, joint_xforms, lean_whole, set_clip_time_range
 
 __all__ = ["asset_to_usdc", "TEXTURE_FILES", "TWIG_TEXTURE_FILES", "prim_name"]
@@ -121,9 +120,10 @@ PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
 def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray | None = None,
-                    origin: np.ndarray | None = None) -> list[str]:
+                    origin: np.ndarray | None = None, instances=None) -> list[str]:
     """The level's leaves as a PointInstancer at `path` (the `chosen` (M,) bool ones, placed from `origin` (3,),
-    when given); returns the names of the prototypes it made."""
+    when given; `instances`: the level's `leaf_instances`, when the caller has them); returns the names of the
+    prototypes it made."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
@@ -136,10 +136,12 @@ def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray |
     prototypes = []
     for kind in kinds:
         prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", card, uv_tile=int(kind))
-        UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+        if card_material is not None:  # else the leaves' season binding above it holds
+            UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
-    translation, rotation, scale = (array[chosen] for array in leaf_instances(level.skeleton))
+    instances = leaf_instances(level.skeleton) if instances is None else instances
+    translation, rotation, scale = (array[chosen] for array in instances)
     if origin is not None:
         translation = translation - origin
     quat = unit_quaternions(rotation)  # x, y, z, w
@@ -198,7 +200,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                           TWIG_TEXTURE_FILES["twig_normal"], None, True, 0.8, "clamp")
              for s in SEASONS} if asset.twig_atlas is not None else {}
     geom = f"{root_path}/Geom"
-    skins = level_skins(asset)
+    skins = asset.level_skins
     if skins:  # skinned meshes live under a SkelRoot; the skeleton and the leaves' joints serve every level
         UsdSkel.Root.Define(stage, geom)
         skeleton = define_skeleton(stage, f"{geom}/Skel", asset.wind_rig, asset.wind_clip)
@@ -228,12 +230,10 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 if skins:
                     bind_skin(mesh, skeleton, skins[k].bark_joints, skins[k].bark_weights)
                 if level.skeleton.n_leaves and skins:
-                    leaf_joint = skins[k].leaf_joint
+                    leaf_joint, instances = skins[k].leaf_joint, leaf_instances(level.skeleton)
                     for joint in np.unique(leaf_joint):
-                        made = _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, leaves["summer"],
-                                               leaf_joint == joint, asset.wind_rig.position[joint])
-                        name = asset.wind_rig.names[joint]
-                        prototype_names.update(f"{name}/cards/prototypes/{kind}" for kind in made)
+                        _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
+                                        asset.wind_rig.position[joint], instances)
                 elif level.skeleton.n_leaves:
                     made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
                     prototype_names.update(f"prototypes/{kind}" for kind in made)
@@ -254,6 +254,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             over = stage.OverridePrim(f"{geom}/leaves")
             if season == "bare":
                 over.SetActive(False)
+            elif skins:  # every joint's cards under Geom/leaves take the season's binding from it
+                UsdShade.MaterialBindingAPI.Apply(over).Bind(leaves[season])
             else:
                 for name in sorted(prototype_names):
                     card = stage.OverridePrim(f"{geom}/leaves/{name}")

@@ -75,20 +75,20 @@ def bind_skin(mesh, skeleton, joints: np.ndarray, weights: np.ndarray) -> None:
 def joint_xforms(stage, path: str, rig, clip, chosen: np.ndarray) -> dict[int, str]:
     """An Xform per chosen joint under `path`, moving as the joint does (translate and orient keyed at the
     clip's time codes); what sits under it is placed from the joint's rest pivot. Returns {joint: prim path}."""
-    from pxr import Gf, UsdGeom
+    from pxr import Gf, Sdf, UsdGeom
 
     world, position = joint_world_poses(rig, clip.rotations)
-    out = {}
+    out, ops = {}, []
     for joint in (int(j) for j in chosen):  # one prim per joint that holds leaves: at most the joint budget
         xform = UsdGeom.Xform.Define(stage, f"{path}/{rig.names[joint]}")
-        translate = xform.AddTranslateOp()
-        orient = xform.AddOrientOp()
-        quaternions = unit_quaternions(world[:, joint])
-        for code in range(len(clip.times)):
-            translate.Set(Gf.Vec3d(*position[code, joint]), code)
-            x, y, z, w = (float(v) for v in quaternions[code])
-            orient.Set(Gf.Quatf(w, x, y, z), code)
+        ops.append((joint, xform.AddTranslateOp().GetAttr(), xform.AddOrientOp().GetAttr()))
         out[joint] = str(xform.GetPath())
+    with Sdf.ChangeBlock():  # thousands of samples: notices once, not per sample
+        for joint, translate, orient in ops:
+            quaternions = unit_quaternions(world[:, joint]).tolist()
+            for code, ((x, y, z, w), offset) in enumerate(zip(quaternions, position[:, joint].tolist())):
+                translate.Set(Gf.Vec3d(*offset), code)
+                orient.Set(Gf.Quatf(w, x, y, z), code)
     return out
 
 

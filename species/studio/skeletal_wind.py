@@ -158,8 +158,7 @@ def _top_influences(joints: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray
 def _trunk_weights(along: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Linear blend between the two trunk joints whose segment middles bracket `along` (n,) in [0, 1]."""
     t = np.clip(along * TRUNK_SEGMENTS - 0.5, 0.0, TRUNK_SEGMENTS - 1.0)
-    low = np.minimum(np.floor(t).astype(np.int64), TRUNK_SEGMENTS - 2) if TRUNK_SEGMENTS > 1 else \
-        np.zeros(len(t), np.int64)
+    low = np.minimum(np.floor(t).astype(np.int64), TRUNK_SEGMENTS - 2)
     share = np.clip(t - low, 0.0, 1.0)
     joints = np.stack([low, np.minimum(low + 1, TRUNK_SEGMENTS - 1)], axis=1)
     return _top_influences(joints, np.stack([1.0 - share, share], axis=1))
@@ -223,7 +222,7 @@ def wind_rig(skeleton: Skeleton, joint_budget: int = DEFAULT_JOINT_BUDGET) -> Wi
     anchor_weights = np.zeros((skeleton.n_branches, MAX_INFLUENCES))
     anchor_weights[:, 0] = 1.0
     depth = _branch_depths(parent)
-    for d in range(1, int(depth.max()) + 1 if len(depth) else 1):
+    for d in range(1, int(depth.max()) + 1):
         now = np.flatnonzero(depth == d)
         host = parent[now]
         along = np.clip(row_norms(pivots[now] - pivots[host]) / np.maximum(reaches[host], 1e-9), 0.0, 1.0)

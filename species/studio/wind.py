@@ -10,7 +10,8 @@ import numpy as np
 
 from ..skeleton import Skeleton
 
-__all__ = ["WIND_LAYOUT", "branch_pivots", "branch_reaches", "branch_phases", "wind_attributes", "GOLDEN_RATIO_CONJUGATE"]
+__all__ = ["WIND_LAYOUT", "branch_pivots", "branch_reaches", "branch_phases", "wind_attributes",
+           "GOLDEN_RATIO_CONJUGATE"]
 
 WIND_LAYOUT = {
     "_WIND": "VEC4 float: x = branch level (0 trunk, 1 first-order branches, ...), y = normalised distance "
