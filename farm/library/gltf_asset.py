@@ -238,6 +238,8 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
     groups = [(None, np.ones(len(clumps), bool))] if leaf_joint is None else \
         [(int(j), leaf_joint == j) for j in np.unique(leaf_joint)]
     origin = np.zeros((len(clumps), 3)) if leaf_joint is None else asset.wind_rig.position[leaf_joint]
+    # Many groups (one per joint): every card's rotation turned once.
+    turned = None if leaf_joint is None else unit_quaternions(Z_UP_TO_Y_UP @ rotation).astype(np.float32)
     nodes = []
     for clump, kind in ((False, "leaves"), (True, "clumps")):
         if not (clumps == clump).any():
@@ -253,7 +255,8 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
                 continue
             attributes = {
                 "TRANSLATION": writer.floats((translation[chosen] - origin[chosen]) @ Z_UP_TO_Y_UP.T, "VEC3", None),
-                "ROTATION": writer.floats(unit_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]).astype(np.float32),
+                "ROTATION": writer.floats(turned[chosen] if turned is not None else
+                                          unit_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]).astype(np.float32),
                                           "VEC4", None),
                 "SCALE": writer.floats(scale[chosen], "VEC3", None),
                 "_WIND": writer.floats(level.leaf_wind[chosen], "VEC4", None),

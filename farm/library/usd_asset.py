@@ -120,10 +120,10 @@ PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
 def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray | None = None,
-                    origin: np.ndarray | None = None, instances=None) -> list[str]:
-    """The level's leaves as a PointInstancer at `path` (the `chosen` (M,) bool ones, placed from `origin` (3,),
-    when given; `instances`: the level's `leaf_instances`, when the caller has them); returns the names of the
-    prototypes it made."""
+                    origin: np.ndarray | None = None, leaves=None) -> list[str]:
+    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made. Skeletal
+    wind gives one per joint: the `chosen` (M,) bool leaves, placed from `origin` (3,), `leaves` the level's
+    (translation, unit quaternion x y z w, scale, clump) per card, made once."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
@@ -131,7 +131,10 @@ def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray |
     # One prototype per card kind present: `leaf` (single-leaf tile) for cards that are one leaf, `clump`
     # (clump tile) for cards that merge several.
     chosen = np.ones(level.skeleton.n_leaves, bool) if chosen is None else chosen
-    clumps = card_clumps(level.mesh.leaves)[chosen]
+    if leaves is None:
+        translation, rotation, scale = leaf_instances(level.skeleton)
+        leaves = translation, unit_quaternions(rotation), scale, card_clumps(level.mesh.leaves)  # x, y, z, w
+    translation, quat, scale, clumps = (array[chosen] for array in leaves)
     kinds = [kind for kind in (False, True) if (clumps == kind).any()]
     prototypes = []
     for kind in kinds:
@@ -140,11 +143,8 @@ def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray |
             UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
-    instances = leaf_instances(level.skeleton) if instances is None else instances
-    translation, rotation, scale = (array[chosen] for array in instances)
     if origin is not None:
         translation = translation - origin
-    quat = unit_quaternions(rotation)  # x, y, z, w
     instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.searchsorted(kinds, clumps).astype(np.int32)))
     instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
     instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))
@@ -230,10 +230,12 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 if skins:
                     bind_skin(mesh, skeleton, skins[k].bark_joints, skins[k].bark_weights)
                 if level.skeleton.n_leaves and skins:
-                    leaf_joint, instances = skins[k].leaf_joint, leaf_instances(level.skeleton)
+                    leaf_joint = skins[k].leaf_joint
+                    translation, rotation, scale = leaf_instances(level.skeleton)
+                    per_level = (translation, unit_quaternions(rotation), scale, card_clumps(level.mesh.leaves))
                     for joint in np.unique(leaf_joint):
                         _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
-                                        asset.wind_rig.position[joint], instances)
+                                        asset.wind_rig.position[joint], per_level)
                 elif level.skeleton.n_leaves:
                     made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
                     prototype_names.update(f"prototypes/{kind}" for kind in made)

@@ -17,6 +17,7 @@ from farm.library.records import write_library_record
 from farm.library.spec import default_library_spec, parse_library_spec
 from farm.dataset.storage import Location
 from gltf_validator import assert_valid_glb
+from usd_validator import assert_valid_usd
 from renderers.blender import blender_available, glb_info
 from species.meshing.gltf import read_accessor, read_glb_chunks
 
@@ -94,13 +95,9 @@ def test_the_wind_animation_turns_every_levels_joints_and_leans_the_impostor_ove
 
 
 def test_the_usd_validates_with_a_skeleton_and_its_animation(asset, record):
-    from pxr import Usd, UsdSkel, UsdValidation
+    from pxr import UsdSkel
 
-    stage = Usd.Stage.Open(str(next(asset.glob("*.usdc"))))
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    errors = [e for e in UsdValidation.ValidationContext(validators).Validate(stage)
-              if e.GetType() == UsdValidation.ValidationErrorType.Error]
-    assert not errors, [e.GetMessage() for e in errors]
+    stage = assert_valid_usd(next(asset.glob("*.usdc")))
     root = stage.GetDefaultPrim()
     geom = root.GetPath().AppendPath("Geom")
     skeleton = UsdSkel.Skeleton(stage.GetPrimAtPath(geom.AppendPath("Skel")))

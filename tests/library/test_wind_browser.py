@@ -228,13 +228,21 @@ def test_with_wind_strength_zero_nothing_moves(wind_page):
     assert problems == []
 
 
-@pytest.fixture(scope="module")
-def octahedral_page(chromium, tmp_path_factory):
-    """The example page showing a palm whose GLB carries an octahedral impostor: yields (page, problems)."""
-    library = one_palm_library(tmp_path_factory.mktemp("octahedral") / "library", OCTAHEDRAL_SPEC)
+@contextmanager
+def palm_page(chromium, folder: Path, spec: dict):
+    """The example page showing the palm of a new one-palm library of `spec` in `folder`: yields (page,
+    problems)."""
+    library = one_palm_library(folder / "library", spec)
     with serving(library) as address, \
             opened_page(chromium, f"{address}/{WIND_PAGE}?glb={glb_path(library)}") as opened:
         yield opened[:2]
+
+
+@pytest.fixture(scope="module")
+def octahedral_page(chromium, tmp_path_factory):
+    """The example page showing a palm whose GLB carries an octahedral impostor: yields (page, problems)."""
+    with palm_page(chromium, tmp_path_factory.mktemp("octahedral"), OCTAHEDRAL_SPEC) as opened:
+        yield opened
 
 
 def test_a_glb_with_crossed_planes_has_no_impostor_for_the_page_to_draw(wind_page):
@@ -287,10 +295,8 @@ SKELETAL_SPEC = {**SPEC, "skeletal_wind": True, "wind_period_s": 4.0}
 @pytest.fixture(scope="module")
 def clip_page(chromium, tmp_path_factory):
     """The example page showing a palm with baked skeletal wind (a 4 s clip): yields (page, problems)."""
-    library = one_palm_library(tmp_path_factory.mktemp("skeletal") / "library", SKELETAL_SPEC)
-    with serving(library) as address, \
-            opened_page(chromium, f"{address}/{WIND_PAGE}?glb={glb_path(library)}") as opened:
-        yield opened[:2]
+    with palm_page(chromium, tmp_path_factory.mktemp("skeletal"), SKELETAL_SPEC) as opened:
+        yield opened
 
 
 def test_the_page_plays_the_wind_clip_on_skinned_bark_with_instanced_leaves(clip_page):
