@@ -40,7 +40,7 @@ BEAT_BASE, BEAT_PER_LEVEL = 1.5, 0.6  # rad/s
 ACROSS_BEAT = 1.3
 ACROSS_SHARE, DROOP_SHARE = 0.5, 0.3
 WIND_DIRECTION = np.array([1.0, -0.3, 0.0]) / np.hypot(1.0, 0.3)
-WIND_ACROSS = np.array([0.3, 1.0, 0.0]) / np.hypot(1.0, 0.3)  # glTF (-0.3, 0, 1) in Z up
+WIND_ACROSS = np.array([-0.3, -1.0, 0.0]) / np.hypot(1.0, 0.3)  # the shader's (-0.3, 0, 1), Y up
 _UP = np.array([0.0, 0.0, 1.0])
 _LEAN_AXIS = np.cross(_UP, WIND_DIRECTION)  # turning +z about it leans the tree downwind
 

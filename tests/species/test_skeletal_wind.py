@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 
 import species
-from species.studio.skeletal_wind import (MAX_INFLUENCES, TRUNK_SEGMENTS, WindClipSettings, joint_world_poses,
-                                         shader_wind_offset, skin_weights, wind_clip, wind_rig)
+from species.meshing.gltf import z_up_to_y_up
+from species.studio.skeletal_wind import (MAX_INFLUENCES, TRUNK_SEGMENTS, WIND_ACROSS, WIND_DIRECTION,
+                                         WindClipSettings, joint_world_poses, shader_wind_offset, skin_weights,
+                                         wind_clip, wind_rig)
 from species.studio.wind import wind_attributes
 
 
@@ -92,3 +94,11 @@ def test_the_clip_follows_the_shaders_lean_and_first_order_sway(tree):
     amplitude = np.linalg.norm(expected, axis=2).max(axis=0)
     share = np.linalg.norm(across, axis=2).max(axis=0) / amplitude
     assert share[0] < 0.05 and np.median(share) < 0.15 and np.percentile(share, 90) < 0.4
+
+
+def test_the_wind_blows_where_the_pages_shader_blows_it():
+    # wind_example.html: windDirection = normalize(1, 0.3) in glTF's ground plane (x, z), and the swing's
+    # across = (-windDirection.y, 0, windDirection.x), both Y up.
+    downwind, across = z_up_to_y_up(np.stack([WIND_DIRECTION, WIND_ACROSS]))
+    assert np.allclose(downwind, np.array([1.0, 0.0, 0.3]) / np.hypot(1.0, 0.3), atol=1e-7)
+    assert np.allclose(across, [-downwind[2], 0.0, downwind[0]], atol=1e-7)
