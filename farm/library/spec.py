@@ -35,7 +35,8 @@ _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px
 # Spec fields the job record leaves out while they hold these values: they came after library.json was first
 # written, and leaving them out keeps the default library's records and spec digest as they were.
 _OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
-# Baked skeletal wind (species.studio.skeletal_wind): off, or on with the clip's joint budget and wind.
+# Baked skeletal wind (species.studio.skeletal_wind): off by default (the one value that decides it), or on
+# with the clip's joint budget and wind.
 _WIND_CLIP_DEFAULTS = WindClipSettings()
 WIND_CLIP_DEFAULTS = {"skeletal_wind": False, "wind_joints": _WIND_CLIP_DEFAULTS.joint_budget,
                       "wind_strength": _WIND_CLIP_DEFAULTS.strength, "wind_gust": _WIND_CLIP_DEFAULTS.gust,
@@ -112,7 +113,7 @@ class LibrarySpec(PipelineSpec):
     impostor_tile: int = DEFAULT_IMPOSTOR_TILE
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
-    skeletal_wind: bool = False
+    skeletal_wind: bool = WIND_CLIP_DEFAULTS["skeletal_wind"]
     wind_joints: int = _WIND_CLIP_DEFAULTS.joint_budget
     wind_strength: float = _WIND_CLIP_DEFAULTS.strength
     wind_gust: float = _WIND_CLIP_DEFAULTS.gust
@@ -245,7 +246,7 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
 def _parse_wind_clip(raw: dict) -> dict:
     """The skeletal wind fields of a spec mapping (their defaults where absent); the clip's own fields only with
     `skeletal_wind: true`."""
-    on = raw.get("skeletal_wind", False)
+    on = raw.get("skeletal_wind", WIND_CLIP_DEFAULTS["skeletal_wind"])
     if not isinstance(on, bool):
         raise LibrarySpecError("skeletal_wind", on, "true or false")
     given = [key for key in WIND_CLIP_KEYS[1:] if key in raw]
