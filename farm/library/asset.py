@@ -18,10 +18,12 @@ from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, sil
 from renderers.octahedral_impostor import render_octahedral_impostor
 from species.studio.collision import collision_capsules
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
+from species.studio.skeletal_wind import wind_clip, wind_rig
 from species.studio.wind import WIND_LAYOUT, wind_attributes
 
 from ..tree_chain import stage_rngs
 from .lod_fit import drawn_cover, fit_impostor, fit_lods, settle_twigs
+from .skinned_levels import level_skins
 
 __all__ = ["LibraryAsset", "LevelData", "asset_id", "build_asset", "build_asset_from_tree", "leaf_instances",
            "leaf_alphas", "leaf_fractions",
@@ -61,6 +63,11 @@ class LevelData:
     twig_index: int = -1  # the level's cards are `twig_atlas.layout.levels[twig_index]`
     twig_wind: np.ndarray | None = None
     twig_pivot: np.ndarray | None = None
+    lod0_branch: np.ndarray | None = None  # (B',) int64 the LOD0 branch of each of the level's branches
+
+    def lod0_branches(self, branch: np.ndarray) -> np.ndarray:
+        """The LOD0 branch ids of this level's branch ids (an array of any shape)."""
+        return np.asarray(branch, np.int64) if self.lod0_branch is None else self.lod0_branch[branch]
 
     @property
     def n_triangles(self) -> int:
@@ -83,6 +90,9 @@ class LibraryAsset:
     bark_maps: object  # species.studio.pbr_textures.BarkMaps
     leaf_atlases: dict[str, np.ndarray]
     twig_atlas: object = None  # renderers.twig_atlas.TwigAtlasImage, when a level draws twig cards
+    wind_rig: object = None  # species.studio.skeletal_wind.WindRig, when the spec asks for skeletal wind
+    wind_clip: object = None  # its WindClip
+    level_skins: list = field(default_factory=list)  # a skinned_levels.LevelSkin per level (None: impostor)
 
     @property
     def lod0(self):
@@ -117,7 +127,16 @@ class LibraryAsset:
                         "iou_per_azimuth": [round(v, 4) for v in lv.iou]} for lv in self.levels],
             "collision_capsules": [[round(float(v), 5) for v in row] for row in self.capsules],
             "wind_layout": WIND_LAYOUT,
+            **({"skeletal_wind": self.skeletal_wind_facts()} if self.wind_rig is not None else {}),
         }
+
+    def skeletal_wind_facts(self) -> dict:
+        """What the baked wind clip is: its joints (names, parents, and how many per branch order), its length,
+        keys and wind (docs/library.md, "Skeletal wind")."""
+        rig, clip = self.wind_rig, self.wind_clip
+        return {"joints": rig.n_joints, "joint_names": list(rig.names), "joint_parents": rig.parent.tolist(),
+                "joints_per_order": np.bincount(rig.level).tolist(), "animation": "wind",
+                "period_s": clip.duration, "keys": len(clip.times)}
 
     def _twig_facts(self, level) -> dict:
         """What a level's twig cards are: how many, and whether they carry their branches' leaves (False: bark
@@ -229,7 +248,9 @@ def build_asset_from_tree(ident: str, species_name: str, seed: int, params: dict
         levels = [LevelData("LOD0", lod0, skeleton, *_level_wind(skeleton, lod0, None), switch_px=0)]
         for k, (lod, px) in enumerate(zip(lods, spec.switch_px)):
             level = LevelData(f"LOD{lod.level}", lod.mesh, lod.skeleton,
-                              *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px))
+                              *_level_wind(lod.skeleton, lod.mesh, lod.original_node), switch_px=int(px),
+                              lod0_branch=skeleton.branch_id[lod.original_node[lod.skeleton.branch_starts]]
+                              .astype(np.int64))
             if twig_slots[k] >= 0:
                 level.twig_index = twig_slots[k]
                 level.twigs = twig_atlas.layout.card_part(level.twig_index)
@@ -238,6 +259,9 @@ def build_asset_from_tree(ident: str, species_name: str, seed: int, params: dict
                                                                     level.twigs.attributes["branch"], None)
             levels.append(level)
         capsules = collision_capsules(skeleton)
+        clip_settings = spec.wind_clip
+        rig = wind_rig(skeleton, clip_settings.joint_budget) if clip_settings is not None else None
+        clip = wind_clip(rig, clip_settings) if clip_settings is not None else None
     with timer.stage("impostor"):
         if spec.impostor == "octahedral":
             atlas = render_octahedral_impostor(renderer, lod0_cover, spec.impostor_frames, spec.impostor_tile)
@@ -252,5 +276,7 @@ def build_asset_from_tree(ident: str, species_name: str, seed: int, params: dict
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
         measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas, points)
+    with timer.stage("wind"):
+        skins = level_skins(rig, levels)
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
-                        levels, atlas, capsules, maps, atlases, twig_atlas)
+                        levels, atlas, capsules, maps, atlases, twig_atlas, rig, clip, skins)

@@ -20,6 +20,7 @@ from species.studio.lod import card_clumps
 from species.skeleton import LEAF_CARD_CORNERS
 
 from .asset import LibraryAsset, leaf_instances
+from .gltf_wind import add_skin_attributes, joint_nodes, skin_entry, wind_animation
 from .png_cache import PngCache
 
 __all__ = ["asset_to_glb", "glb_size", "SCREEN_HEIGHT_PX", "EXTENSIONS", "CARD_MESH_KINDS"]
@@ -119,35 +120,41 @@ def _document(asset: LibraryAsset, instanced: bool, pngs: PngCache | None,
     writer = GlbWriter(keep_bytes)
     materials = _materials(writer, asset, PngCache() if pngs is None else pngs)
     variant_maps = [{"material": materials[season], "variants": [i]} for i, season in enumerate(SEASONS)]
-    level_nodes = []
-    for level in asset.levels:
+    skins = asset.level_skins
+    level_nodes, level_joints, skin_entries, lean_node = [], [], [], None
+    for k, level in enumerate(asset.levels):
         children = []
         mesh = level.mesh
+        node = {"name": f"{asset.asset_id}_{level.name}"}
         if level.name == "IMPOSTOR":
             part = mesh.bark
             prim = _primitive(writer, part.vertices, part.normals, part.uvs, part.faces, materials["impostor"],
                               tangents=part.tangents)
             children.append(writer.node({"name": f"{asset.asset_id}_IMPOSTOR_card", "mesh": writer.mesh("impostor", prim)}))
+            if skins:  # the card leans whole about the tree's base, turned by a node of its own
+                lean_node = writer.node({"name": f"{asset.asset_id}_IMPOSTOR_lean", "children": children})
+                children = [lean_node]
         else:
             bark = mesh.bark
             prim = _primitive(writer, bark.vertices, bark.normals, bark.uvs, bark.faces, materials["bark"],
                               {"_WIND": (level.bark_wind, "VEC4"),
                                "_WIND_PIVOT": (z_up_to_y_up(level.bark_pivot), "VEC3")}, tangents=bark.tangents)
-            children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_bark",
-                                         "mesh": writer.mesh(f"{level.name}_bark", prim)}))
-            if level.skeleton.n_leaves:
-                children += _leaves_nodes(writer, asset, level, materials, variant_maps, instanced)
-            if level.twigs is not None:
-                twigs = level.twigs
-                prim = _primitive(writer, twigs.vertices, twigs.normals, twigs.uvs, twigs.faces,
-                                  materials["twigs_summer"], {"_WIND": (level.twig_wind, "VEC4"),
-                                                              "_WIND_PIVOT": (z_up_to_y_up(level.twig_pivot), "VEC3")},
-                                  [{"material": materials[f"twigs_{season}"], "variants": [i]}
-                                   for i, season in enumerate(SEASONS)], tangents=twigs.tangents)
-                children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_twigs",
-                                             "mesh": writer.mesh(f"{level.name}_twigs", prim)}))
-        node = {"name": f"{asset.asset_id}_{level.name}", "children": children,
-                "extras": {"switch_px": level.switch_px, "triangles": level.n_triangles}}
+            if skins:
+                children, joints = _skinned_level(writer, asset, level, skins[k], prim, materials, variant_maps,
+                                                  instanced, node)
+                level_joints.append(joints)
+                skin_entries.append(skin_entry(writer, asset.wind_rig, joints, f"{asset.asset_id}_{level.name}_wind"))
+                node["skin"] = len(skin_entries) - 1
+            else:
+                children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_bark",
+                                             "mesh": writer.mesh(f"{level.name}_bark", prim)}))
+                if level.skeleton.n_leaves:
+                    children += _leaves_nodes(writer, asset, level, materials, variant_maps, instanced)
+                if level.twigs is not None:
+                    children.append(writer.node({"name": f"{asset.asset_id}_{level.name}_twigs",
+                                                 "mesh": writer.mesh(f"{level.name}_twigs",
+                                                                     _twig_primitive(writer, level, materials))}))
+        node.update({"children": children, "extras": {"switch_px": level.switch_px, "triangles": level.n_triangles}})
         if level.name == "IMPOSTOR" and asset.impostor.layout():
             # An octahedral impostor: what a shader needs to pick its frames (the crossed planes need nothing).
             node["extras"]["impostor"] = asset.impostor.layout()
@@ -161,46 +168,105 @@ def _document(asset: LibraryAsset, instanced: bool, pngs: PngCache | None,
             "extensionsUsed": EXTENSIONS if instanced else [e for e in EXTENSIONS if e != "EXT_mesh_gpu_instancing"],
             "extensions": {"KHR_materials_variants": {"variants": [{"name": s} for s in SEASONS]}},
             "scene": 0, "scenes": [{"name": asset.asset_id, "nodes": [level_nodes[0]]}]}
+    if skins:
+        head["skins"] = skin_entries
+        head["animations"] = [wind_animation(writer, asset.wind_clip, level_joints, lean_node)]
     return writer, head
 
 
-def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, instanced: bool) -> list[int]:
-    """The level's leaf card nodes. Flat: one `_leaves` mesh, each card's UVs in its own tile. Instanced: one
-    node per card kind present, each drawing one card mesh at every instance of its kind (`_leaves`: cards
-    that are one leaf, single-leaf tile; `_clumps`: cards that merge several, clump tile)."""
-    skeleton, part = level.skeleton, level.mesh.leaves
-    clumps = card_clumps(part)
+def _twig_primitive(writer: GlbWriter, level, materials) -> dict:
+    """The level's twig cluster cards, their season variants mapping the twig atlas of each season."""
+    twigs = level.twigs
+    return _primitive(writer, twigs.vertices, twigs.normals, twigs.uvs, twigs.faces, materials["twigs_summer"],
+                      {"_WIND": (level.twig_wind, "VEC4"), "_WIND_PIVOT": (z_up_to_y_up(level.twig_pivot), "VEC3")},
+                      [{"material": materials[f"twigs_{season}"], "variants": [i]}
+                       for i, season in enumerate(SEASONS)], tangents=twigs.tangents)
+
+
+def _skinned_level(writer: GlbWriter, asset, level, skin, bark_prim: dict, materials, variant_maps,
+                   instanced: bool, node: dict) -> tuple[list[int], list[int]]:
+    """A level with skeletal wind: its node takes one skinned mesh (bark, twig cards and, not instanced, the
+    leaves), and its children are the joints, each holding the instanced leaf cards that move with it. Returns
+    (children, joint nodes in rig order)."""
+    prims = [add_skin_attributes(writer, bark_prim, skin.bark_joints, skin.bark_weights)]
+    if level.twigs is not None:
+        prims.append(add_skin_attributes(writer, _twig_primitive(writer, level, materials), skin.twig_joints,
+                                         skin.twig_weights))
+    joints = joint_nodes(writer, asset.wind_rig, "wind")
+    if level.skeleton.n_leaves:
+        if instanced:
+            for joint, leaves in _leaves_nodes(writer, asset, level, materials, variant_maps, True, skin.leaf_joint):
+                writer.nodes[joints[joint]].setdefault("children", []).append(leaves)
+        else:
+            flat = _flat_leaves_primitive(writer, level, materials, variant_maps)
+            rigid = np.repeat(skin.leaf_joint, 4)
+            weights = np.zeros((len(rigid), 4), np.float32)
+            weights[:, 0] = 1.0
+            prims.append(add_skin_attributes(writer, flat, np.stack([rigid] + [np.zeros_like(rigid)] * 3, axis=1),
+                                             weights))
+    mesh = writer.mesh(f"{level.name}_bark", prims[0])
+    writer.meshes[mesh]["primitives"] += prims[1:]
+    node["mesh"] = mesh
+    return [joints[0]], joints
+
+
+def _flat_leaves_primitive(writer: GlbWriter, level, materials, variant_maps) -> dict:
+    """The level's leaf cards as one plain primitive, each card's UVs in its own tile."""
+    part = level.mesh.leaves
+    per_vertex = {"_WIND": (np.repeat(level.leaf_wind, 4, axis=0), "VEC4"),
+                  "_WIND_PIVOT": (z_up_to_y_up(np.repeat(level.leaf_pivot, 4, axis=0)), "VEC3")}
+    return _primitive(writer, part.vertices, part.normals, _leaf_tile_uvs(part.uvs, np.repeat(card_clumps(part), 4)),
+                      part.faces, materials["summer"], per_vertex, variant_maps)
+
+
+def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, instanced: bool,
+                  leaf_joint: np.ndarray | None = None):
+    """The level's leaf card nodes. Flat: one `_leaves` mesh. Instanced: one node per card kind present, each
+    drawing one card mesh at every instance of its kind (`_leaves`: cards that are one leaf, single-leaf tile;
+    `_clumps`: cards that merge several, clump tile). With `leaf_joint` (M,) (skeletal wind): one such node
+    per joint and kind, its instances placed from the joint's rest pivot, as (joint, node) pairs."""
+    skeleton = level.skeleton
+    clumps = card_clumps(level.mesh.leaves)
     if not instanced:
-        per_vertex = {"_WIND": (np.repeat(level.leaf_wind, 4, axis=0), "VEC4"),
-                      "_WIND_PIVOT": (z_up_to_y_up(np.repeat(level.leaf_pivot, 4, axis=0)), "VEC3")}
-        prim = _primitive(writer, part.vertices, part.normals, _leaf_tile_uvs(part.uvs, np.repeat(clumps, 4)),
-                          part.faces, materials["summer"], per_vertex, variant_maps)
+        prim = _flat_leaves_primitive(writer, level, materials, variant_maps)
         return [writer.node({"name": f"{asset.asset_id}_{level.name}_leaves",
                              "mesh": writer.mesh(f"{level.name}_leaves", prim)})]
     # One card in its own frame (z along the leaf, normal +y); every card of a kind is an instance of it. Its
     # vertices are not turned to Y up: the instance rotations carry the whole frame change.
     card_normals = np.tile([0.0, 1.0, 0.0], (4, 1))
     translation, rotation, scale = leaf_instances(skeleton)
+    groups = [(None, np.ones(len(clumps), bool))] if leaf_joint is None else \
+        [(int(j), leaf_joint == j) for j in np.unique(leaf_joint)]
+    origin = np.zeros((len(clumps), 3)) if leaf_joint is None else asset.wind_rig.position[leaf_joint]
+    # Many groups (one per joint): every card's rotation turned once.
+    turned = None if leaf_joint is None else unit_quaternions(Z_UP_TO_Y_UP @ rotation).astype(np.float32)
     nodes = []
     for clump, kind in ((False, "leaves"), (True, "clumps")):
-        chosen = clumps == clump
-        if not chosen.any():
+        if not (clumps == clump).any():
             continue
         card = _primitive(writer, _card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
                           _leaf_tile_uvs(CARD_UVS, np.full(4, clump)), CARD_FACES, materials["summer"],
                           {"_WIND": (np.zeros((4, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((4, 3)), "VEC3")},
                           variant_maps)
-        attributes = {
-            "TRANSLATION": writer.floats(translation[chosen] @ Z_UP_TO_Y_UP.T, "VEC3", None),
-            "ROTATION": writer.floats(unit_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]).astype(np.float32), "VEC4",
-                                       None),
-            "SCALE": writer.floats(scale[chosen], "VEC3", None),
-            "_WIND": writer.floats(level.leaf_wind[chosen], "VEC4", None),
-            "_WIND_PIVOT": writer.floats(z_up_to_y_up(level.leaf_pivot[chosen]), "VEC3", None),
-        }
-        nodes.append(writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
-                                  "mesh": writer.mesh(f"{level.name}_{CARD_MESH_KINDS[kind]}_card", card),
-                                  "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}}))
+        card_mesh = writer.mesh(f"{level.name}_{CARD_MESH_KINDS[kind]}_card", card)
+        for joint, members in groups:
+            chosen = members & (clumps == clump)
+            if not chosen.any():
+                continue
+            attributes = {
+                "TRANSLATION": writer.floats((translation[chosen] - origin[chosen]) @ Z_UP_TO_Y_UP.T, "VEC3", None),
+                "ROTATION": writer.floats(turned[chosen] if turned is not None else
+                                          unit_quaternions(Z_UP_TO_Y_UP @ rotation[chosen]).astype(np.float32),
+                                          "VEC4", None),
+                "SCALE": writer.floats(scale[chosen], "VEC3", None),
+                "_WIND": writer.floats(level.leaf_wind[chosen], "VEC4", None),
+                "_WIND_PIVOT": writer.floats(z_up_to_y_up(level.leaf_pivot[chosen]), "VEC3", None),
+            }
+            name = f"{asset.asset_id}_{level.name}_{kind}" + ("" if joint is None else
+                                                             f"_{asset.wind_rig.names[joint]}")
+            entry = writer.node({"name": name, "mesh": card_mesh,
+                                 "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}})
+            nodes.append(entry if joint is None else (joint, entry))
     return nodes
 
 

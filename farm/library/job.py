@@ -143,7 +143,8 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
         for name in item["level_names"]:
             jobs.append({"glb": location.path(record["files"]["glb_flat"]),
                          "fbx": location.path(f"{item['folder']}/fbx/{ident}_{name}.fbx"),
-                         "node": f"{ident}_{name}", "name": f"{ident}_{name}"})
+                         "node": f"{ident}_{name}", "name": f"{ident}_{name}",
+                         **({"animated": True} if spec.skeletal_wind else {})})
             owners.append((index, name))
     if jobs:
         try:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -16,10 +17,11 @@ from typing import Any
 from farm.jobs import (DatasetTables, JobSpecError, PipelineSpec, check_int, check_keys, check_resources, check_seed,
                        load_spec, preset_names, species_of_trees)
 from renderers.octahedral_impostor import FRAMES_RANGE, MAX_ATLAS_PX, OCTAHEDRAL_FRAMES
+from species.studio.skeletal_wind import JOINT_BUDGET_RANGE, TRUNK_SEGMENTS, WindClipSettings
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "library_spec_from_record", "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "LIBRARY_TABLES",
-           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "species_of_trees"]
+           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "species_of_trees", "WIND_CLIP_DEFAULTS", "WIND_CLIP_KEYS"]
 
 FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
 _MADE_FROM_GLB = ("fbx", "blend")
@@ -33,6 +35,15 @@ _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px
 # Spec fields the job record leaves out while they hold these values: they came after library.json was first
 # written, and leaving them out keeps the default library's records and spec digest as they were.
 _OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
+# Baked skeletal wind (species.studio.skeletal_wind): off by default (the one value that decides it), or on
+# with the clip's joint budget and wind.
+_WIND_CLIP_DEFAULTS = WindClipSettings()
+WIND_CLIP_DEFAULTS = {"skeletal_wind": False, "wind_joints": _WIND_CLIP_DEFAULTS.joint_budget,
+                      "wind_strength": _WIND_CLIP_DEFAULTS.strength, "wind_gust": _WIND_CLIP_DEFAULTS.gust,
+                      "wind_period_s": _WIND_CLIP_DEFAULTS.period_s}
+WIND_CLIP_KEYS = tuple(WIND_CLIP_DEFAULTS)
+_TOP_KEYS |= set(WIND_CLIP_KEYS)
+_OMITTED_WHEN.update(WIND_CLIP_DEFAULTS)
 # The library's trees table holds the skeletons (and carries resume); the meshes are the assets' own files, so
 # no views and no GLB column.
 LIBRARY_TABLES = DatasetTables(view_outputs=(), store_glb=False)
@@ -81,6 +92,11 @@ class LibrarySpec(PipelineSpec):
     impostor_frames : octahedral frames per side of the atlas grid (FRAMES_RANGE); crossed: the default, unused.
     impostor_tile : pixels per impostor atlas tile (crossed: one tile per plane, 8 tiles in 4 columns;
                     octahedral: one per frame, impostor_frames x impostor_tile at most MAX_ATLAS_PX).
+    skeletal_wind : whether each asset carries baked skeletal wind (joints, skinned bark, leaves under their
+                    joints, a looping `wind` clip in the GLB, USD and FBX; docs/library.md, "Skeletal wind").
+    wind_joints   : joints at most (JOINT_BUDGET_RANGE; at least the trunk's TRUNK_SEGMENTS).
+    wind_strength, wind_gust, wind_period_s : the clip's wind (strength in [0, 1], the share of the lean that
+                    comes and goes with the gust in [0, 1], seconds of one loop > 0).
     shard_size    : assets per shard; resources: Ray resources per worker actor.
     """
 
@@ -97,6 +113,19 @@ class LibrarySpec(PipelineSpec):
     impostor_tile: int = DEFAULT_IMPOSTOR_TILE
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
+    skeletal_wind: bool = WIND_CLIP_DEFAULTS["skeletal_wind"]
+    wind_joints: int = _WIND_CLIP_DEFAULTS.joint_budget
+    wind_strength: float = _WIND_CLIP_DEFAULTS.strength
+    wind_gust: float = _WIND_CLIP_DEFAULTS.gust
+    wind_period_s: float = _WIND_CLIP_DEFAULTS.period_s
+
+    @property
+    def wind_clip(self) -> WindClipSettings | None:
+        """The skeletal wind clip's settings, None when the assets carry none."""
+        if not self.skeletal_wind:
+            return None
+        return WindClipSettings(strength=self.wind_strength, gust=self.wind_gust, period_s=self.wind_period_s,
+                                joint_budget=self.wind_joints)
 
     @property
     def tables(self) -> DatasetTables:
@@ -206,11 +235,38 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
                                f"{MAX_ATLAS_PX} px")
     shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
     resources = check_resources(raw.get("resources", {}))
+    wind = _parse_wind_clip(raw)
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
                        formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, twig_cards=twig_cards,
                        impostor=impostor,
                        impostor_frames=frames, impostor_tile=tile,
-                       shard_size=shard_size, resources=resources)
+                       shard_size=shard_size, resources=resources, **wind)
+
+
+def _parse_wind_clip(raw: dict) -> dict:
+    """The skeletal wind fields of a spec mapping (their defaults where absent); the clip's own fields only with
+    `skeletal_wind: true`."""
+    on = raw.get("skeletal_wind", WIND_CLIP_DEFAULTS["skeletal_wind"])
+    if not isinstance(on, bool):
+        raise LibrarySpecError("skeletal_wind", on, "true or false")
+    given = [key for key in WIND_CLIP_KEYS[1:] if key in raw]
+    if given and not on:
+        raise LibrarySpecError(given[0], raw[given[0]], "only with skeletal_wind: true (the clip it sets)")
+    low, high = JOINT_BUDGET_RANGE
+    joints = raw.get("wind_joints", WIND_CLIP_DEFAULTS["wind_joints"])
+    if isinstance(joints, bool) or not isinstance(joints, int) or not low <= joints <= high:
+        raise LibrarySpecError("wind_joints", joints, f"an integer in [{low}, {high}] (at least the trunk's "
+                               f"{TRUNK_SEGMENTS} segments)")
+    out = {"skeletal_wind": on, "wind_joints": joints}
+    for key, allowed in (("wind_strength", "a number in [0, 1]"), ("wind_gust", "a number in [0, 1]"),
+                         ("wind_period_s", "a number of seconds > 0 (and at most 600)")):
+        value = raw.get(key, WIND_CLIP_DEFAULTS[key])
+        bad = isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
+        top = 600.0 if key == "wind_period_s" else 1.0
+        if bad or not (0.0 < value <= top if key == "wind_period_s" else 0.0 <= value <= top):
+            raise LibrarySpecError(key, value, allowed)
+        out[key] = float(value)
+    return out
 
 
 def load_library_spec(path: str | Path, **known) -> LibrarySpec:

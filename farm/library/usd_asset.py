@@ -20,6 +20,7 @@ from species.skeleton import LEAF_CARD_CORNERS
 from species.tree_mesh import MeshPart
 
 from .asset import LibraryAsset, leaf_instances
+from .usd_wind import bind_skin, define_skeleton, joint_xforms, lean_whole, set_clip_time_range
 
 __all__ = ["asset_to_usdc", "TEXTURE_FILES", "TWIG_TEXTURE_FILES", "prim_name"]
 
@@ -118,33 +119,41 @@ def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = N
 PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
-def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
-    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made."""
+def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray | None = None,
+                    origin: np.ndarray | None = None, leaves=None) -> list[str]:
+    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made. Skeletal
+    wind gives one per joint: the `chosen` (M,) bool leaves, placed from `origin` (3,), `leaves` the level's
+    (translation, unit quaternion x y z w, scale, clump) per card, made once."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
     card = MeshPart(LEAF_CARD_CORNERS, CARD_FACES, np.tile([0.0, 1.0, 0.0], (4, 1)), CARD_UVS)
     # One prototype per card kind present: `leaf` (single-leaf tile) for cards that are one leaf, `clump`
     # (clump tile) for cards that merge several.
-    clumps = card_clumps(level.mesh.leaves)
+    chosen = np.ones(level.skeleton.n_leaves, bool) if chosen is None else chosen
+    if leaves is None:
+        translation, rotation, scale = leaf_instances(level.skeleton)
+        leaves = translation, unit_quaternions(rotation), scale, card_clumps(level.mesh.leaves)  # x, y, z, w
+    translation, quat, scale, clumps = (array[chosen] for array in leaves)
     kinds = [kind for kind in (False, True) if (clumps == kind).any()]
     prototypes = []
     for kind in kinds:
         prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", card, uv_tile=int(kind))
-        UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+        if card_material is not None:  # else the leaves' season binding above it holds
+            UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
-    translation, rotation, scale = leaf_instances(level.skeleton)
-    quat = unit_quaternions(rotation)  # x, y, z, w
+    if origin is not None:
+        translation = translation - origin
     instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.searchsorted(kinds, clumps).astype(np.int32)))
     instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
     instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))
     instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scale.astype(np.float32)))
     primvars = UsdGeom.PrimvarsAPI(instancer)
     primvars.CreatePrimvar("wind", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
-        Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(level.leaf_wind, np.float32)))
+        Vt.Vec4fArray.FromNumpy(np.ascontiguousarray(level.leaf_wind[chosen], np.float32)))
     primvars.CreatePrimvar("windPivot", Sdf.ValueTypeNames.Float3Array, UsdGeom.Tokens.vertex).Set(
-        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(level.leaf_pivot, np.float32)))
+        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(level.leaf_pivot[chosen], np.float32)))
     return [PROTOTYPE_NAMES[kind] for kind in kinds]
 
 
@@ -166,7 +175,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     """`.usdc` bytes of the asset: /<id> (component, default prim) with Looks/, and Geom/ filled per `lod`
     variant (bark mesh + leaves PointInstancer, or the impostor card); the `season` variant set binds the leaf
     material of that season, and `bare` deactivates the leaves. Selected by default: LOD0, summer."""
-    from pxr import Kind, Sdf, Usd, UsdGeom, UsdShade, Vt
+    from pxr import Kind, Sdf, Usd, UsdGeom, UsdShade, UsdSkel, Vt
 
     layer = Sdf.Layer.CreateAnonymous(".usdc")
     stage = Usd.Stage.Open(layer)
@@ -191,10 +200,19 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                           TWIG_TEXTURE_FILES["twig_normal"], None, True, 0.8, "clamp")
              for s in SEASONS} if asset.twig_atlas is not None else {}
     geom = f"{root_path}/Geom"
-    UsdGeom.Xform.Define(stage, geom)
+    skins = asset.level_skins
+    if skins:  # skinned meshes live under a SkelRoot; the skeleton and the leaves' joints serve every level
+        UsdSkel.Root.Define(stage, geom)
+        skeleton = define_skeleton(stage, f"{geom}/Skel", asset.wind_rig, asset.wind_clip)
+        set_clip_time_range(stage, asset.wind_clip)
+        with_leaves = np.unique(np.concatenate([skin.leaf_joint for skin in skins if skin is not None]))
+        UsdGeom.Xform.Define(stage, f"{geom}/leaves")
+        joint_prims = joint_xforms(stage, f"{geom}/leaves", asset.wind_rig, asset.wind_clip, with_leaves)
+    else:
+        UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")
-    prototype_names: set[str] = set()  # the leaf prototypes of every level, which each season binds
-    for level in asset.levels:
+    prototype_names: set[str] = set()  # the leaf prototypes of every level (under Geom/leaves) each season binds
+    for k, level in enumerate(asset.levels):
         lod_set.AddVariant(level.name)
         lod_set.SetVariantSelection(level.name)
         with lod_set.GetVariantEditContext():
@@ -204,14 +222,28 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 layout = asset.impostor.layout()
                 if layout:  # an octahedral impostor: how its frames lie in the atlas
                     card.GetPrim().SetCustomDataByKey("treefarm:impostor", _custom_data(layout))
+                if skins:
+                    lean_whole(card.GetPrim(), asset.wind_clip)
             else:
                 mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
-                if level.skeleton.n_leaves:
-                    prototype_names.update(_leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"]))
+                if skins:
+                    bind_skin(mesh, skeleton, skins[k].bark_joints, skins[k].bark_weights)
+                if level.skeleton.n_leaves and skins:
+                    leaf_joint = skins[k].leaf_joint
+                    translation, rotation, scale = leaf_instances(level.skeleton)
+                    per_level = (translation, unit_quaternions(rotation), scale, card_clumps(level.mesh.leaves))
+                    for joint in np.unique(leaf_joint):
+                        _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
+                                        asset.wind_rig.position[joint], per_level)
+                elif level.skeleton.n_leaves:
+                    made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
+                    prototype_names.update(f"prototypes/{kind}" for kind in made)
                 if level.twigs is not None:
                     cards = _mesh(stage, f"{geom}/twigs", level.twigs, level.twig_wind, level.twig_pivot)
                     UsdShade.MaterialBindingAPI.Apply(cards.GetPrim()).Bind(twigs["summer"])
+                    if skins:
+                        bind_skin(cards, skeleton, skins[k].twig_joints, skins[k].twig_weights)
             stage.GetPrimAtPath(geom).SetCustomDataByKey("treefarm:switch_px", int(level.switch_px))
     lod_set.SetVariantSelection("LOD0")
     season_set = root.GetVariantSets().AddVariantSet("season")
@@ -224,9 +256,11 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             over = stage.OverridePrim(f"{geom}/leaves")
             if season == "bare":
                 over.SetActive(False)
+            elif skins:  # every joint's cards under Geom/leaves take the season's binding from it
+                UsdShade.MaterialBindingAPI.Apply(over).Bind(leaves[season])
             else:
                 for name in sorted(prototype_names):
-                    card = stage.OverridePrim(f"{geom}/leaves/prototypes/{name}")
+                    card = stage.OverridePrim(f"{geom}/leaves/{name}")
                     UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
     season_set.SetVariantSelection("summer")
     # `season` first among the prim's variant sets: its leaf bindings are then stronger than the `lod` variants'.

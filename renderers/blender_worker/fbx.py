@@ -1,6 +1,7 @@
 """Job kinds `fbx` (GLB files to FBX files for Unity/Unreal, many in one job) and `fbx_info` (read an FBX back).
 
-`fbx` keys: exports, a list of {glb, fbx, name (optional), node (optional: keep that glTF node's subtree)}.
+`fbx` keys: exports, a list of {glb, fbx, name (optional), node (optional: keep that glTF node's subtree),
+animated (optional: the armatures and their actions too, `ANIMATED_FBX_SETTINGS`)}.
 Result: per export the FBX path, its objects (name, part, vertices, triangles), bounds and seconds.
 Also the GLB import shared with `asset_library`: checked, importer bug patched, instanced meshes merged.
 """
@@ -15,7 +16,7 @@ import time
 import bpy
 import numpy as np
 
-from scene import JobError, import_glb, mesh_stats, require, reset_scene
+from scene import JobError, animation_stats, import_glb, mesh_stats, require, reset_scene
 
 GLB_MAGIC = b"glTF"
 
@@ -27,6 +28,14 @@ FBX_SETTINGS = dict(
     global_scale=1.0, axis_forward="-Z", axis_up="Y", bake_space_transform=True, use_mesh_modifiers=True,
     mesh_smooth_type="FACE", use_triangles=False, add_leaf_bones=False, bake_anim=False,
     path_mode="COPY", embed_textures=True, use_custom_props=True,
+)
+
+# With baked skeletal wind: the armature and its action (one take, keyed on every frame, as the GLB's clip), and
+# the axis change left on the root: the exporter's baked space transform is not meant for armatures.
+ANIMATED_FBX_SETTINGS = dict(
+    FBX_SETTINGS, object_types={"MESH", "EMPTY", "ARMATURE"}, bake_space_transform=False, bake_anim=True,
+    bake_anim_use_all_bones=True, bake_anim_use_nla_strips=False, bake_anim_use_all_actions=False,
+    bake_anim_force_startend_keying=True, bake_anim_step=1.0, bake_anim_simplify_factor=0.0,
 )
 
 
@@ -232,7 +241,7 @@ def _json_custom_props(objects: list) -> None:
                 obj[key] = json.dumps(obj[key].to_dict(), sort_keys=True)
 
 
-def export_fbx(objects: list, path: str) -> None:
+def export_fbx(objects: list, path: str, animated: bool = False) -> None:
     _deterministic_exporter()
     _json_custom_props(objects)
     bpy.ops.object.select_all(action="DESELECT")
@@ -240,10 +249,22 @@ def export_fbx(objects: list, path: str) -> None:
         obj.select_set(True)
     os.makedirs(os.path.dirname(os.path.abspath(path)) or ".", exist_ok=True)
     tmp = path + ".tmp.fbx"
-    result = bpy.ops.export_scene.fbx(filepath=tmp, use_selection=True, **FBX_SETTINGS)
+    if animated:
+        _frame_range_of_actions()
+    settings = ANIMATED_FBX_SETTINGS if animated else FBX_SETTINGS
+    result = bpy.ops.export_scene.fbx(filepath=tmp, use_selection=True, **settings)
     if "FINISHED" not in result or not os.path.isfile(tmp):
         raise RuntimeError(f"Blender's FBX exporter did not write {path!r} ({result})")
     os.replace(tmp, path)  # whole files only: a killed job never leaves half an FBX
+
+
+def _frame_range_of_actions() -> None:
+    """The scene's frame range is the actions' (the clip's keys): the exporter bakes that range."""
+    ranges = [action.frame_range for action in bpy.data.actions]
+    if ranges:
+        scene = bpy.context.scene
+        scene.frame_start = int(round(min(r[0] for r in ranges)))
+        scene.frame_end = int(round(max(r[1] for r in ranges)))
 
 
 def run(job: dict, out_dir: str) -> dict:
@@ -262,7 +283,7 @@ def run(job: dict, out_dir: str) -> dict:
         chosen = subtree(objects, item.get("node"))
         if item.get("name"):
             rename(chosen, str(item["name"]))
-        export_fbx(chosen, fbx)
+        export_fbx(chosen, fbx, animated=bool(item.get("animated", False)))
         stats = mesh_stats(chosen)
         rows.append({"glb": glb, "fbx": fbx, "objects": stats["objects"], "triangles": stats["triangles"],
                      "bounds": stats["bounds"], "bytes": os.path.getsize(fbx),
@@ -289,6 +310,7 @@ def info(job: dict, out_dir: str) -> dict:
     stats["images"] = [_image_row(image) for image in bpy.data.images]
     stats["bindings"] = {material.name: _bindings(material) for material in bpy.data.materials}
     stats["unit_scale"] = bpy.context.scene.unit_settings.scale_length
+    stats.update(animation_stats(objects))
     return stats
 
 

@@ -1,12 +1,15 @@
-"""Job kind `info`: import a GLB and report what Blender sees (objects, parts, vertices, triangles, bounds).
+"""Job kind `info`: import a GLB and report what Blender sees (objects, parts, vertices, triangles, bounds,
+armatures and actions).
 
-Job keys: glb (path). Result: the `scene.mesh_stats` dictionary.
+Job keys: glb (path). Result: the `scene.mesh_stats` dictionary with `scene.animation_stats`'.
 """
 from __future__ import annotations
 
-from scene import import_glb, mesh_stats, require, reset_scene
+from fbx import import_checked_glb
+from scene import animation_stats, mesh_stats, require, reset_scene
 
 
 def run(job: dict, out_dir: str) -> dict:
     reset_scene()
-    return mesh_stats(import_glb(require(job, "glb")))
+    objects = import_checked_glb(require(job, "glb"))
+    return {**mesh_stats(objects), **animation_stats(objects)}

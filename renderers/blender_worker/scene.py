@@ -9,7 +9,8 @@ import os
 import bpy
 from mathutils import Vector
 
-__all__ = ["JobError", "require", "reset_scene", "import_glb", "mesh_objects", "mesh_stats", "part_of", "PART_INDEX"]
+__all__ = ["JobError", "require", "reset_scene", "import_glb", "mesh_objects", "mesh_stats", "animation_stats",
+           "part_of", "PART_INDEX"]
 
 # Mask values of the farm's renderers (renderers/maps.py, combine_parts): 0 background, 1 bark, 2 leaves.
 PART_INDEX = {"bark": 1, "leaves": 2}
@@ -71,3 +72,16 @@ def mesh_stats(objects) -> dict:
             hi = [max(a, b) for a, b in zip(hi, world)]
     return {"objects": rows, "triangles": sum(r["triangles"] for r in rows),
             "vertices": sum(r["vertices"] for r in rows), "bounds": [lo, hi] if rows else None}
+
+
+def animation_stats(objects) -> dict:
+    """The armatures among `objects` (name, bones) and every action in the file (name, first and last frame,
+    seconds at the scene's frame rate), with that frame rate."""
+    scene = bpy.context.scene
+    fps = scene.render.fps / scene.render.fps_base
+    armatures = [{"name": obj.name, "bones": len(obj.data.bones)} for obj in objects if obj.type == "ARMATURE"]
+    actions = []
+    for action in bpy.data.actions:
+        start, end = (float(v) for v in action.frame_range)
+        actions.append({"name": action.name, "frames": [start, end], "seconds": (end - start) / fps})
+    return {"armatures": armatures, "actions": actions, "fps": fps}

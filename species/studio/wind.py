@@ -10,7 +10,8 @@ import numpy as np
 
 from ..skeleton import Skeleton
 
-__all__ = ["WIND_LAYOUT", "branch_pivots", "branch_phases", "wind_attributes", "GOLDEN_RATIO_CONJUGATE"]
+__all__ = ["WIND_LAYOUT", "branch_pivots", "branch_reaches", "branch_phases", "wind_attributes",
+           "GOLDEN_RATIO_CONJUGATE"]
 
 WIND_LAYOUT = {
     "_WIND": "VEC4 float: x = branch level (0 trunk, 1 first-order branches, ...), y = normalised distance "
@@ -28,6 +29,15 @@ def branch_pivots(skeleton: Skeleton) -> np.ndarray:
     """(B,) int64, node index of each branch's pivot: its junction on the parent branch (node 0 for the trunk)."""
     starts = skeleton.branch_starts.astype(np.int64)
     return np.where(skeleton.parent[starts] >= 0, skeleton.parent[starts], starts)
+
+
+def branch_reaches(skeleton: Skeleton) -> np.ndarray:
+    """(B,) float64 metres: straight distance from each branch's pivot to its farthest node."""
+    pivot_xyz = skeleton.positions[branch_pivots(skeleton)].astype(np.float64)
+    reach = np.linalg.norm(skeleton.positions - pivot_xyz[skeleton.branch_id], axis=1)
+    branch_reach = np.zeros(skeleton.n_branches)
+    np.maximum.at(branch_reach, skeleton.branch_id, reach)
+    return branch_reach
 
 
 def branch_phases(pivot_keys: np.ndarray) -> np.ndarray:
@@ -50,9 +60,7 @@ def wind_attributes(skeleton: Skeleton, positions: np.ndarray, branch: np.ndarra
     branch = np.asarray(branch, np.int64)
     pivots = branch_pivots(skeleton)
     pivot_xyz = skeleton.positions[pivots].astype(np.float64)
-    reach = np.linalg.norm(skeleton.positions - pivot_xyz[skeleton.branch_id], axis=1)
-    branch_reach = np.zeros(skeleton.n_branches)
-    np.maximum.at(branch_reach, skeleton.branch_id, reach)
+    branch_reach = branch_reaches(skeleton)
     keys = skeleton.branch_starts if branch_keys is None else branch_keys
     phase = branch_phases(keys)
     level = skeleton.order[skeleton.branch_starts].astype(np.float32)

@@ -228,13 +228,21 @@ def test_with_wind_strength_zero_nothing_moves(wind_page):
     assert problems == []
 
 
-@pytest.fixture(scope="module")
-def octahedral_page(chromium, tmp_path_factory):
-    """The example page showing a palm whose GLB carries an octahedral impostor: yields (page, problems)."""
-    library = one_palm_library(tmp_path_factory.mktemp("octahedral") / "library", OCTAHEDRAL_SPEC)
+@contextmanager
+def palm_page(chromium, folder: Path, spec: dict):
+    """The example page showing the palm of a new one-palm library of `spec` in `folder`: yields (page,
+    problems)."""
+    library = one_palm_library(folder / "library", spec)
     with serving(library) as address, \
             opened_page(chromium, f"{address}/{WIND_PAGE}?glb={glb_path(library)}") as opened:
         yield opened[:2]
+
+
+@pytest.fixture(scope="module")
+def octahedral_page(chromium, tmp_path_factory):
+    """The example page showing a palm whose GLB carries an octahedral impostor: yields (page, problems)."""
+    with palm_page(chromium, tmp_path_factory.mktemp("octahedral"), OCTAHEDRAL_SPEC) as opened:
+        yield opened
 
 
 def test_a_glb_with_crossed_planes_has_no_impostor_for_the_page_to_draw(wind_page):
@@ -278,4 +286,34 @@ def test_the_octahedral_impostor_turns_with_the_camera(octahedral_page):
     }""")
     top = np.asarray(Image.open(io.BytesIO(base64.b64decode(above.split(",", 1)[1]))).convert("RGB"), np.int16)
     assert covered_share(top) > 0.01 and changed_share(side, top) > 0.3 * covered_share(side)
+    assert problems == []
+
+
+SKELETAL_SPEC = {**SPEC, "skeletal_wind": True, "wind_period_s": 4.0}
+
+
+@pytest.fixture(scope="module")
+def clip_page(chromium, tmp_path_factory):
+    """The example page showing a palm with baked skeletal wind (a 4 s clip): yields (page, problems)."""
+    with palm_page(chromium, tmp_path_factory.mktemp("skeletal"), SKELETAL_SPEC) as opened:
+        yield opened
+
+
+def test_the_page_plays_the_wind_clip_on_skinned_bark_with_instanced_leaves(clip_page):
+    page, problems = clip_page
+    parts = page.evaluate("window.__wind.parts")
+    assert page.evaluate("window.__wind.error") is None
+    assert parts["clip"]["name"] == "wind" and parts["clip"]["duration"] == pytest.approx(4.0)
+    assert parts["skinned"] >= 1 and parts["leafInstances"] > 100
+    assert problems == []
+
+
+def test_the_clip_moves_the_tree_and_one_period_later_gives_the_same_image(clip_page):
+    page, problems = clip_page
+    start, later, looped = (frame(page, t, 1.0, "all") for t in (0.0, 1.3, 4.0))
+    assert covered_share(start) > 0.02
+    assert changed_share(start, later) > 0.05 * covered_share(start)
+    assert np.array_equal(start, looped)
+    leaves_start, leaves_later = frame(page, 0.0, 1.0, "leaves"), frame(page, 1.3, 1.0, "leaves")
+    assert changed_share(leaves_start, leaves_later) > 0.05 * covered_share(leaves_start)
     assert problems == []
