@@ -16,7 +16,10 @@ from renderers.framing import framing_points
 from renderers.impostor import render_impostors
 from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import render_octahedral_impostor
+from species.meshing.tubes_and_cards import CARD_FACES
 from species.studio.collision import collision_capsules
+from species.studio.leaf_cutout import trace_leaf_outline
+from species.studio.lod import card_clumps
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 from species.studio.wind import WIND_LAYOUT, wind_attributes
 
@@ -60,10 +63,15 @@ class LevelData:
     twig_index: int = -1  # the level's cards are `twig_atlas.layout.levels[twig_index]`
     twig_wind: np.ndarray | None = None
     twig_pivot: np.ndarray | None = None
+    leaf_outline: object = None  # species.studio.leaf_cutout.LeafOutline: single leaves drawn as its polygon
 
     @property
     def n_triangles(self) -> int:
-        return int(self.mesh.n_faces) + (self.twigs.n_faces if self.twigs is not None else 0)
+        triangles = int(self.mesh.n_faces) + (self.twigs.n_faces if self.twigs is not None else 0)
+        if self.leaf_outline is not None:  # each single-leaf card's two triangles become the outline's
+            singles = int(np.count_nonzero(~card_clumps(self.mesh.leaves)))
+            triangles += singles * (self.leaf_outline.n_triangles - len(CARD_FACES))
+        return triangles
 
 
 @dataclass
@@ -82,6 +90,7 @@ class LibraryAsset:
     bark_maps: object  # species.studio.pbr_textures.BarkMaps
     leaf_atlases: dict[str, np.ndarray]
     twig_atlas: object = None  # renderers.twig_atlas.TwigAtlasImage, when a level draws twig cards
+    leaf_outline: object = None  # the `cutout` leaves' LeafOutline (None: leaf cards)
 
     @property
     def lod0(self):
@@ -100,6 +109,18 @@ class LibraryAsset:
                    for season in SEASONS}
         for image in albedos.values():
             image.flags.writeable = False  # each file's writer encodes them: `PngCache` knows them by identity
+        return albedos
+
+    @cached_property
+    def cutout_albedos(self) -> dict[str, np.ndarray]:
+        """(h, 2 h, 3) uint8 leaf atlas colour without its alpha per leafy season, for `cutout` leaves' opaque
+        material: with no alpha channel in the image, no importer (Blender's FBX one, Unity's) turns on an
+        alpha test the outline polygons do not need. {} for leaf cards."""
+        if self.leaf_outline is None:
+            return {}
+        albedos = {season: np.ascontiguousarray(atlas[..., :3]) for season, atlas in self.leaf_atlases.items()}
+        for image in albedos.values():
+            image.flags.writeable = False  # `PngCache` knows them by identity
         return albedos
 
     def metadata(self) -> dict:
@@ -244,5 +265,11 @@ def build_asset(species_name: str, seed: int, spec, renderer, timer) -> LibraryA
                                 switch_px=int(spec.switch_px[-1])))
     with timer.stage("quality"):
         measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas, points)
+    outline = None
+    if spec.leaves == "cutout":
+        with timer.stage("cutout"):
+            outline = trace_leaf_outline(leaf_alphas(atlases["summer"])[0])  # every season's leaf has one shape
+            for level in levels[:-1]:
+                level.leaf_outline = outline
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
-                        levels, atlas, capsules, maps, atlases, twig_atlas)
+                        levels, atlas, capsules, maps, atlases, twig_atlas, outline)

@@ -19,7 +19,7 @@ from renderers.octahedral_impostor import FRAMES_RANGE, MAX_ATLAS_PX, OCTAHEDRAL
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "library_spec_from_record", "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "LIBRARY_TABLES",
-           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "species_of_trees"]
+           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "LEAF_KINDS", "species_of_trees"]
 
 FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
 _MADE_FROM_GLB = ("fbx", "blend")
@@ -28,11 +28,16 @@ DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
 # Crossed planes (the portable default any glTF viewer draws) or an octahedral atlas (a shader picks its frames).
 IMPOSTOR_KINDS = ("crossed", "octahedral")
 DEFAULT_IMPOSTOR_TILE = 128  # px; an octahedral atlas takes the largest tile up to this that fits MAX_ATLAS_PX
+# Leaves as alpha-tested cards (the default) or as opaque outline polygons traced from the leaf texture's alpha
+# (`species.studio.leaf_cutout`), for engines that draw full geometry faster than alpha tests (Nanite).
+LEAF_KINDS = ("cards", "cutout")
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
-             "twig_cards", "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources"}
+             "twig_cards", "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources",
+             "leaves"}
 # Spec fields the job record leaves out while they hold these values: they came after library.json was first
 # written, and leaving them out keeps the default library's records and spec digest as they were.
-_OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
+_OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES,
+                 "leaves": "cards"}
 # The library's trees table holds the skeletons (and carries resume); the meshes are the assets' own files, so
 # no views and no GLB column.
 LIBRARY_TABLES = DatasetTables(view_outputs=(), store_glb=False)
@@ -82,6 +87,8 @@ class LibrarySpec(PipelineSpec):
     impostor_tile : pixels per impostor atlas tile (crossed: one tile per plane, 8 tiles in 4 columns;
                     octahedral: one per frame, impostor_frames x impostor_tile at most MAX_ATLAS_PX).
     shard_size    : assets per shard; resources: Ray resources per worker actor.
+    leaves        : "cards" (alpha-tested leaf cards; the default) or "cutout" (each single leaf an opaque outline
+                    polygon of a few triangles, at every level that keeps single leaves; clump cards stay cards).
     """
 
     name: str = "library"
@@ -97,6 +104,7 @@ class LibrarySpec(PipelineSpec):
     impostor_tile: int = DEFAULT_IMPOSTOR_TILE
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
+    leaves: str = "cards"
 
     @property
     def tables(self) -> DatasetTables:
@@ -206,11 +214,14 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
                                f"{MAX_ATLAS_PX} px")
     shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
     resources = check_resources(raw.get("resources", {}))
+    leaves = raw.get("leaves", "cards")
+    if leaves not in LEAF_KINDS:
+        raise LibrarySpecError("leaves", leaves, f"one of: {', '.join(LEAF_KINDS)}")
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
                        formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, twig_cards=twig_cards,
                        impostor=impostor,
                        impostor_frames=frames, impostor_tile=tile,
-                       shard_size=shard_size, resources=resources)
+                       shard_size=shard_size, resources=resources, leaves=leaves)
 
 
 def load_library_spec(path: str | Path, **known) -> LibrarySpec:

@@ -118,8 +118,9 @@ def _mesh(stage, path: str, part, wind=None, pivot=None, uv_tile: int | None = N
 PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
-def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
-    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made."""
+def _leaf_instancer(stage, path: str, level, card_material, cutout_material=None) -> list[str]:
+    """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made. A level with
+    a `leaf_outline` draws its single leaves as that polygon, bound to `cutout_material` (opaque)."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
@@ -130,8 +131,12 @@ def _leaf_instancer(stage, path: str, level, card_material) -> list[str]:
     kinds = [kind for kind in (False, True) if (clumps == kind).any()]
     prototypes = []
     for kind in kinds:
-        prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", card, uv_tile=int(kind))
-        UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+        outline = level.leaf_outline if not kind else None
+        shape = card if outline is None else MeshPart(outline.card_points, outline.faces,
+                                                      np.tile([0.0, 1.0, 0.0], (len(outline.uvs), 1)), outline.uvs)
+        prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", shape, uv_tile=int(kind))
+        UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material if outline is None
+                                                                    else cutout_material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
     translation, rotation, scale = leaf_instances(level.skeleton)
@@ -185,6 +190,10 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     leaves = {s: _material(stage, f"{looks}/leaves_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, True, 0.7,
                            "clamp")
               for s in SEASONS if s != "bare"}
+    # `cutout` leaves: the same atlas on opaque outline polygons (no opacity, so no alpha test).
+    cutout = {s: _material(stage, f"{looks}/leaves_cutout_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, False,
+                           0.7, "clamp")
+              for s in SEASONS if s != "bare"} if asset.leaf_outline is not None else {}
     impostor = _material(stage, f"{looks}/impostor", TEXTURE_FILES["impostor_albedo"],
                          TEXTURE_FILES["impostor_normal"], None, True, 0.8, "clamp")
     twigs = {s: _material(stage, f"{looks}/twigs_{s}", TWIG_TEXTURE_FILES[f"twig_atlas_{s}"],
@@ -208,7 +217,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 mesh = _mesh(stage, f"{geom}/bark", level.mesh.bark, level.bark_wind, level.bark_pivot)
                 UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim()).Bind(bark)
                 if level.skeleton.n_leaves:
-                    prototype_names.update(_leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"]))
+                    prototype_names.update(_leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"],
+                                                           cutout.get("summer")))
                 if level.twigs is not None:
                     cards = _mesh(stage, f"{geom}/twigs", level.twigs, level.twig_wind, level.twig_pivot)
                     UsdShade.MaterialBindingAPI.Apply(cards.GetPrim()).Bind(twigs["summer"])
@@ -227,7 +237,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             else:
                 for name in sorted(prototype_names):
                     card = stage.OverridePrim(f"{geom}/leaves/prototypes/{name}")
-                    UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
+                    outlined = cutout and name == PROTOTYPE_NAMES[False]
+                    UsdShade.MaterialBindingAPI.Apply(card).Bind(cutout[season] if outlined else leaves[season])
     season_set.SetVariantSelection("summer")
     # `season` first among the prim's variant sets: its leaf bindings are then stronger than the `lod` variants'.
     layer.GetPrimAtPath(root_path).variantSetNameList.prependedItems = ["season", "lod"]
