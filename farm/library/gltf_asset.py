@@ -205,10 +205,9 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
             continue
         if outline is not None and not clump:  # the leaf's outline polygon in the card's frame, opaque
             k = len(outline.uvs)
-            card = _primitive(writer, _card_to_local(outline.card_points), _card_to_local(np.tile([0.0, 1.0, 0.0],
-                                                                                                  (k, 1))),
-                              _leaf_tile_uvs(outline.uvs, np.zeros(k, bool)), outline.faces,
-                              materials["cutout_summer"],
+            normals = np.tile([0.0, 1.0, 0.0], (k, 1))
+            card = _primitive(writer, _card_to_local(outline.card_points), _card_to_local(normals),
+                              _leaf_tile_uvs(outline.uvs, np.zeros(k, bool)), outline.faces, materials["cutout_summer"],
                               {"_WIND": (np.zeros((k, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((k, 3)), "VEC3")},
                               cutout_maps)
         else:

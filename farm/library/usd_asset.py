@@ -1,7 +1,7 @@
 """The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
 variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on
-coarser levels, a clump card), wind primvars; an octahedral impostor's layout in its prim's `treefarm:impostor`
-custom data.
+coarser levels, a clump card; a `cutout` asset's leaf is its opaque outline polygon), wind primvars; an
+octahedral impostor's layout in its prim's `treefarm:impostor` custom data.
 
 In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
 """

@@ -10,6 +10,7 @@ import yaml
 from farm.cli import main as farm_main
 from farm.library.spec import LibrarySpecError, default_library_spec, parse_library_spec
 from gltf_validator import assert_valid_glb
+from usd_validator import assert_valid_usd
 from species.errors import ParameterError
 from species.studio.leaf_cutout import outline_leaves, trace_leaf_outline, triangulate_polygon
 from species.studio.lod import card_clumps
@@ -157,14 +158,11 @@ def test_cutout_glb_is_valid_and_its_single_leaves_are_opaque_polygons(cutout_as
 
 
 def test_cutout_usd_is_valid_and_binds_opaque_leaf_materials_per_season(cutout_asset):
-    from pxr import Usd, UsdGeom, UsdShade, UsdValidation
+    from pxr import Usd, UsdGeom, UsdShade
 
     asset, _, _, path = cutout_asset
     stage = Usd.Stage.Open(str(path))
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    errors = [e for e in UsdValidation.ValidationContext(validators).Validate(stage)
-              if e.GetType() == UsdValidation.ValidationErrorType.Error]
-    assert not errors, [e.GetMessage() for e in errors]
+    assert_valid_usd(stage)
     root = stage.GetDefaultPrim()
     root.GetVariantSets().GetVariantSet("lod").SetVariantSelection("LOD1")
     prototypes = {p.name: p for p in UsdGeom.PointInstancer(

@@ -15,6 +15,7 @@ from farm.library.records import write_library_record
 from farm.library.spec import parse_library_spec
 from farm.dataset.storage import Location
 from gltf_validator import assert_valid_glb
+from usd_validator import assert_valid_usd
 from renderers.blender import blender_available
 from species.meshing.gltf import read_glb_chunks
 
@@ -67,13 +68,10 @@ def test_the_glb_passes_the_validator_and_carries_the_layout_on_its_impostor_nod
 
 
 def test_the_usd_validates_and_holds_the_layout_on_the_impostor_prim(asset, record):
-    from pxr import Usd, UsdValidation
+    from pxr import Usd
 
     stage = Usd.Stage.Open(str(next(asset.glob("*.usdc"))))
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
-    errors = [e for e in UsdValidation.ValidationContext(validators).Validate(stage)
-              if e.GetType() == UsdValidation.ValidationErrorType.Error]
-    assert not errors, [e.GetMessage() for e in errors]
+    assert_valid_usd(stage)
     root = stage.GetDefaultPrim()
     root.GetVariantSets().GetVariantSet("lod").SetVariantSelection("IMPOSTOR")
     custom = stage.GetPrimAtPath(root.GetPath().AppendPath("Geom/impostor")).GetCustomDataByKey("treefarm:impostor")
