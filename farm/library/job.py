@@ -266,6 +266,7 @@ def add_asset(out: str, species_name: str, seed: int) -> dict:
     """Build one more asset (species, tree seed) into an existing library with its spec; rewrite the catalog."""
     location = Location.resolve(out)
     spec = read_library_spec(location)
+    check_fbx_blender(spec)
     known = preset_names()
     if species_name not in known:
         raise LibraryError(f"species {species_name!r} is unknown: allowed {', '.join(sorted(known))}")
