@@ -29,7 +29,7 @@ def _check_glb(path: str | Path, what: str) -> str:
 def _fbx_item(job, index: int) -> dict:
     if isinstance(job, Mapping):
         glb, out = job.get("glb"), job.get("fbx")
-        extra = {k: job[k] for k in ("name", "node", "animated") if job.get(k) is not None}
+        extra = {k: job[k] for k in ("name", "node", "animated", "nodes", "names") if job.get(k) is not None}
     elif isinstance(job, (tuple, list)) and len(job) == 2:
         (glb, out), extra = job, {}
     else:
@@ -65,7 +65,8 @@ def export_fbx(glb_path: str | Path, out_path: str | Path, *, name: str | None =
 
 def export_fbx_batch(jobs: Sequence, timeout: float = DEFAULT_TIMEOUT_S) -> list[dict]:
     """Export many GLBs in ONE Blender process (start-up is paid once); jobs are (glb_path, out_path) pairs
-    or dicts {glb, fbx, name, node, animated (armatures and actions too)}. Consecutive jobs on the same GLB import it once (one FBX per LOD node).
+    or dicts {glb, fbx, name, node, animated (armatures and actions too)} (or {glb, fbx, nodes, names}: several
+    nodes in one file, each renamed). Consecutive jobs on the same GLB import it once (one FBX per LOD node).
     Returns one `export_fbx` dictionary per job, in order; the first failure raises BlenderError."""
     if not jobs:
         raise BlenderError("export_fbx_batch needs at least one (glb_path, out_path) job; got none")

@@ -16,7 +16,10 @@ from renderers.framing import framing_points
 from renderers.impostor import render_impostors
 from renderers.silhouette_metric import QUALITY_AZIMUTHS, closed_silhouette, silhouette_iou, switch_camera
 from renderers.octahedral_impostor import render_octahedral_impostor
+from species.meshing.tubes_and_cards import CARD_FACES
 from species.studio.collision import collision_capsules
+from species.studio.leaf_cutout import trace_leaf_outline
+from species.studio.lod import card_clumps
 from species.studio.pbr_textures import SEASONS, bark_maps, leaf_atlas, season_leaf_colour
 from species.studio.skeletal_wind import wind_clip, wind_rig
 from species.studio.wind import WIND_LAYOUT, wind_attributes
@@ -63,6 +66,7 @@ class LevelData:
     twig_index: int = -1  # the level's cards are `twig_atlas.layout.levels[twig_index]`
     twig_wind: np.ndarray | None = None
     twig_pivot: np.ndarray | None = None
+    leaf_outline: object = None  # species.studio.leaf_cutout.LeafOutline: single leaves drawn as its polygon
     lod0_branch: np.ndarray | None = None  # (B',) int64 the LOD0 branch of each of the level's branches
 
     def lod0_branches(self, branch: np.ndarray) -> np.ndarray:
@@ -71,7 +75,11 @@ class LevelData:
 
     @property
     def n_triangles(self) -> int:
-        return int(self.mesh.n_faces) + (self.twigs.n_faces if self.twigs is not None else 0)
+        triangles = int(self.mesh.n_faces) + (self.twigs.n_faces if self.twigs is not None else 0)
+        if self.leaf_outline is not None:  # each single-leaf card's two triangles become the outline's
+            singles = int(np.count_nonzero(~card_clumps(self.mesh.leaves)))
+            triangles += singles * (self.leaf_outline.n_triangles - len(CARD_FACES))
+        return triangles
 
 
 @dataclass
@@ -93,6 +101,7 @@ class LibraryAsset:
     wind_rig: object = None  # species.studio.skeletal_wind.WindRig, when the spec asks for skeletal wind
     wind_clip: object = None  # its WindClip
     level_skins: list = field(default_factory=list)  # a skinned_levels.LevelSkin per level (None: impostor)
+    leaf_outline: object = None  # the `cutout` leaves' LeafOutline (None: leaf cards)
 
     @property
     def lod0(self):
@@ -111,6 +120,18 @@ class LibraryAsset:
                    for season in SEASONS}
         for image in albedos.values():
             image.flags.writeable = False  # each file's writer encodes them: `PngCache` knows them by identity
+        return albedos
+
+    @cached_property
+    def cutout_albedos(self) -> dict[str, np.ndarray]:
+        """(h, 2 h, 3) uint8 leaf atlas colour without its alpha per leafy season, for `cutout` leaves' opaque
+        material: with no alpha channel in the image, no importer (Blender's FBX one, Unity's) turns on an
+        alpha test the outline polygons do not need. {} for leaf cards."""
+        if self.leaf_outline is None:
+            return {}
+        albedos = {season: np.ascontiguousarray(atlas[..., :3]) for season, atlas in self.leaf_atlases.items()}
+        for image in albedos.values():
+            image.flags.writeable = False  # `PngCache` knows them by identity
         return albedos
 
     def metadata(self) -> dict:
@@ -278,5 +299,11 @@ def build_asset_from_tree(ident: str, species_name: str, seed: int, params: dict
         measure_chain(renderer, levels, atlas, lod0_fraction, card_fraction, lod0_cover, twig_atlas, points)
     with timer.stage("wind"):
         skins = level_skins(rig, levels)
+    outline = None
+    if spec.leaves == "cutout":
+        with timer.stage("cutout"):
+            outline = trace_leaf_outline(leaf_alphas(atlases["summer"])[0])  # every season's leaf has one shape
+            for level in levels[:-1]:
+                level.leaf_outline = outline
     return LibraryAsset(ident, species_name, params.get("generator", "weber_penn"), int(seed), params, skeleton,
-                        levels, atlas, capsules, maps, atlases, twig_atlas, rig, clip, skins)
+                        levels, atlas, capsules, maps, atlases, twig_atlas, rig, clip, skins, outline)

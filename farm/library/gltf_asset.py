@@ -1,7 +1,8 @@
 """The asset GLB: every level of detail and the impostor as named nodes (MSFT_lod on the root, screen coverages
 in its extras), leaves as instanced cards (EXT_mesh_gpu_instancing: one card for single leaves, one for
 clumps: meshes `<level>_leaf_card`, `<level>_clump_card`), seasons as KHR_materials_variants, wind attributes
-`_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha; the normal-mapped primitives (bark, impostor) carry
+`_WIND`/`_WIND_PIVOT`, PBR bark and a leaf atlas with alpha (a `cutout` asset: single leaves as opaque outline
+polygons, `species.studio.leaf_cutout`); the normal-mapped primitives (bark, impostor) carry
 TANGENT. An octahedral impostor's layout is in its level node's `extras.impostor`.
 
 In: a LibraryAsset and the worker's PngCache. Out: GLB bytes (Y up, metres); same asset, same bytes.
@@ -16,7 +17,9 @@ from species.geometry import unit_quaternions, vertex_tangents
 from species.meshing.gltf import CLAMP_TO_EDGE, REPEAT, TRIANGLES, Z_UP_TO_Y_UP, GlbWriter, z_up_to_y_up
 from species.meshing.tubes_and_cards import CARD_FACES, CARD_UVS
 from species.studio.pbr_textures import SEASONS
+from species.studio.leaf_cutout import outline_leaves
 from species.studio.lod import card_clumps
+from species.tree_mesh import MeshPart
 from species.skeleton import LEAF_CARD_CORNERS
 
 from .asset import LibraryAsset, leaf_instances
@@ -72,6 +75,15 @@ def _materials(writer: GlbWriter, asset: LibraryAsset, pngs: PngCache) -> dict[s
                 "baseColorTexture": texture(f"leaf_atlas_{season}", asset.leaf_atlases[season], CLAMP_TO_EDGE),
                 "metallicFactor": 0.0, "roughnessFactor": 0.7}
         out[season] = writer.material(entry)
+    if asset.leaf_outline is not None:
+        # Outline polygons of single leaves: the atlas's colour without alpha, opaque (no alpha test); bare still
+        # draws nothing.
+        for season, image in asset.cutout_albedos.items():
+            out[f"cutout_{season}"] = writer.material({
+                "name": f"leaf_cutout_{season}", "doubleSided": True, "pbrMetallicRoughness": {
+                    "baseColorTexture": texture(f"leaf_cutout_{season}", image, CLAMP_TO_EDGE),
+                    "metallicFactor": 0.0, "roughnessFactor": 0.7}})
+        out["cutout_bare"] = out["bare"]
     if asset.twig_atlas is not None:
         # Twig cluster cards: one atlas of bark and leaf texels, recoloured per season (bare keeps the twigs).
         normal = texture("twig_normal", asset.twig_atlas.normal, CLAMP_TO_EDGE)
@@ -227,6 +239,11 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
     per joint and kind, its instances placed from the joint's rest pivot, as (joint, node) pairs."""
     skeleton = level.skeleton
     clumps = card_clumps(level.mesh.leaves)
+    outline = level.leaf_outline
+    cutout_maps = [{"material": materials[f"cutout_{season}"], "variants": [i]} for i, season in enumerate(SEASONS)] \
+        if outline is not None else None
+    if not instanced and outline is not None:
+        return _flat_cutout_nodes(writer, asset, level, materials, variant_maps, cutout_maps, clumps)
     if not instanced:
         prim = _flat_leaves_primitive(writer, level, materials, variant_maps)
         return [writer.node({"name": f"{asset.asset_id}_{level.name}_leaves",
@@ -244,10 +261,18 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
     for clump, kind in ((False, "leaves"), (True, "clumps")):
         if not (clumps == clump).any():
             continue
-        card = _primitive(writer, _card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
-                          _leaf_tile_uvs(CARD_UVS, np.full(4, clump)), CARD_FACES, materials["summer"],
-                          {"_WIND": (np.zeros((4, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((4, 3)), "VEC3")},
-                          variant_maps)
+        if outline is not None and not clump:  # the leaf's outline polygon in the card's frame, opaque
+            k = len(outline.uvs)
+            normals = np.tile([0.0, 1.0, 0.0], (k, 1))
+            card = _primitive(writer, _card_to_local(outline.card_points), _card_to_local(normals),
+                              _leaf_tile_uvs(outline.uvs, np.zeros(k, bool)), outline.faces, materials["cutout_summer"],
+                              {"_WIND": (np.zeros((k, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((k, 3)), "VEC3")},
+                              cutout_maps)
+        else:
+            card = _primitive(writer, _card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
+                              _leaf_tile_uvs(CARD_UVS, np.full(4, clump)), CARD_FACES, materials["summer"],
+                              {"_WIND": (np.zeros((4, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((4, 3)), "VEC3")},
+                              variant_maps)
         card_mesh = writer.mesh(f"{level.name}_{CARD_MESH_KINDS[kind]}_card", card)
         for joint, members in groups:
             chosen = members & (clumps == clump)
@@ -267,6 +292,34 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
             entry = writer.node({"name": name, "mesh": card_mesh,
                                  "extensions": {"EXT_mesh_gpu_instancing": {"attributes": attributes}}})
             nodes.append(entry if joint is None else (joint, entry))
+    return nodes
+
+
+def _flat_cutout_nodes(writer: GlbWriter, asset, level, materials, variant_maps, cutout_maps,
+                       clumps: np.ndarray) -> list[int]:
+    """Baked leaves of a `cutout` asset: `_leaves`, every single-leaf card's outline polygon (opaque), and
+    `_clumps`, the cards that merge several leaves (alpha-tested clump tile), when the level has any."""
+    part, nodes = level.mesh.leaves, []
+    for clump, kind in ((False, "leaves"), (True, "clumps")):
+        chosen = clumps == clump
+        if not chosen.any():
+            continue
+        if clump:
+            picked = np.repeat(chosen, 4)
+            shape = MeshPart(part.vertices[picked], CARD_FACES[None] + 4 * np.arange(chosen.sum())[:, None, None],
+                             part.normals[picked], _leaf_tile_uvs(part.uvs[picked], np.ones(picked.sum(), bool)))
+            material, maps = materials["summer"], variant_maps
+        else:
+            shape = outline_leaves(part, level.leaf_outline, chosen)
+            shape = MeshPart(shape.vertices, shape.faces, shape.normals,
+                             _leaf_tile_uvs(shape.uvs, np.zeros(shape.n_vertices, bool)))
+            material, maps = materials["cutout_summer"], cutout_maps
+        per_card = shape.n_vertices // int(chosen.sum())
+        wind = {"_WIND": (np.repeat(level.leaf_wind[chosen], per_card, axis=0), "VEC4"),
+                "_WIND_PIVOT": (z_up_to_y_up(np.repeat(level.leaf_pivot[chosen], per_card, axis=0)), "VEC3")}
+        prim = _primitive(writer, shape.vertices, shape.normals, shape.uvs, shape.faces, material, wind, maps)
+        nodes.append(writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
+                                  "mesh": writer.mesh(f"{level.name}_{kind}", prim)}))
     return nodes
 
 

@@ -27,15 +27,16 @@ from ..tree_chain import BuiltTree, to_json, tree_seed
 from .asset import LibraryAsset, build_asset
 from .catalog import write_catalog
 from .gltf_asset import asset_to_glb, glb_size
+from .lod_group import lod_group_entry, lod_group_job
 from .png_cache import PngCache
 from .previews import thumbnail, turntable
 from .records import (ASSETS, BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
                       library_asset_ids, read_library_spec, write_added_record, write_library_record)
-from .spec import LibrarySpec, species_of_trees
+from .spec import FORMATS, LibrarySpec, LibrarySpecError, species_of_trees
 from .usd_asset import TEXTURE_FILES, TWIG_TEXTURE_FILES, asset_to_usdc
 
 __all__ = ["LibraryChain", "run_library", "add_asset", "write_asset_files", "stage_asset_files", "finish_assets",
-           "retry_failed_fbx"]
+           "retry_failed_fbx", "check_fbx_blender"]
 
 
 def _obj_text(part, name: str) -> bytes:
@@ -128,8 +129,9 @@ def stage_asset_files(asset: LibraryAsset, location: Location, spec, renderer, t
 
 
 def finish_assets(pending: list[dict], location: Location, spec, timer: StageTimer) -> list[dict]:
-    """Export the FBX files (one per LOD) of every pending asset in ONE Blender process, from each asset's
-    non-instanced GLB, then write each asset.json (atomically, last); returns the finished records.
+    """Export the FBX files (one per LOD, and the LOD-group file of every level, `lod_group`) of every pending
+    asset in ONE Blender process, from each asset's non-instanced GLB, then write each asset.json (atomically,
+    last); returns the finished records.
 
     When Blender fails, every asset of the batch still gets its asset.json (its other files are whole), with
     `"blender": "failed: <Blender's message>"`; the catalog counts those assets and `farm library validate`
@@ -146,6 +148,8 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
                          "node": f"{ident}_{name}", "name": f"{ident}_{name}",
                          **({"animated": True} if spec.skeletal_wind else {})})
             owners.append((index, name))
+        jobs.append(lod_group_job(record, location, item["folder"]))  # every level in one file, last
+        owners.append((index, None))
     if jobs:
         try:
             with timer.stage("blender"):
@@ -157,8 +161,11 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
         for (index, name), job, row in zip(owners, jobs, rows):
             record = pending[index]["record"]
             relative = os.path.relpath(job["fbx"], location.root)
-            record["files"][f"fbx_{name}"] = relative
-            record["sizes"][f"fbx_{name}"] = int(row["bytes"])
+            key = "fbx" if name is None else f"fbx_{name}"  # None: the LOD-group file
+            record["files"][key] = relative
+            record["sizes"][key] = int(row["bytes"])
+            if name is None:
+                record["lod_group"] = lod_group_entry(record)
             record["all_files"] = sorted([*record["all_files"], relative])
             record["blender"] = "written"
     for item in pending:
@@ -186,6 +193,15 @@ def retry_failed_fbx(location: Location, spec, timer: StageTimer | None = None) 
     if pending:
         finish_assets(pending, location, spec, timer or StageTimer())
     return len(pending)
+
+
+def check_fbx_blender(spec: LibrarySpec) -> None:
+    """Refuse (LibrarySpecError naming `formats`) a spec that names `fbx` among its formats when Blender, which
+    writes the FBX files, is missing. The default formats (every format) still build there, their FBX files
+    left pending in asset.json, so the default library builds on any machine."""
+    if "fbx" in spec.formats and tuple(spec.formats) != FORMATS and not blender_available():
+        raise LibrarySpecError("formats", list(spec.formats), "formats without 'fbx' on this machine: Blender, which "
+                               "writes the FBX files, is missing (run `make env`, or set $TREEFARM_BLENDER_PYTHON)")
 
 
 def _tags(asset: LibraryAsset) -> list[str]:
@@ -231,6 +247,7 @@ def run_library(spec: LibrarySpec, out: str, workers: int | None = None, address
                 progress: bool = True) -> dict:
     """Run (or resume) a library job into `out` on the farm pipeline, then write the catalog; returns it."""
     location = Location.resolve(out)
+    check_fbx_blender(spec)
     if location.exists(LIBRARY_RECORD):
         existing = json.loads(location.read_bytes(LIBRARY_RECORD))
         if existing.get("spec_digest") != spec.digest():
@@ -250,6 +267,7 @@ def add_asset(out: str, species_name: str, seed: int) -> dict:
     """Build one more asset (species, tree seed) into an existing library with its spec; rewrite the catalog."""
     location = Location.resolve(out)
     spec = read_library_spec(location)
+    check_fbx_blender(spec)
     known = preset_names()
     if species_name not in known:
         raise LibraryError(f"species {species_name!r} is unknown: allowed {', '.join(sorted(known))}")

@@ -21,7 +21,8 @@ from species.studio.skeletal_wind import JOINT_BUDGET_RANGE, TRUNK_SEGMENTS, Win
 
 __all__ = ["LibrarySpec", "LibrarySpecError", "parse_library_spec", "load_library_spec", "default_library_spec",
            "library_spec_from_record", "FORMATS", "DEFAULT_BUDGETS", "DEFAULT_SWITCH_PX", "LIBRARY_TABLES",
-           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "species_of_trees", "WIND_CLIP_DEFAULTS", "WIND_CLIP_KEYS"]
+           "IMPOSTOR_KINDS", "DEFAULT_IMPOSTOR_TILE", "LEAF_KINDS", "species_of_trees", "WIND_CLIP_DEFAULTS",
+           "WIND_CLIP_KEYS"]
 
 FORMATS = ("glb", "usd", "obj", "fbx", "blend", "collision")  # every format, and the default
 _MADE_FROM_GLB = ("fbx", "blend")
@@ -30,11 +31,16 @@ DEFAULT_SWITCH_PX = (512, 256, 128, 64)  # LOD1, LOD2, LOD3, impostor
 # Crossed planes (the portable default any glTF viewer draws) or an octahedral atlas (a shader picks its frames).
 IMPOSTOR_KINDS = ("crossed", "octahedral")
 DEFAULT_IMPOSTOR_TILE = 128  # px; an octahedral atlas takes the largest tile up to this that fits MAX_ATLAS_PX
+# Leaves as alpha-tested cards (the default) or as opaque outline polygons traced from the leaf texture's alpha
+# (`species.studio.leaf_cutout`), for engines that draw full geometry faster than alpha tests (Nanite).
+LEAF_KINDS = ("cards", "cutout")
 _TOP_KEYS = {"name", "seed", "species", "per_species", "lod_budgets", "switch_px", "formats", "texture_size",
-             "twig_cards", "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources"}
+             "twig_cards", "impostor", "impostor_frames", "impostor_tile", "shard_size", "resources",
+             "leaves"}
 # Spec fields the job record leaves out while they hold these values: they came after library.json was first
 # written, and leaving them out keeps the default library's records and spec digest as they were.
-_OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES}
+_OMITTED_WHEN = {"twig_cards": True, "impostor": "crossed", "impostor_frames": OCTAHEDRAL_FRAMES,
+                 "leaves": "cards"}
 # Baked skeletal wind (species.studio.skeletal_wind): off by default (the one value that decides it), or on
 # with the clip's joint budget and wind.
 _WIND_CLIP_DEFAULTS = WindClipSettings()
@@ -98,6 +104,8 @@ class LibrarySpec(PipelineSpec):
     wind_strength, wind_gust, wind_period_s : the clip's wind (strength in [0, 1], the share of the lean that
                     comes and goes with the gust in [0, 1], seconds of one loop > 0).
     shard_size    : assets per shard; resources: Ray resources per worker actor.
+    leaves        : "cards" (alpha-tested leaf cards; the default) or "cutout" (each single leaf an opaque outline
+                    polygon of a few triangles, at every level that keeps single leaves; clump cards stay cards).
     """
 
     name: str = "library"
@@ -113,6 +121,7 @@ class LibrarySpec(PipelineSpec):
     impostor_tile: int = DEFAULT_IMPOSTOR_TILE
     shard_size: int = 4
     resources: dict[str, float] = field(default_factory=lambda: {"num_cpus": 1.0, "num_gpus": 0.0})
+    leaves: str = "cards"
     skeletal_wind: bool = WIND_CLIP_DEFAULTS["skeletal_wind"]
     wind_joints: int = _WIND_CLIP_DEFAULTS.joint_budget
     wind_strength: float = _WIND_CLIP_DEFAULTS.strength
@@ -236,11 +245,14 @@ def _parse_library_spec(raw: dict | None, known_species=None) -> LibrarySpec:
     shard_size = check_int("shard_size", raw.get("shard_size", 4), 1, 10_000)
     resources = check_resources(raw.get("resources", {}))
     wind = _parse_wind_clip(raw)
+    leaves = raw.get("leaves", "cards")
+    if leaves not in LEAF_KINDS:
+        raise LibrarySpecError("leaves", leaves, f"one of: {', '.join(LEAF_KINDS)}")
     return LibrarySpec(name=name, seed=seed, species=species, lod_budgets=budgets, switch_px=tuple(switch),
                        formats=tuple(dict.fromkeys(formats)), texture_size=texture_size, twig_cards=twig_cards,
                        impostor=impostor,
                        impostor_frames=frames, impostor_tile=tile,
-                       shard_size=shard_size, resources=resources, **wind)
+                       shard_size=shard_size, resources=resources, leaves=leaves, **wind)
 
 
 def _parse_wind_clip(raw: dict) -> dict:

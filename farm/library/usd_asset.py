@@ -1,7 +1,7 @@
 """The asset as USD (`.usdc` via usd-core): Z up, metres, a `lod` variant set (LOD0.., IMPOSTOR) and a `season`
 variant set (spring, summer, autumn, bare without leaves), leaves as a PointInstancer of a leaf card (and, on
-coarser levels, a clump card), wind primvars; an octahedral impostor's layout in its prim's `treefarm:impostor`
-custom data.
+coarser levels, a clump card; a `cutout` asset's leaf is its opaque outline polygon), wind primvars; an
+octahedral impostor's layout in its prim's `treefarm:impostor` custom data.
 
 In: a LibraryAsset and the texture file names beside it. Out: `.usdc` bytes (written through a temporary file).
 """
@@ -120,10 +120,11 @@ PROTOTYPE_NAMES = {False: "leaf", True: "clump"}
 
 
 def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray | None = None,
-                    origin: np.ndarray | None = None, leaves=None) -> list[str]:
+                    origin: np.ndarray | None = None, leaves=None, cutout_material=None) -> list[str]:
     """The level's leaves as a PointInstancer at `path`; returns the names of the prototypes it made. Skeletal
     wind gives one per joint: the `chosen` (M,) bool leaves, placed from `origin` (3,), `leaves` the level's
-    (translation, unit quaternion x y z w, scale, clump) per card, made once."""
+    (translation, unit quaternion x y z w, scale, clump) per card, made once. A level with a `leaf_outline`
+    draws its single leaves as that polygon, bound to `cutout_material` (opaque)."""
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     instancer = UsdGeom.PointInstancer.Define(stage, path)
@@ -138,16 +139,21 @@ def _leaf_instancer(stage, path: str, level, card_material, chosen: np.ndarray |
     kinds = [kind for kind in (False, True) if (clumps == kind).any()]
     prototypes = []
     for kind in kinds:
-        prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", card, uv_tile=int(kind))
-        if card_material is not None:  # else the leaves' season binding above it holds
-            UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(card_material)
+        outline = level.leaf_outline if not kind else None
+        shape = card if outline is None else MeshPart(outline.card_points, outline.faces,
+                                                      np.tile([0.0, 1.0, 0.0], (len(outline.uvs), 1)), outline.uvs)
+        prototype = _mesh(stage, f"{path}/prototypes/{PROTOTYPE_NAMES[kind]}", shape, uv_tile=int(kind))
+        material = card_material if outline is None else cutout_material
+        if material is not None:  # else the leaves' season binding above it holds
+            UsdShade.MaterialBindingAPI.Apply(prototype.GetPrim()).Bind(material)
         prototypes.append(prototype.GetPath())
     instancer.CreatePrototypesRel().SetTargets(prototypes)
     if origin is not None:
         translation = translation - origin
     instancer.CreateProtoIndicesAttr(Vt.IntArray.FromNumpy(np.searchsorted(kinds, clumps).astype(np.int32)))
     instancer.CreatePositionsAttr(Vt.Vec3fArray.FromNumpy(translation.astype(np.float32)))
-    instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(quat[:, [3, 0, 1, 2]].astype(np.float16)))
+    # Vt reads each row as GfQuath lays it out: imaginary (x, y, z) first, then the real part w.
+    instancer.CreateOrientationsAttr(Vt.QuathArray.FromNumpy(np.ascontiguousarray(quat, np.float16)))
     instancer.CreateScalesAttr(Vt.Vec3fArray.FromNumpy(scale.astype(np.float32)))
     primvars = UsdGeom.PrimvarsAPI(instancer)
     primvars.CreatePrimvar("wind", Sdf.ValueTypeNames.Float4Array, UsdGeom.Tokens.vertex).Set(
@@ -194,6 +200,10 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
     leaves = {s: _material(stage, f"{looks}/leaves_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, True, 0.7,
                            "clamp")
               for s in SEASONS if s != "bare"}
+    # `cutout` leaves: the same atlas on opaque outline polygons (no opacity, so no alpha test).
+    cutout = {s: _material(stage, f"{looks}/leaves_cutout_{s}", TEXTURE_FILES[f"leaf_atlas_{s}"], None, None, False,
+                           0.7, "clamp")
+              for s in SEASONS if s != "bare"} if asset.leaf_outline is not None else {}
     impostor = _material(stage, f"{looks}/impostor", TEXTURE_FILES["impostor_albedo"],
                          TEXTURE_FILES["impostor_normal"], None, True, 0.8, "clamp")
     twigs = {s: _material(stage, f"{looks}/twigs_{s}", TWIG_TEXTURE_FILES[f"twig_atlas_{s}"],
@@ -237,7 +247,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                         _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
                                         asset.wind_rig.position[joint], per_level)
                 elif level.skeleton.n_leaves:
-                    made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"])
+                    made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"],
+                                           cutout_material=cutout.get("summer"))
                     prototype_names.update(f"prototypes/{kind}" for kind in made)
                 if level.twigs is not None:
                     cards = _mesh(stage, f"{geom}/twigs", level.twigs, level.twig_wind, level.twig_pivot)
@@ -261,7 +272,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
             else:
                 for name in sorted(prototype_names):
                     card = stage.OverridePrim(f"{geom}/leaves/{name}")
-                    UsdShade.MaterialBindingAPI.Apply(card).Bind(leaves[season])
+                    outlined = cutout and name == f"prototypes/{PROTOTYPE_NAMES[False]}"
+                    UsdShade.MaterialBindingAPI.Apply(card).Bind(cutout[season] if outlined else leaves[season])
     season_set.SetVariantSelection("summer")
     # `season` first among the prim's variant sets: its leaf bindings are then stronger than the `lod` variants'.
     layer.GetPrimAtPath(root_path).variantSetNameList.prependedItems = ["season", "lod"]

@@ -1,7 +1,8 @@
 """Job kinds `fbx` (GLB files to FBX files for Unity/Unreal, many in one job) and `fbx_info` (read an FBX back).
 
 `fbx` keys: exports, a list of {glb, fbx, name (optional), node (optional: keep that glTF node's subtree),
-animated (optional: the armatures and their actions too, `ANIMATED_FBX_SETTINGS`)}.
+animated (optional: the armatures and their actions too, `ANIMATED_FBX_SETTINGS`)} or {glb, fbx, nodes, names}:
+several nodes' subtrees in one file, each renamed (an engine LOD group).
 Result: per export the FBX path, its objects (name, part, vertices, triangles), bounds and seconds.
 Also the GLB import shared with `asset_library`: checked, importer bug patched, instanced meshes merged.
 """
@@ -101,6 +102,24 @@ def subtree(objects: list, node: str | None) -> list:
     if not roots:
         raise JobError(f"node {node!r} is not in the GLB: it has {sorted(obj.name for obj in objects)}")
     return [roots[0]] + list(roots[0].children_recursive)
+
+
+def renamed_subtrees(objects: list, nodes: list, names: list) -> list:
+    """The subtrees (`subtree`) of several glTF nodes in one list, the top of each renamed to its entry of
+    `names` and its descendants' names starting with the node's name given that prefix instead: one FBX holding
+    several levels as `<id>_LOD0`, `<id>_LOD1`, ... (an engine's LOD group)."""
+    if not isinstance(nodes, list) or not isinstance(names, list) or len(nodes) != len(names) or not nodes:
+        raise JobError(f"nodes {nodes!r} and names {names!r} must be lists of the same, non-zero length")
+    chosen = []
+    for node, name in zip(nodes, names):
+        part = subtree(objects, str(node))
+        for obj in part:
+            old = obj.name
+            obj.name = str(name) + old[len(node):] if old.startswith(str(node)) else f"{name}_{old}"
+            if obj.type == "MESH":
+                obj.data.name = obj.name
+        chosen += part
+    return chosen
 
 
 def _repeated_mesh(source, matrices: np.ndarray, name: str):
@@ -280,8 +299,11 @@ def run(job: dict, out_dir: str) -> dict:
         if glb != loaded:  # several LODs of one GLB: import it once
             objects, loaded = merge_instances(load_glb(glb)), glb
             name_textures()
-        chosen = subtree(objects, item.get("node"))
-        if item.get("name"):
+        if item.get("nodes") is not None:  # several levels in one file, each under its own name
+            chosen = renamed_subtrees(objects, item["nodes"], item.get("names"))
+        else:
+            chosen = subtree(objects, item.get("node"))
+        if item.get("name") and item.get("nodes") is None:
             rename(chosen, str(item["name"]))
         export_fbx(chosen, fbx, animated=bool(item.get("animated", False)))
         stats = mesh_stats(chosen)

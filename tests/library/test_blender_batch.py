@@ -42,7 +42,8 @@ def shard_run(tmp_path_factory):
 
 def test_each_shard_exports_its_assets_fbx_in_one_blender_batch(shard_run):
     out, batches, records = shard_run
-    assert [len(batch) for batch in batches] == [2 * 5, 1 * 5]  # assets x (4 LODs + impostor), per shard
+    # assets x (4 LODs + impostor, a file each, and the LOD-group file of all five), per shard
+    assert [len(batch) for batch in batches] == [2 * 6, 1 * 6]
     assert all(not record["failures"] for record in records)
 
 
@@ -95,7 +96,7 @@ def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypa
     monkeypatch.setattr(job, "export_fbx_batch", record_batch)
     glb_before = {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")}
     assert job.retry_failed_fbx(location, spec) == 3
-    assert [len(batch) for batch in batches] == [3 * 5]
+    assert [len(batch) for batch in batches] == [3 * 6]
     for path in sorted(tmp_path.glob("assets/*/asset.json")):
         record = json.loads(path.read_text())
         assert record["blender"] == "written"

@@ -17,6 +17,7 @@ import yaml
 
 from farm.cli import main as farm_main
 from gltf_validator import assert_valid_glb
+from usd_validator import assert_valid_usd
 
 SPEC = {"name": "tiny", "seed": 5, "species": {"maple": 1, "sc_young_sapling": 1, "lsystem_monopodial": 1},
         "formats": ["glb", "usd", "obj", "collision"], "texture_size": 64, "impostor_tile": 32, "shard_size": 1}
@@ -73,15 +74,11 @@ def test_every_glb_passes_the_khronos_validator_and_loads_in_trimesh(library, tm
 
 
 def test_every_usd_opens_and_passes_usd_validation(library):
-    from pxr import Usd, UsdGeom, UsdValidation
+    from pxr import UsdGeom
 
-    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     for path in sorted(library.glob("assets/*/*.usdc")):
-        stage = Usd.Stage.Open(str(path))
+        stage = assert_valid_usd(path)
         assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
-        errors = [e for e in UsdValidation.ValidationContext(validators).Validate(stage)
-                  if e.GetType() == UsdValidation.ValidationErrorType.Error]
-        assert not errors, [e.GetMessage() for e in errors]
         sets = stage.GetDefaultPrim().GetVariantSets()
         assert set(sets.GetNames()) == {"lod", "season"}
         sets.GetVariantSet("season").SetVariantSelection("bare")
@@ -416,3 +413,32 @@ def test_the_progress_bar_shows_no_view_count_for_a_library(tmp_path, monkeypatc
     spec = parse_library_spec({**SPEC, "species": {"lsystem_monopodial": 1}, "formats": ["glb"]})
     run_library(spec, str(tmp_path / "out"), workers=1, progress=True)
     assert shown == ["failed=0"]
+
+
+def test_usd_leaf_instances_stand_where_the_glb_instances_stand(library):
+    # The USD's PointInstancer and the GLB's EXT_mesh_gpu_instancing place every LOD0 leaf card (the GLB in
+    # Y up, its rotations carrying the frame change; the USD in Z up): the same cards, the same turns.
+    from pxr import Usd, UsdGeom
+    from scipy.spatial import cKDTree
+
+    from farm.library.glb_scene import INSTANCING, instance_matrices
+    from species.meshing.gltf import Z_UP_TO_Y_UP, read_glb_chunks
+
+    glb = next(p for p in sorted(library.glob("assets/*/*.glb")) if "baked" not in p.name)
+    document, binary = read_glb_chunks(glb.read_bytes())
+    nodes = [n for n in document["nodes"] if "_LOD0_" in n.get("name", "") and INSTANCING in n.get("extensions", {})]
+    glb_matrices = np.concatenate([instance_matrices(document, binary, n["extensions"][INSTANCING]["attributes"])
+                                   for n in nodes])
+    glb_positions = glb_matrices[:, :3, 3] @ Z_UP_TO_Y_UP  # back to Z up
+    glb_turns = np.einsum("ij,kjl->kil", Z_UP_TO_Y_UP.T, glb_matrices[:, :3, :3])
+    stage = Usd.Stage.Open(str(next(glb.parent.glob("*.usdc"))))
+    stage.GetDefaultPrim().GetVariantSets().GetVariantSet("lod").SetVariantSelection("LOD0")
+    instancer = next(UsdGeom.PointInstancer(p) for p in stage.Traverse() if p.IsA(UsdGeom.PointInstancer))
+    usd = np.array(instancer.ComputeInstanceTransformsAtTime(Usd.TimeCode.Default(), Usd.TimeCode.Default()))
+    usd_positions, usd_turns = usd[:, 3, :3], np.transpose(usd[:, :3, :3], (0, 2, 1))  # row vectors in USD
+    assert len(usd) == len(glb_matrices) > 0
+    # Cards share a node's position: each GLB card must have a USD card at its place with its turn.
+    near = cKDTree(usd_positions).query_ball_point(glb_positions, 1e-3)
+    turn_error = [np.abs(usd_turns[k] - turn).max(axis=(1, 2)).min() if k else np.inf
+                  for k, turn in zip(near, glb_turns)]  # a loop over cards, in a test
+    assert max(turn_error) < 0.01  # half floats in the USD
