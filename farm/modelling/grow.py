@@ -176,8 +176,9 @@ def grow_model(lobes: list[trimesh.Trimesh], branches: list[tuple[np.ndarray, in
     """The tree grown inside `lobes` from `branches`, also into the painted `markers` (see the module).
 
     Markers fill the lobes at the preset's density, at most the marker budget (MODEL_DEFAULTS's unless `params`
-    says otherwise; under the density, buds look further: `perception_at_budget`); the painted ones are added as they are and are reachable outside the lobes. Without branches, a trunk runs from
-    the origin into the lowest lobe. brush_paths : the brush's paths (K, 3) metres; buds that perceive markers near
+    says otherwise; under the density, buds look further: `perception_at_budget`); the painted ones are added
+    as they are and are reachable outside the lobes. Without branches, a trunk runs from the origin into the
+    lowest lobe. brush_paths : the brush's paths (K, 3) metres; buds that perceive markers near
     them turn along them (eq. 4.2-4.3, sigma = brush_sigma, by default half of REACH internode lengths).
     Raises ModelError (a ValueError) for an unknown preset, bad branches, or nothing to grow into.
     """

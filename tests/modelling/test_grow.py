@@ -69,7 +69,8 @@ def test_painted_markers_outside_the_lobe_are_reached(lobe):
 
 # A crown-sized lobe (about 110 m^3: the preset's density would want over 200 000 markers) on a drawn trunk and
 # two limbs, as a user draws one in the page.
-CROWN_BRANCHES = [(np.array([[0, 0, 0], [0, 0, 2], [0.2, 0, 4]]), -1), (np.array([[0.1, 0, 2], [1, 0, 3], [2, 0, 4]]), 0),
+CROWN_BRANCHES = [(np.array([[0, 0, 0], [0, 0, 2], [0.2, 0, 4]]), -1),
+                  (np.array([[0.1, 0, 2], [1, 0, 3], [2, 0, 4]]), 0),
                   (np.array([[0.05, 0, 3], [-1, 0, 4], [-2, 0, 5]]), 0)]
 
 
