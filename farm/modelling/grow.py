@@ -11,7 +11,7 @@ import numpy as np
 import trimesh
 
 from species.colonization import (grow_in_space, MarkerSteering, MeshSpace, PointSpace, REFERENCE_INTERNODE,
-                                  UnionSpace, validate)
+                                  SCHEMA, UnionSpace, validate)
 from species.errors import ParameterError, TreefarmError
 from species.presets import get_preset, list_presets, PresetError
 from species.skeleton import Skeleton
@@ -19,11 +19,14 @@ from species.skeleton import Skeleton
 from .strokes import arc_lengths, resample_polyline
 
 __all__ = ["ModelError", "grow_model", "colonization_presets", "model_params", "branch_guide", "model_space",
-           "MODEL_DEFAULTS", "REACH"]
+           "perceived_markers", "perception_at_budget", "MODEL_DEFAULTS", "REACH", "MIN_PERCEIVED"]
 
 # What modelling changes in a preset before the user's overrides: a marker budget that keeps growth live.
 MODEL_DEFAULTS = {"max_markers": 4000, "leaf_age": 3}
 REACH = 1.5  # IL: buds may grow this far round painted markers and drawn branches, outside the lobes
+# Markers a bud's perception cone must hold on average for growth to spread on through the lobes (fewer, and
+# most buds perceive none and die); a marker budget under the preset's density widens the cone to this.
+MIN_PERCEIVED = 8
 
 
 class ModelError(TreefarmError):
@@ -136,14 +139,46 @@ def model_space(lobes: list, guide: Skeleton, markers: np.ndarray, internode_len
     return UnionSpace(tuple(parts))
 
 
+def perceived_markers(params: dict, markers_per_cubic_metre: float, internode_length: float) -> float:
+    """The markers a bud's perception cone (radius, angle of `params`) holds on average at that density."""
+    radius = params["perception_radius"] * internode_length
+    cap = (1.0 - np.cos(np.radians(params["perception_angle"]) / 2)) / 2  # the cone's share of the ball
+    return markers_per_cubic_metre * 4.0 / 3.0 * np.pi * radius ** 3 * cap
+
+
+def perception_at_budget(params: dict, markers_per_cubic_metre: float, internode_length: float) -> dict:
+    """`params` with the perception radius (and each schedule phase's) widened for markers sparser than the
+    preset's density (a marker budget too small for the lobes): until a bud's cone holds MIN_PERCEIVED markers
+    again, never further than the preset's own spacing would give, at most the schema's limit. Without it a bud
+    perceives next to nothing and growth dies out round the drawn branches. The occupancy radius stays in
+    internode lengths: it sets how closely branches pack, not how far buds look. `params` itself when the
+    markers are as dense as the preset's."""
+    spread = params["marker_density"] / internode_length ** 3 / markers_per_cubic_metre
+    if not spread > 1.0:
+        return params
+    limit = SCHEMA["perception_radius"].high
+
+    def radius(phase: dict) -> float:
+        current = {**params, **phase}
+        seen = perceived_markers(current, markers_per_cubic_metre, internode_length)
+        widen = max(1.0, min(np.cbrt(MIN_PERCEIVED / seen), np.cbrt(spread)))
+        return float(min(current["perception_radius"] * widen, limit))
+
+    perceives = ("perception_radius", "perception_angle")
+    schedule = [[start, {**phase, "perception_radius": radius(phase)} if any(k in phase for k in perceives)
+                 else phase] for start, phase in params["schedule"]]
+    return {**params, "perception_radius": radius({}), "schedule": schedule}
+
+
 def grow_model(lobes: list[trimesh.Trimesh], branches: list[tuple[np.ndarray, int]], markers: np.ndarray,
                preset: str, params: dict | None, rng: np.random.Generator, *, brush_paths=(),
                brush_sigma: float | None = None, internode_length: float = REFERENCE_INTERNODE) -> Skeleton:
     """The tree grown inside `lobes` from `branches`, also into the painted `markers` (see the module).
 
-    Markers fill the lobes at the preset's density (MODEL_DEFAULTS's budget unless `params` says otherwise); the
-    painted ones are added as they are and are reachable outside the lobes. Without branches, a trunk runs from
-    the origin into the lowest lobe. brush_paths : the brush's paths (K, 3) metres; buds that perceive markers near
+    Markers fill the lobes at the preset's density, at most the marker budget (MODEL_DEFAULTS's unless `params`
+    says otherwise; under the density, buds look further: `perception_at_budget`); the painted ones are added
+    as they are and are reachable outside the lobes. Without branches, a trunk runs from the origin into the
+    lowest lobe. brush_paths : the brush's paths (K, 3) metres; buds that perceive markers near
     them turn along them (eq. 4.2-4.3, sigma = brush_sigma, by default half of REACH internode lengths).
     Raises ModelError (a ValueError) for an unknown preset, bad branches, or nothing to grow into.
     """
@@ -170,8 +205,11 @@ def grow_model(lobes: list[trimesh.Trimesh], branches: list[tuple[np.ndarray, in
     sampled = [markers]
     if lobes:
         lobe_space = UnionSpace(tuple(space.parts[:-1]))
-        sampled.insert(0, lobe_space.sample_markers(p["marker_density"] / internode_length ** 3,
-                                                    p["max_markers"], rng))
+        density = p["marker_density"] / internode_length ** 3
+        sampled.insert(0, lobe_space.sample_markers(density, p["max_markers"], rng))
+        if len(sampled[0]) >= p["max_markers"]:  # the budget, not the density, set the count
+            lobe_volume = sum(abs(float(mesh.volume)) for mesh in lobes)  # overlaps count twice: a little wider
+            p = perception_at_budget(p, len(sampled[0]) / lobe_volume, internode_length)
     steering = None
     if len(brush_paths):
         sigma = REACH * internode_length / 2 if brush_sigma is None else float(brush_sigma)

@@ -8,9 +8,12 @@ import pytest
 import species
 from farm.modelling.brush import brush_markers, BrushError
 from farm.modelling.grow import (branch_guide, colonization_presets, grow_model, model_params, model_space,
-                                 ModelError)
+                                 MIN_PERCEIVED, ModelError, perceived_markers,
+                                 perception_at_budget)
 from farm.modelling.lobes import lobe_mesh
-from species.colonization import MeshSpace
+from scipy.spatial import cKDTree
+
+from species.colonization import MeshSpace, SCHEMA
 from species.errors import ParameterError
 
 FAST = {"max_markers": 1500, "iterations": 15}
@@ -62,6 +65,44 @@ def test_painted_markers_outside_the_lobe_are_reached(lobe):
     brushed = _grow(lobe, markers=painted, brush_paths=[PAINT_PATH])
     assert (plain.positions[:, 0] > 0.95).sum() == 0
     assert (brushed.positions[:, 0] > 0.95).sum() >= 5
+
+
+# A crown-sized lobe (about 110 m^3: the preset's density would want over 200 000 markers) on a drawn trunk and
+# two limbs, as a user draws one in the page.
+CROWN_BRANCHES = [(np.array([[0, 0, 0], [0, 0, 2], [0.2, 0, 4]]), -1),
+                  (np.array([[0.1, 0, 2], [1, 0, 3], [2, 0, 4]]), 0),
+                  (np.array([[0.05, 0, 3], [-1, 0, 4], [-2, 0, 5]]), 0)]
+
+
+@pytest.mark.parametrize("budget", [100, 1000])  # the page allows 100 and up
+def test_a_low_marker_budget_still_fills_a_large_lobe(budget):
+    crown = lobe_mesh([_ring(3.0, 4.0), _ring(2.5, 8.0)])
+    skeleton = grow_model([crown], CROWN_BRANCHES, None, "sc_round_maple", {"max_markers": budget},
+                          np.random.default_rng(0))
+    assert len(skeleton.leaves) > 500  # a crown, not the bare drawn branches
+    # Spread across the lobe: most of its volume lies within one marker spacing of the tree.
+    inside = MeshSpace(crown).sample_markers(1e9, 2000, np.random.default_rng(1))
+    spacing = np.cbrt(crown.volume / budget)
+    assert (cKDTree(skeleton.positions).query(inside)[0] < spacing).mean() > 0.9
+
+
+def test_buds_look_further_only_when_the_budget_spreads_the_markers():
+    params = model_params("sc_round_maple", {"schedule": [[0, {"perception_radius": 4.0}], [5, {"tropism": 0.1}]]})
+    preset_density = params["marker_density"] / 0.1 ** 3
+    assert perception_at_budget(params, preset_density, 0.1) is params  # as dense as the preset: unchanged
+    sparse = preset_density / 1000  # a cone of 4 or 5 IL holds under MIN_PERCEIVED markers there
+    wider = perception_at_budget(params, sparse, 0.1)
+    for phase in (wider, {**wider, **wider["schedule"][0][1]}):
+        assert phase["perception_radius"] < 10 * params["perception_radius"]  # not the preset's whole spacing
+        assert perceived_markers(phase, sparse, 0.1) == pytest.approx(MIN_PERCEIVED)
+    assert wider["schedule"][1] == [5, {"tropism": 0.1}]
+    assert wider["occupancy_radius"] == params["occupancy_radius"]  # how closely branches pack stays
+    # A little sparse, the cone still holds enough: as the preset. Never wider than the preset's own spacing
+    # (markers 8 times sparser: twice as far) for a preset that perceives few; at most the schema's limit.
+    assert perception_at_budget(params, preset_density / 8, 0.1)["perception_radius"] == params["perception_radius"]
+    short_sighted = model_params("sc_round_maple", {"perception_radius": 1.5, "occupancy_radius": 1.0})
+    assert perception_at_budget(short_sighted, preset_density / 8, 0.1)["perception_radius"] == pytest.approx(3.0)
+    assert perception_at_budget(params, 1e-3, 0.1)["perception_radius"] == SCHEMA["perception_radius"].high
 
 
 def test_branches_drawn_either_way_make_the_same_guide():
