@@ -680,6 +680,10 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
                              settings.min_radius_m)
     lap("radii")
     positions, parent, radius = hermite_midpoints(positions, parent, radius, settings.hermite_angle_deg)
+    # The tree stands on the ground, the cloud's lowest point (Z = 0), where the trunk's first slice begins: the
+    # root goes down to it, and no vertex (a Hermite midpoint can overshoot a low bend) lies below it.
+    positions[0, 2] = 0.0
+    positions[:, 2] = np.maximum(positions[:, 2], 0.0)
     skeleton = Skeleton(positions.astype(np.float32), parent, radius.astype(np.float32),
                         branch_orders(positions, parent))
     lap("smooth")
