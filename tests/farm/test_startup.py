@@ -136,6 +136,16 @@ def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
 
 
 @pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
+def test_a_batch_of_one_cloud_runs_without_ray(tmp_path):
+    # A folder --out is a batch; with one tree and no --address it runs in-process, with the batch's files.
+    status, imported = _imported(["reconstruct", str(TREE1), "--out", str(tmp_path / "trees")], tmp_path)
+    assert status == 0, status
+    assert {p.name for p in (tmp_path / "trees").iterdir()} >= {"tree1.glb", "tree1.qsm.csv", "summary.csv",
+                                                                "contact_sheet.png"}
+    assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
+
+
+@pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
 def test_a_point_cloud_reconstructions_import_set_does_not_grow(tmp_path):
     # The command's start-up time is mostly its imports: a new library or stdlib module on this path, or another
     # command's modules, fails here (defer it to where it is used, or add it above with its reason).
