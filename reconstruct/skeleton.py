@@ -27,7 +27,9 @@ The stages, each a function below:
 9. removal of collinear single-child vertices (Douglas-Peucker along each branch at a share of the spacing);
 10. the trunk cylinder fit (nonlinear least squares on the centralised trunk's original points), its radius on
     the trunk, and above it radii by the power law r = r_trunk (reach / reach at the trunk's top) ^ 1.1, never
-    wider than the parent;
+    wider than the parent, and never thinner than one point spacing (at most MIN_RADIUS_CAP_M; 2 mm at least):
+    the law thins twigs below what the scan resolves, and their points, a spacing or so apart, then lie beside
+    the tube instead of on it;
 11. Hermite smoothing: a cubic Hermite point inserted in every segment where the branch turns by more than 15
     degrees, so the tube bends smoothly without a dense skeleton.
 
@@ -68,6 +70,9 @@ MAX_BAND_M = 0.06
 # points, so on a sparse scan (airborne lidar) a link of a few spacings would leave them beyond the 10 cm bar.
 MAX_LINK_M = 0.2
 RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
+# The thinnest radius follows the point spacing up to this: on a sparse scan (airborne lidar, a spacing of 15 cm)
+# the spacing says nothing of a twig's width, and tubes that thick would stand off the points of thin branches.
+MIN_RADIUS_CAP_M = 0.01
 DUPLICATE_M = 1e-3         # points closer than this are one point
 
 
@@ -88,7 +93,10 @@ class SkeletonSettings:
     sibling_angle_deg : stage 8's angle.
     collinear_share   : stage 9's Douglas-Peucker tolerance, as a share of the band width.
     radius_exponent   : stage 10's power law.
-    min_radius_m      : the thinnest branch radius written.
+    min_radius_m      : the thinnest branch radius written, in metres.
+    min_radius_spacings : and in median point spacings, up to max_min_radius_m metres: a branch the scan resolves
+                        spreads its points about a spacing wide, however thin the wood, so a thinner tube leaves
+                        them beside it.
     hermite_angle_deg : stage 11's turning angle above which a segment gets a Hermite midpoint.
     """
 
@@ -108,6 +116,8 @@ class SkeletonSettings:
     collinear_share: float = 0.25
     radius_exponent: float = RADIUS_EXPONENT
     min_radius_m: float = 0.002
+    min_radius_spacings: float = 1.0
+    max_min_radius_m: float = MIN_RADIUS_CAP_M
     hermite_angle_deg: float = 15.0
 
     def __post_init__(self) -> None:
@@ -119,7 +129,8 @@ class SkeletonSettings:
                 raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
         for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "max_band_m", "link_spacings",
                      "max_link_m", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
-                     "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
+                     "collinear_share", "radius_exponent", "min_radius_m", "min_radius_spacings", "max_min_radius_m",
+                     "hermite_angle_deg"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise CloudError(f"{name} = {value!r}: allowed a finite number >= 0")
@@ -677,7 +688,8 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     # Slice centres sit half a slice above their bottoms, and the first bottom is the lowest point, Z = 0.
     trunk_top = float(axis_centres[-1, 2] + axis_centres[0, 2]) if len(axis_centres) > 1 else 0.0
     radius = power_law_radii(positions, parent, trunk_radius, trunk_top, settings.radius_exponent,
-                             settings.min_radius_m)
+                             max(settings.min_radius_m, min(settings.min_radius_spacings * spacing,
+                                                            settings.max_min_radius_m)))
     lap("radii")
     positions, parent, radius = hermite_midpoints(positions, parent, radius, settings.hermite_angle_deg)
     # The tree stands on the ground, the cloud's lowest point (Z = 0), where the trunk's first slice begins: the
