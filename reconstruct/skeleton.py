@@ -43,7 +43,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
-from scipy.optimize import least_squares
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
@@ -55,6 +54,7 @@ from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_
 from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
+from .robust_fit import soft_l1_fit
 
 __all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT",
            "MAX_BAND_M"]
@@ -579,9 +579,7 @@ def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: fl
     span = np.array([2 * radius0, 2 * radius0, 0.3, 0.3, 0.0])
     lower, upper = first - span, first + span
     lower[4], upper[4] = 0.5 * radius0, 2.0 * radius0
-    fit = least_squares(residual, first, loss="soft_l1", f_scale=max(0.2 * radius0, 1e-3), max_nfev=50,
-                        bounds=(lower, upper))
-    x = fit.x
+    x = soft_l1_fit(residual, first, lower, upper, max(0.2 * radius0, 1e-3))
     direction = np.array([x[2], x[3], 1.0])
     radius = float(x[4])
     return radius, np.array([[x[0], x[1], z0], direction / row_norms(direction[None])[0]])
