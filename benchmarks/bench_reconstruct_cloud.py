@@ -127,7 +127,7 @@ def real_scan_rows(label: str, path: Path, up: str, adtree) -> tuple[list[list],
     hull = ConvexHull(points)
     top = float(points[:, 2].max())
     root = result.scan.fit.skeleton.positions[0].astype(np.float64)
-    measured = build_mesh(result.scan.measured, {"name": "tree"})
+    measured = build_mesh(result.scan.measured, {"name": "tree", "mesh_ground_clear": True})
     rows, fits = [], {}
     for name, mesh in (("default", result.mesh), ("--no-complete", measured)):
         fit = fits[name] = scan_fit(mesh, root, points, hull, top)

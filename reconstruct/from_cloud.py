@@ -115,7 +115,7 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
         tree = complete(measured, np.random.default_rng(seed), twigs=twigs, prune=False, reach=reach) \
             if completion else measured
     with timer.stage("mesh"):
-        mesh = build_mesh(tree, {"name": name})
+        mesh = build_mesh(tree, {"name": name, "mesh_ground_clear": True})
     transform = np.eye(4)
     transform[:3, :3] = cloud.up_rotation.T
     transform[:3, 3] = cloud.up_rotation.T @ (root + cloud.offset)

@@ -27,7 +27,9 @@ The stages, each a function below:
 9. removal of collinear single-child vertices (Douglas-Peucker along each branch at a share of the spacing);
 10. the trunk cylinder fit (nonlinear least squares on the centralised trunk's original points), its radius on
     the trunk, and above it radii by the power law r = r_trunk (reach / reach at the trunk's top) ^ 1.1, never
-    wider than the parent;
+    wider than the parent, and never thinner than one point spacing (at most MIN_RADIUS_CAP_M; 2 mm at least):
+    the law thins twigs below what the scan resolves, and their points, a spacing or so apart, then lie beside
+    the tube instead of on it;
 11. Hermite smoothing: a cubic Hermite point inserted in every segment where the branch turns by more than 15
     degrees, so the tube bends smoothly without a dense skeleton.
 
@@ -41,7 +43,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
-from scipy.optimize import least_squares
 from scipy.sparse.csgraph import connected_components, dijkstra
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
@@ -53,6 +54,7 @@ from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_
 from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
+from .robust_fit import soft_l1_fit
 
 __all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT",
            "MAX_BAND_M"]
@@ -68,6 +70,9 @@ MAX_BAND_M = 0.06
 # points, so on a sparse scan (airborne lidar) a link of a few spacings would leave them beyond the 10 cm bar.
 MAX_LINK_M = 0.2
 RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
+# The thinnest radius follows the point spacing up to this: on a sparse scan (airborne lidar, a spacing of 15 cm)
+# the spacing says nothing of a twig's width, and tubes that thick would stand off the points of thin branches.
+MIN_RADIUS_CAP_M = 0.01
 DUPLICATE_M = 1e-3         # points closer than this are one point
 
 
@@ -88,7 +93,10 @@ class SkeletonSettings:
     sibling_angle_deg : stage 8's angle.
     collinear_share   : stage 9's Douglas-Peucker tolerance, as a share of the band width.
     radius_exponent   : stage 10's power law.
-    min_radius_m      : the thinnest branch radius written.
+    min_radius_m      : the thinnest branch radius written, in metres.
+    min_radius_spacings : and in median point spacings, up to max_min_radius_m metres: a branch the scan resolves
+                        spreads its points about a spacing wide, however thin the wood, so a thinner tube leaves
+                        them beside it.
     hermite_angle_deg : stage 11's turning angle above which a segment gets a Hermite midpoint.
     """
 
@@ -108,6 +116,8 @@ class SkeletonSettings:
     collinear_share: float = 0.25
     radius_exponent: float = RADIUS_EXPONENT
     min_radius_m: float = 0.002
+    min_radius_spacings: float = 1.0
+    max_min_radius_m: float = MIN_RADIUS_CAP_M
     hermite_angle_deg: float = 15.0
 
     def __post_init__(self) -> None:
@@ -119,7 +129,8 @@ class SkeletonSettings:
                 raise CloudError(f"{name} = {value!r}: allowed an integer >= {least}")
         for name in ("outlier_sigma", "trunk_base_share", "band_spacings", "max_band_m", "link_spacings",
                      "max_link_m", "merge_bands", "flank_bands", "prune_ratio", "sibling_angle_deg",
-                     "collinear_share", "radius_exponent", "min_radius_m", "hermite_angle_deg"):
+                     "collinear_share", "radius_exponent", "min_radius_m", "min_radius_spacings", "max_min_radius_m",
+                     "hermite_angle_deg"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise CloudError(f"{name} = {value!r}: allowed a finite number >= 0")
@@ -568,9 +579,7 @@ def fit_trunk_cylinder(points: np.ndarray, axis_centres: np.ndarray, radius0: fl
     span = np.array([2 * radius0, 2 * radius0, 0.3, 0.3, 0.0])
     lower, upper = first - span, first + span
     lower[4], upper[4] = 0.5 * radius0, 2.0 * radius0
-    fit = least_squares(residual, first, loss="soft_l1", f_scale=max(0.2 * radius0, 1e-3), max_nfev=50,
-                        bounds=(lower, upper))
-    x = fit.x
+    x = soft_l1_fit(residual, first, lower, upper, max(0.2 * radius0, 1e-3))
     direction = np.array([x[2], x[3], 1.0])
     radius = float(x[4])
     return radius, np.array([[x[0], x[1], z0], direction / row_norms(direction[None])[0]])
@@ -677,9 +686,14 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     # Slice centres sit half a slice above their bottoms, and the first bottom is the lowest point, Z = 0.
     trunk_top = float(axis_centres[-1, 2] + axis_centres[0, 2]) if len(axis_centres) > 1 else 0.0
     radius = power_law_radii(positions, parent, trunk_radius, trunk_top, settings.radius_exponent,
-                             settings.min_radius_m)
+                             max(settings.min_radius_m, min(settings.min_radius_spacings * spacing,
+                                                            settings.max_min_radius_m)))
     lap("radii")
     positions, parent, radius = hermite_midpoints(positions, parent, radius, settings.hermite_angle_deg)
+    # The tree stands on the ground, the cloud's lowest point (Z = 0), where the trunk's first slice begins: the
+    # root goes down to it, and no vertex (a Hermite midpoint can overshoot a low bend) lies below it.
+    positions[0, 2] = 0.0
+    positions[:, 2] = np.maximum(positions[:, 2], 0.0)
     skeleton = Skeleton(positions.astype(np.float32), parent, radius.astype(np.float32),
                         branch_orders(positions, parent))
     lap("smooth")

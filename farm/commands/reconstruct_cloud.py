@@ -257,11 +257,26 @@ def _batch_task(method: str, source: str, out: str, options: RunOptions, extras:
         return {"input": source, "status": "error", "message": traceback.format_exc()}
 
 
-def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int:
-    import ray
+def _ray_rows(args: argparse.Namespace, tasks: list[tuple]) -> list[dict]:
+    """Each task's `_batch_task` row, run as Ray tasks (on the cluster at --address, or a local Ray)."""
+    import ray  # here: only a batch of several trees, or one sent to a cluster, starts Ray
     from tqdm import tqdm
 
     from farm.pipeline import ray_connection
+
+    rows = []
+    with ray_connection(args.address, args.workers, log_to_driver=False):
+        task = ray.remote(num_cpus=1)(_batch_task)
+        pending = [task.remote(*arguments) for arguments in tasks]
+        with tqdm(total=len(pending), desc="reconstruct", unit="tree", disable=None) as bar:
+            while pending:
+                done, pending = ray.wait(pending, num_returns=1)
+                rows.append(ray.get(done[0]))
+                bar.update(1)
+    return rows
+
+
+def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int:
     from renderers.contact_sheet import write_contact_sheet
     from reconstruct.report import cloud_drawing, skeleton_drawing
     from species.skeleton import Skeleton
@@ -281,16 +296,9 @@ def run_batch(args: argparse.Namespace, method: str, sources: list[Path]) -> int
     with user_path(out_dir, "write"):
         out_dir.mkdir(parents=True, exist_ok=True)
     options = _options(args, batch=True)
-    rows = []
-    with ray_connection(args.address, args.workers, log_to_driver=False):
-        task = ray.remote(num_cpus=1)(_batch_task)
-        pending = [task.remote(method, str(s), str(out_dir / f"{stem}.glb"), options, True)
-                   for s, stem in zip(sources, stems)]
-        with tqdm(total=len(pending), desc="reconstruct", unit="tree", disable=None) as bar:
-            while pending:
-                done, pending = ray.wait(pending, num_returns=1)
-                rows.append(ray.get(done[0]))
-                bar.update(1)
+    tasks = [(method, str(s), str(out_dir / f"{stem}.glb"), options, True) for s, stem in zip(sources, stems)]
+    # One tree and no cluster named: it runs in this process, as Ray's start-up would take longer than the tree.
+    rows = [_batch_task(*tasks[0])] if len(tasks) == 1 and args.address is None else _ray_rows(args, tasks)
     rows.sort(key=lambda r: r["input"])
     with user_path(out_dir / "summary.csv", "write"):
         with open(out_dir / "summary.csv", "w", newline="") as handle:

@@ -37,7 +37,7 @@ class MeshBuildError(TreefarmError):
 
 
 # The keys of the `mesh_` family build_mesh reads; any other `mesh_` key is a typo, not a generator's key.
-_MESH_KEYS = ("mesh_radial_segments", "mesh_min_segments")
+_MESH_KEYS = ("mesh_radial_segments", "mesh_min_segments", "mesh_ground_clear")
 
 
 def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
@@ -51,6 +51,8 @@ def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
                                higher orders). Default (8, 6, 6, 4), raised on thick branches so that no
                                side is wider than 0.12 m (at most 16 sides); an explicit list is used as is.
         mesh_min_segments    : int >= 3, lower bound on tube sides for every branch (default 3).
+        mesh_ground_clear    : bool, no ring dips below the ground plane z = 0 (rings low beside it lean
+                               towards flat; default False: only the trunk's first ring lies flat).
         bark_color, leaf_color : three floats in [0, 1], linear RGB base colours (TreeMesh defaults).
         name                 : str, the tree's name in exported files (default "tree").
     Returns a TreeMesh whose bark carries attributes `order` (V,) uint8 and `branch` (V,) int32, and whose
@@ -72,7 +74,10 @@ def build_mesh(skeleton: Skeleton, params: dict | None = None) -> TreeMesh:
     name = params.get("name", "tree")
     if not isinstance(name, str) or not name:
         raise ParameterError("name", name, "a non-empty string")
-    bark = bark_part(skeleton, by_order, int(min_segments), thick_more=not explicit)
+    ground_clear = params.get("mesh_ground_clear", False)
+    if not isinstance(ground_clear, (bool, np.bool_)):
+        raise ParameterError("mesh_ground_clear", ground_clear, "True or False")
+    bark = bark_part(skeleton, by_order, int(min_segments), thick_more=not explicit, ground_clear=bool(ground_clear))
     return TreeMesh(bark=bark, leaves=leaf_part(skeleton), name=name, **colours)
 
 
@@ -119,11 +124,12 @@ def radial_segments(order: np.ndarray, base_radius: np.ndarray, by_order=DEFAULT
     return np.maximum(sides, min_segments)
 
 
-def _branch_polylines(skeleton: Skeleton):
+def _branch_polylines(skeleton: Skeleton, ground_clear: bool = False):
     """Concatenated branch paths with repeated points merged and junction radii fixed.
 
     Returns (points (K, 3) float64 m, radius (K,) float64 m, offsets (P + 1,) int64, branch (P,) int64):
-    only branches left with at least two distinct points, in branch-id order.
+    only branches left with at least two distinct points, in branch-id order. With `ground_clear` a junction at
+    or above the ground plane (z = 0) is not pulled below it.
     """
     path_nodes, path_offsets = skeleton.branch_path_nodes
     nodes = path_nodes.astype(np.int64)
@@ -145,7 +151,12 @@ def _branch_polylines(skeleton: Skeleton):
     direction = points[after] - points[at]
     length = row_norms(direction)[:, None]
     pull = np.minimum(0.5 * parent_radius, parent_radius - radius[at])
-    pull = np.where(nodes[at] == 0, 0.0, pull)[:, None]  # at the root that would go below the ground
+    pull = np.where(nodes[at] == 0, 0.0, pull)  # at the root that would go below the ground
+    if ground_clear:  # nor may a junction low on the trunk be pulled below it
+        rising = (direction[:, 2] > 0.0) & (points[at, 2] >= 0.0)
+        pull = np.where(rising, np.minimum(pull, points[at, 2] * length[:, 0] / np.maximum(direction[:, 2], 1e-30)),
+                        pull)
+    pull = pull[:, None]
     points[at] -= np.where(length > 0, pull * direction / np.maximum(length, 1e-30), 0.0)
     # Each pass drops a point too close to the one before it; a path that doubles back (a stem pruned to almost
     # nothing) can leave two kept points together again, so passes repeat until none is dropped.
@@ -166,15 +177,40 @@ def _branch_polylines(skeleton: Skeleton):
     return points[keep], radius[keep], offsets, np.flatnonzero(counts >= 2)
 
 
+def _ground_clear_tangents(points: np.ndarray, radius: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+    """(K, 3) unit tangents whose rings stay on or above the ground plane (z = 0): a ring whose centre is less than
+    its radius above the ground (and not below it) leans no more than keeps its rim there, turned towards the
+    vertical on the side it already points to. A leaning trunk's lowest rings and a low branch flare flat instead
+    of dipping into the ground; rings higher up are unchanged."""
+    height = points[:, 2]
+    near = (height >= 0.0) & (height < radius)
+    if not near.any():
+        return tangent
+    # A ring of radius r about unit tangent t reaches r sqrt(1 - t_z^2) below its centre.
+    least_z = np.sqrt(1.0 - (height[near] / radius[near]) ** 2)
+    steep = tangent[near]
+    leaning = np.abs(steep[:, 2]) < least_z
+    if not leaning.any():
+        return tangent
+    chosen = np.flatnonzero(near)[leaning]
+    flat = tangent[chosen, :2]
+    flat_length = np.hypot(flat[:, 0], flat[:, 1])[:, None]
+    side = np.where(tangent[chosen, 2] < 0.0, -1.0, 1.0)
+    tangent = tangent.copy()
+    tangent[chosen, :2] = flat / np.maximum(flat_length, 1e-30) * (height[chosen] / radius[chosen])[:, None]
+    tangent[chosen, 2] = side * least_z[leaning]
+    return tangent
+
+
 def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments: int = 3,
               thick_more: bool = True, branch_sides: np.ndarray | None = None,
-              tip_cones: np.ndarray | None = None) -> MeshPart:
+              tip_cones: np.ndarray | None = None, ground_clear: bool = False) -> MeshPart:
     """Bark: a tube per branch along rotation-minimizing frames, a cone at each tip, a disc under the root.
 
-    The trunk's first ring is horizontal, so the bark never dips below the ground plane.
+    The trunk's first ring is horizontal, on the ground plane; with `ground_clear` no other ring dips below it.
     branch_sides : (B,) int per branch of `skeleton`, sides that override `by_order` (levels of detail);
     tip_cones : (B,) bool, which branches end in a cone (default all; an open end of a sub-pixel twig shows
-    nothing, so far levels leave it out).
+    nothing, so far levels leave it out); ground_clear : no ring or tip cone below z = 0 (`_ground_clear_tangents`).
 
     Vertex layout: branches grouped by side count (ascending), then in branch order; per branch its rings
     (S + 1 vertices each, the seam duplicated so u runs 0..repeat), then the tip apices of the group's coned
@@ -182,7 +218,7 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     0.25 m), at least 1), v = arc length / tile height (a tile is twice as tall as wide, like the bark
     texture), both continuous along a branch.
     """
-    points, radius, offsets, branch = _branch_polylines(skeleton)
+    points, radius, offsets, branch = _branch_polylines(skeleton, ground_clear)
     if len(branch) == 0:
         return _empty_bark()
     sizes = np.diff(offsets)
@@ -191,6 +227,8 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     tangent = polyline_tangents(points, offsets)
     # The trunk's first ring lies flat on the ground (z = 0) even when the trunk leans.
     tangent[starts[own_node == 0]] = (0.0, 0.0, 1.0)
+    if ground_clear:
+        tangent = _ground_clear_tangents(points, radius, tangent)
     tangent, normal, binormal = parallel_transport_frames(points, offsets, tangent)
     point_branch = np.repeat(np.arange(len(branch)), sizes)  # index into `branch`, per point
     order = skeleton.order[own_node].astype(np.int64)
@@ -214,7 +252,8 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
     for side_count in np.unique(sides):
         chosen = np.flatnonzero(sides == side_count)
         part = _tube_group(int(side_count), chosen, offsets, points, radius, tangent, normal, binormal,
-                           v_coord, repeat, tile_height, is_root=(own_node == 0), coned=coned)
+                           v_coord, repeat, tile_height, is_root=(own_node == 0), coned=coned,
+                           ground_clear=ground_clear)
         part["faces"] += vertex_base
         vertex_base += len(part["vertices"])
         part["order"] = order[chosen][part["local_branch"]].astype(np.uint8)
@@ -227,7 +266,7 @@ def bark_part(skeleton: Skeleton, by_order=DEFAULT_RADIAL_SEGMENTS, min_segments
 
 
 def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent, normal, binormal,
-                v_coord, repeat, tile_height, is_root, coned) -> dict[str, np.ndarray]:
+                v_coord, repeat, tile_height, is_root, coned, ground_clear=False) -> dict[str, np.ndarray]:
     """Rings, tip cones (where `coned`) and (for the root branch) the base disc of the branches `chosen`, all
     S-sided."""
     sizes = np.diff(offsets)[chosen]
@@ -276,6 +315,10 @@ def _tube_group(sides: int, chosen: np.ndarray, offsets, points, radius, tangent
     # Tip cones: one apex past the last ring of each coned branch.
     tip_point = point_ids[last_ring[cone]]
     tip_height = _TIP_CAP_HEIGHT * radius[tip_point]
+    # A tip pointing down near the ground stops its cone there (its ring is on or above it).
+    falling = ground_clear & (tangent[tip_point, 2] < 0.0) & (points[tip_point, 2] >= 0.0)
+    tip_height = np.where(falling, np.minimum(tip_height, points[tip_point, 2] / np.maximum(-tangent[tip_point, 2],
+                                                                                           1e-30)), tip_height)
     apex_rows = slice(n_ring_vertices, n_ring_vertices + len(cone))
     vertices[apex_rows] = points[tip_point] + tangent[tip_point] * tip_height[:, None]
     normals[apex_rows] = tangent[tip_point]

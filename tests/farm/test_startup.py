@@ -113,7 +113,7 @@ def test_a_cheap_run_imports_no_runtime_it_does_not_need(argv, allowed, tmp_path
 # What a point-cloud reconstruction may import besides our own packages: the parts of numpy and scipy the skeleton
 # uses and Pillow (the GLB's PNG textures; its image plugins load as it saves), and what numpy's text reader loads
 # on first use. Of ours, no trainer, renderer, dataset, job or other method's module.
-CLOUD_RUN_BASE = "import numpy, scipy.optimize, scipy.sparse.csgraph, scipy.spatial, PIL.Image, PIL.PngImagePlugin"
+CLOUD_RUN_BASE = "import numpy, scipy.sparse.csgraph, scipy.spatial, PIL.Image, PIL.PngImagePlugin"
 CLOUD_RUN_EXTRA = {"gzip"}
 OURS = ("farm", "species", "reconstruct", "trainers", "renderers")
 CLOUD_RUN_NOT_OURS = ("farm.commands.train", "farm.commands.evaluate", "farm.commands.tree", "farm.commands.render",
@@ -133,6 +133,16 @@ def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
     assert status == 0 and (tmp_path / "q.csv").is_file() and (tmp_path / "b.csv").is_file()
     assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
     assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES
+
+
+@pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
+def test_a_batch_of_one_cloud_runs_without_ray(tmp_path):
+    # A folder --out is a batch; with one tree and no --address it runs in-process, with the batch's files.
+    status, imported = _imported(["reconstruct", str(TREE1), "--out", str(tmp_path / "trees")], tmp_path)
+    assert status == 0, status
+    assert {p.name for p in (tmp_path / "trees").iterdir()} >= {"tree1.glb", "tree1.qsm.csv", "summary.csv",
+                                                                "contact_sheet.png"}
+    assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
 
 
 @pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")

@@ -187,6 +187,27 @@ def test_mesh_min_segments_raises_the_side_count():
     assert mesh.bark.n_vertices == 5 * (7 + 1) + 2
 
 
+def leaning_low_tree() -> Skeleton:
+    """A 0.3 m trunk leaning 40 degrees from the origin, a junction 0.15 m up whose 0.25 m branch rises, and a
+    0.1 m branch drooping to a tip 0.05 m above the ground."""
+    lean = np.array([np.sin(np.radians(40.0)), 0.0, np.cos(np.radians(40.0))])
+    trunk = lean[None] * np.array([0.0, 0.2, 1.0, 2.0])[:, None]
+    positions = np.concatenate([trunk, [[0.3, 0.4, 0.5], [0.6, 0.9, 0.9], [1.0, -0.5, 0.6], [1.6, -1.0, 0.05]]])
+    parent = [-1, 0, 1, 2, 1, 4, 2, 6]
+    return Skeleton(positions, parent, [0.3, 0.3, 0.25, 0.2, 0.25, 0.2, 0.1, 0.08], [0, 0, 0, 0, 1, 1, 1, 1])
+
+
+def test_ground_clear_keeps_every_ring_and_tip_above_the_ground():
+    tree = leaning_low_tree()
+    assert build_mesh(tree).bark.vertices[:, 2].min() < -0.05  # upright rings on that lean dip into the ground
+    cleared = build_mesh(tree, {"mesh_ground_clear": True}).bark
+    assert cleared.vertices[:, 2].min() >= -1e-6
+    # A tree none of whose rings reaches the ground meshes as it did.
+    upright = straight_trunk()
+    np.testing.assert_array_equal(build_mesh(upright, {"mesh_ground_clear": True}).bark.vertices,
+                                  build_mesh(upright).bark.vertices)
+
+
 def test_colours_come_from_params():
     mesh = build_mesh(straight_trunk(), {"bark_color": [0.5, 0.4, 0.3], "leaf_color": (0.1, 0.6, 0.1)})
     assert mesh.bark_color == (0.5, 0.4, 0.3) and mesh.leaf_color == (0.1, 0.6, 0.1)
@@ -196,6 +217,7 @@ def test_colours_come_from_params():
     ({"mesh_radial_segments": [2]}, "mesh_radial_segments"),
     ({"mesh_radial_segments": "8"}, "mesh_radial_segments"),
     ({"mesh_min_segments": 1}, "mesh_min_segments"),
+    ({"mesh_ground_clear": "yes"}, "mesh_ground_clear"),
     ({"bark_color": [2, 0, 0]}, "bark_color"),
     ({"leaf_color": [0.1, 0.2]}, "leaf_color"),
 ])
