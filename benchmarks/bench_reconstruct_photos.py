@@ -15,6 +15,7 @@ on the same photos, in one run:
 
 Run: python -m benchmarks.bench_reconstruct_photos [--views 36] [--size 640] [--tree sc_broad_oak:0] [--leafless]
      [--max-features 4096] [--matcher sequential] [--ways estimated,aligned,known] [--shapes sparse,hull]
+     [--masks network|classical]
 """
 from __future__ import annotations
 
@@ -114,8 +115,8 @@ def shape_table(ways: list, args, folder: Path, true: species.Skeleton) -> list[
                                    matcher=args.matcher)
             for shape in shapes:
                 try:
-                    timing = time_case(lambda: from_photos(source, height=height, settings=settings, shape=shape),
-                                       repeats=1)
+                    timing = time_case(lambda: from_photos(source, height=height, settings=settings, shape=shape,
+                                                           masks=args.masks), repeats=1)
                 except PhotoError as error:
                     rows.append([f"{label}, {shape}", f"failed: {error}"] + [""] * (len(SHAPE_COLUMNS) - 2))
                     continue
@@ -150,6 +151,8 @@ def main() -> None:
                         help="which poses to run: estimated (scaled by the height), aligned, known")
     parser.add_argument("--shapes", default="sparse,hull",
                         help="crowns to compare in unseen views: sparse, hull (comma-separated)")
+    parser.add_argument("--masks", default="network", choices=("network", "classical"),
+                        help="the hull's tree masks: the tree mask network (default) or classical")
     args = parser.parse_args()
     preset, seed = args.tree.split(":")
     folder, true = orbit(preset, int(seed), args.views, args.size, args.samples, args.leafless)

@@ -32,6 +32,7 @@ from species.timing import StageTimer
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
 from .hull_growth import colonization_preset, grow_in_hull
+from .photo_masks import mask_network
 from .result import Reconstruction
 from .sfm import PhotoError, Progress, SfmPoints, no_progress, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
 from .skeleton import _adjacency, statistical_inliers
@@ -255,8 +256,8 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
-                progress: Progress | None = None, shape: str = "hull", species: str | None = None
-                ) -> Reconstruction:
+                progress: Progress | None = None, shape: str = "hull", species: str | None = None,
+                masks: str = "network", models=None, mask_net=None) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
@@ -268,6 +269,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     shape    : "sparse" (the cloud method's tree from the SfM points) or "hull": that tree's trunk and main
                branches, then growth of the `species` colonization preset inside the visual hull of the photos'
                tree masks (`reconstruct.hull_growth`; timings "hull.STAGE", maps "hull", "masks", "main_skeleton").
+    masks    : how the hull's tree masks are drawn (`reconstruct.photo_masks.MASKS`): "network" (the tree mask
+               network: `mask_net` if given, else `models`' (None: the shipped default)) or "classical".
     The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
     Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
     """
@@ -275,8 +278,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         raise PhotoError(f"frame {frame!r} is not known: allowed {', '.join(FRAMES)}")
     if shape not in SHAPES:
         raise PhotoError(f"shape {shape!r} is not known: allowed {', '.join(SHAPES)}")
+    network = None
     if shape == "hull":
         colonization_preset(species)  # said before SfM spends minutes
+        network = mask_network(masks, models, mask_net)
     check_height(height)
     settings = SfmSettings() if settings is None else settings
     cameras = known_cameras(folder, photo_names(folder))
@@ -309,7 +314,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
     if shape == "hull":
-        result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed)
+        result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network)
     progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,

@@ -22,7 +22,7 @@ from species.skeleton import Skeleton
 from species.timing import StageTimer
 
 from .from_sketch import DEFAULT_SPECIES
-from .photo_masks import tree_mask, tree_window
+from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
 from .result import Reconstruction
 from .visual_hull import PinholeView, carve
@@ -83,12 +83,13 @@ def colonization_preset(species: str | None) -> Preset:
 
 
 def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, species: str | None = None,
-                 seed: int = 0) -> Reconstruction:
+                 seed: int = 0, mask_net: MaskNetwork | None = None) -> Reconstruction:
     """`result` (the cloud method's, from `tree`'s points) regrown inside the photos' visual hull (module
     docstring); timings add "hull.masks", "hull.hull", "hull.growth" and "hull.mesh"; maps add "hull" (the
     `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton"; params are the species preset's draw it grew with.
     species : a colonization preset (sc_*), default DEFAULT_SPECIES. Raises PhotoError for a preset that is not
-    a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree."""
+    a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree.
+    mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical."""
     preset = colonization_preset(species)
     timer = StageTimer()
     views = photo_views(sfm, tree.model_to_upright)
@@ -98,7 +99,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     for name, view in zip(sfm.registered, views):
         with Image.open(Path(folder) / name) as photo:
             image = np.asarray(photo.convert("RGB"))
-        masks.append(tree_mask(image, tree_window(view, bounds, base, tree.points)))
+        masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points)
     timer.lap("hull")

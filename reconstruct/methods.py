@@ -79,6 +79,7 @@ class RunOptions:
     species    : sketch-depth's colonization preset, "auto" (TreeSketchNet reads it) or None (its default); the
                  photos' hull growth's preset (None: the same default).
     shape      : photos: "sparse" (the crown from the SfM points) or "hull" (grown in the photos' visual hull).
+    masks      : photos: the hull's tree masks, "network" (the "tree-mask" model: nets, else models) or "classical".
     photo      : sketch-depth reads a photo: its blurred edges are the sketch.
     brush      : two-view's stroke kind; None tells it from the drawings.
     up, frame, completion : cloud and photos (`reconstruct.from_cloud`); poses, threads : photos' SfM
@@ -110,6 +111,7 @@ class RunOptions:
     fit_evals: int = DEFAULT_FIT_EVALS
     renderer: Any = None
     shape: str = "hull"
+    masks: str = "network"
 
 
 @dataclass(frozen=True)
@@ -182,7 +184,8 @@ def _run_photos(inputs, options: RunOptions):
     return from_photos(inputs["photos"], height=options.height, frame=options.frame, completion=options.completion,
                        seed=options.seed, settings=settings, name=options.name, workdir=options.workdir,
                        log=options.log, progress=options.progress, shape=options.shape,
-                       species=options.species)
+                       species=options.species, masks=options.masks, models=options.models,
+                       mask_net=options.nets.get("tree-mask"))
 
 
 METHODS: dict[str, Method] = {
@@ -219,7 +222,7 @@ METHODS: dict[str, Method] = {
         source="AdTree, seed 003"),
     "photos": Method(
         "photos", (Input("photos", "photos", "a folder of photos (with cameras.json when the poses are known)"),),
-        _run_photos, options=("frame", "completion", "poses", "shape", "species"),
+        _run_photos, models=("tree-mask",), options=("frame", "completion", "poses", "shape", "species", "masks"),
         summary="pycolmap SfM points, levelled, scaled and isolated from the ground, then the cloud method",
         source="SfM, seed 003"),
 }

@@ -1,5 +1,10 @@
-"""Classical tree masks of photos (issue 51): which pixels show the tree, from colour, the sky and where the tree
-stands, with no network.
+"""Tree masks of photos (issue 51): which pixels show the tree, by the tree mask network or, classically, from
+colour, the sky and where the tree stands.
+
+`MASKS` names the two ways: "network" (the default) runs the tree mask network (`trainers` task "tree-mask", the
+shipped default in models/ or a registry's champion) with ONNX Runtime on the photo shrunk to NETWORK_SIDE px on
+its longer side, its probabilities brought back to the photo's size; the tree is its pixels at 0.5 or above inside
+the tree's box (other trees behind are not this one). "classical" needs no network (what follows).
 
 In: a photo (H, W, 3) uint8 and what the cameras already say about the tree in it (`TreeWindow`): the box the
 tree's volume projects to, the image row of its base on the ground, and pixels SfM placed on the tree. Out: an
@@ -14,13 +19,23 @@ branches leave in a crown are closed. Deterministic: no random draw.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
+import cv2
 import numpy as np
 from scipy import ndimage
 
+from .networks import predictor
+from .photo_folder import PhotoError
 from .visual_hull import PinholeView
 
-__all__ = ["TreeWindow", "tree_window", "tree_mask", "sky_mask", "BINS"]
+__all__ = ["TreeWindow", "tree_window", "tree_mask", "sky_mask", "BINS", "MASKS", "MASK_TASK", "NETWORK_SIDE",
+           "MaskNetwork", "mask_network", "photo_mask"]
+
+MASKS = ("network", "classical")
+MASK_TASK = "tree-mask"   # the trainers task whose model draws the network masks
+NETWORK_SIDE = 192        # px: the network sees a photo at this size on its longer side
+_MULTIPLE = 8             # the network's height and width are multiples of this
 
 BINS = 16                 # histogram bins per colour channel
 HISTOGRAM_SIGMA = 1.0     # bins: colours next to a seen one count as seen
@@ -127,3 +142,62 @@ def _cleaned(candidate: np.ndarray, seeds: np.ndarray) -> np.ndarray:
     small[0] = False
     return mask | small[holes]
 
+
+
+class MaskNetwork:
+    """The tree mask network of a loaded predictor (`trainers.models.Predictor` of task MASK_TASK)."""
+
+    def __init__(self, net):
+        if getattr(net, "task", None) != MASK_TASK:
+            raise PhotoError(f"the model given for the masks is a {getattr(net, 'task', type(net).__name__)} "
+                             f"model: allowed a {MASK_TASK} model")
+        self.net = net
+
+    def probabilities(self, image: np.ndarray, side: int = NETWORK_SIDE) -> np.ndarray:
+        """(H, W) float32 in [0, 1]: the tree's probability at each pixel of `image` (H, W, 3) uint8, the network
+        run on the photo shrunk to `side` px on its longer side (padded by reflection to its size multiple)."""
+        image = np.asarray(image)[..., :3]
+        height, width = image.shape[:2]
+        scale = side / max(height, width)
+        small = (max(1, round(width * scale)), max(1, round(height * scale)))
+        shrunk = cv2.resize(image, small, interpolation=cv2.INTER_AREA).astype(np.float32) / 255.0
+        pad_h, pad_w = (-small[1]) % _MULTIPLE, (-small[0]) % _MULTIPLE
+        padded = np.pad(shrunk.reshape(small[1], small[0], 3), ((0, pad_h), (0, pad_w), (0, 0)), mode="reflect")
+        out = self.net.model.run(np.moveaxis(padded, 2, 0)[None])[0, 0, :small[1], :small[0]]
+        return cv2.resize(np.ascontiguousarray(out), (width, height), interpolation=cv2.INTER_LINEAR)
+
+    def mask(self, image: np.ndarray, window: TreeWindow | None = None) -> np.ndarray:
+        """(H, W) bool: the tree's pixels (probability 0.5 or above), inside `window`'s box when one is given."""
+        found = self.probabilities(image) >= 0.5
+        if window is not None:
+            u0, v0, u1, v1 = (int(v) for v in window.box)
+            inside = np.zeros_like(found)
+            inside[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
+            found &= inside
+        return found
+
+
+def mask_network(masks: str = "network", models=None, net=None) -> MaskNetwork | None:
+    """The network that draws the masks, or None for "classical" ones. masks : one of MASKS. net : a predictor
+    already loaded; else `models`: None for the shipped default, a model folder (holding model.json), or a
+    registry (URI, folder or `Registry`: its champion). PhotoError (one line) for another `masks`; a missing or
+    unreadable model raises the trainers' own one-line errors."""
+    if masks not in MASKS:
+        raise PhotoError(f"masks {masks!r} is not known: allowed {', '.join(MASKS)}")
+    if masks == "classical":
+        return None
+    if net is None:
+        if isinstance(models, (str, Path)) and (Path(models) / "model.json").is_file():
+            from trainers.models import predictor_from_folder  # torch, ONNX Runtime: only where a network runs
+
+            net = predictor_from_folder(models, MASK_TASK)
+        else:
+            net = predictor(MASK_TASK, models)
+    return MaskNetwork(net)
+
+
+def photo_mask(image: np.ndarray, window: TreeWindow, network: MaskNetwork | None) -> np.ndarray:
+    """(H, W) bool: the tree's pixels in `image`, by `network` (inside the window's box) or, for None, classical."""
+    if network is None:
+        return tree_mask(image, window)
+    return network.mask(image, window)

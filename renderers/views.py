@@ -19,10 +19,14 @@ from . import sketch
 from .camera import Camera, CameraError, make_rig, rig_parts
 from .gl_depth import DepthRenderer
 from .maps import combine_parts, envelope_silhouette_map, normals_from_depth, silhouette_map
+from .photo_backdrop import photo_view
 from .strokes import trunk_strokes
 
 __all__ = ["ViewRenderer", "RenderedView", "Output", "OUTPUTS", "FLOAT_OUTPUTS", "METRIC_MAPS", "LABEL_MAPS",
            "DEFAULT_OUTPUTS", "OutputError", "check_outputs"]
+
+
+LEAFLESS_PHOTO_SHARE = 0.3  # of the "photo" views, those showing the tree without its leaves
 
 
 class OutputError(TreefarmError):
@@ -43,8 +47,9 @@ class _ViewFrame:
     """Everything one view's outputs are made from, each computed once and only when an output asks for it."""
 
     def __init__(self, gl: DepthRenderer, camera: Camera, skeleton: Skeleton, split_orders: bool,
-                 rng: np.random.Generator):
+                 rng: np.random.Generator, colours: tuple):
         self.gl, self.camera, self.skeleton, self.split_orders, self.rng = gl, camera, skeleton, split_orders, rng
+        self.colours = colours  # the tree's bark and leaf base colours (linear RGB), for the "photo" output
 
     @cached_property
     def parts(self):
@@ -65,6 +70,17 @@ class _ViewFrame:
     @cached_property
     def trunk(self) -> tuple[np.ndarray, np.ndarray]:
         return trunk_strokes(self.camera, self.skeleton)
+
+    @cached_property
+    def photo(self) -> tuple[np.ndarray, np.ndarray]:
+        """(photo (H, W, 3) uint8, its mask (H, W) uint8 1 bark, 2 leaves): a photo-like view over a random
+        backdrop; one view in LEAFLESS_PHOTO_SHARE shows the tree in winter (bark only, the bark behind the leaves
+        uncovered), so a mask network sees both seasons. Drawn from the view's rng: the season first."""
+        labels, normals = self.visible[1], self.normals
+        bark = self.parts.bark
+        if self.rng.random() < LEAFLESS_PHOTO_SHARE and (bark > 0).any():
+            labels, normals = (bark > 0).astype(np.uint8), normals_from_depth(self.camera, bark)
+        return photo_view(self.rng, labels, normals, *self.colours), labels
 
     @cached_property
     def crown(self) -> np.ndarray:
@@ -127,6 +143,10 @@ OUTPUTS: dict[str, Output] = {
     "sketch_strokes_brush": Output(lambda f: sketch.sketch_strokes_brush(f.camera, f.skeleton), _U8),
     "sketch_crown": Output(lambda f: sketch.sketch_crown(f.crown), _U8),
     "sketch_hand": Output(lambda f: sketch.sketch_hand(f.camera, f.skeleton, f.crown, f.rng), _U8),
+    # A photo-like colour view over a random outdoor backdrop, and the tree's pixels in it (the tree mask
+    # network's input and target; "mask" differs from it in the photos that show the tree leafless).
+    "photo": Output(lambda f: f.photo[0], _U8),
+    "photo_mask": Output(lambda f: f.photo[1], _U8, label=True),
 }
 
 
@@ -235,7 +255,7 @@ class ViewRenderer:
         views = []
         for index, camera in enumerate(cameras):
             frame = _ViewFrame(self._gl, camera, skeleton, "order" in names,
-                               np.random.default_rng(int(view_seeds[index])))
+                               np.random.default_rng(int(view_seeds[index])), (tree.bark_color, tree.leaf_color))
             views.append(RenderedView(index, camera.name, camera, {n: OUTPUTS[n].make(frame) for n in names}))
         return views
 

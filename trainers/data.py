@@ -14,12 +14,14 @@ Decisions:
   read from DIR/reviews.sqlite (read-only) and DIR/reviews/*.parquet (`farm review export`), the later verdict of
   each (tree, reviewer) winning. "flag" and "approve" keep the tree.
 - Records: `input` float32 (C, S, S) through `trainers.preprocess.prepare` (crop to the drawing, ink on 0 paper);
-  sketchnet adds `params_json` (str) and `species` (str); pix2pix adds `target` (C, S, S) and `mask` (1, S, S)
-  float32 from `trainers.pix2pix.targets_from_views`, cut with the input's crop (nearest, background filled).
+  sketchnet adds `params_json` (str) and `species` (str); pix2pix and segment add `target` (C, S, S) and `mask`
+  (1, S, S) float32 from their module's `targets_from_views`, cut with the input's crop (nearest, background
+  filled).
 - Augmentation (training only), drawn from numpy.random.default_rng([seed, epoch, index]) in a fixed order:
   sketchnet's hand style (p = 0.5), one affine jitter (rotation +-3 deg, scale +-5 %, shift +-3 %) applied to the
   input, target and mask alike, stroke width (thinner, unchanged, thicker by 1 px, p = 1/3 each; thinning never
-  removes a stroke) and line dropout (0-3 short pieces of stroke erased) on the input only.
+  removes a stroke) and line dropout (0-3 short pieces of stroke erased) on the input only. A segment task's
+  photos take `trainers.segment.augment_photo` instead (mirror, a wider affine, colour jitter).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from farm.dataset import parse_format_json, read_columns, read_format_json, read
 from farm.dataset.storage import Location
 from farm.dataset.torch_dataset import ViewsDataset
 
-from .pix2pix import targets_from_views
+from . import pix2pix, segment
 from .preprocess import apply_crop, prepare
 from .tasks import Task, TrainingDataError, get_task
 
@@ -63,7 +65,7 @@ _VERDICTS_SQL = "SELECT tree_id, reviewer, verdict, time_ms FROM verdicts"
 
 # Background value per channel of each target map (what a view shows where there is no tree), filled in where a
 # crop or a jitter reaches past the rendered image.
-TARGET_BACKGROUND = {"silhouette_envelope": (1.0, 0.0, 0.0), "trunk_depth": (1.0,)}
+TARGET_BACKGROUND = {"silhouette_envelope": (1.0, 0.0, 0.0), "trunk_depth": (1.0,), "photo_mask": (0.0,)}
 
 # Augmentation ranges (module docstring).
 JITTER_ROTATION_DEG = 3.0
@@ -484,14 +486,15 @@ class TaskDataset(torch.utils.data.Dataset):
         out = {"tree_id": tree_id, "view": int(item["view"]), "spec_digest": source.spec_digest, "style": style,
                "input": prepared.image}
         if task.targets:
-            # The target maps and the raw input cut alike; the mask rule is pix2pix's own.
+            # The target maps and the raw input cut alike; the mask rule is the network family's own.
             cut = {style: apply_crop(raw, prepared.crop, task.input_size, 255)}
             for output in task.targets:
                 cut[output] = apply_crop(_hwc(self._item(s, output, row)[output]), prepared.crop,
                                          task.input_size, TARGET_BACKGROUND[output])
             cut = {k: v[None] if v.ndim == 2 else np.moveaxis(v, 2, 0) for k, v in cut.items()}
-            _, target, mask = targets_from_views(task, cut)
-            out["target"], out["mask"] = target.numpy(), mask.numpy()
+            family = segment if task.network == "segment" else pix2pix
+            _, target, mask = family.targets_from_views(task, cut)
+            out["target"], out["mask"] = np.asarray(target), np.asarray(mask)
         else:
             species, params_json = source.trees[tree_id]
             out.update(species=species, params_json=params_json)
@@ -506,7 +509,8 @@ class TaskDataset(torch.utils.data.Dataset):
         targets = []
         if "target" in plain:
             targets = [(plain["target"], TARGET_BACKGROUND[self.data.task.targets[0]]), (plain["mask"], (0.0,))]
-        out["input"], warped = augment(plain["input"], rng, targets)
+        draw = segment.augment_photo if self.data.task.network == "segment" else augment
+        out["input"], warped = draw(plain["input"], rng, targets)
         if warped:
             out["target"], out["mask"] = warped
         return out

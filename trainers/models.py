@@ -137,7 +137,9 @@ def shipped_models(folder: str | Path = DEFAULT_MODELS) -> list[ModelVersion]:
 class Predictor:
     """A trained network ready for inference: `predict(image)` takes a drawing (any size; scanned, tablet or
     rendered, as `trainers.preprocess` reads them) and gives a parameter dictionary (TreeSketchNet, grown by
-    `species.grow`) or depth maps (pix2pix: float32 (C, S, S) on [0, 1], the channels of the task's target)."""
+    `species.grow`), depth maps (pix2pix: float32 (C, S, S) on [0, 1], the channels of the task's target) or tree
+    probabilities (segment: float32 (1, S, S) of the photo centred in a square; `reconstruct.photo_masks` runs the
+    model on a photo at its own aspect)."""
 
     task: str
     folder: Path
@@ -174,6 +176,8 @@ class Predictor:
 
 
 def _expected_signature(task: Task, size: int, codec: ParameterCodec | None) -> tuple[dict, dict]:
+    if task.network == "segment":  # fully convolutional: any height and width
+        return {"photo": (None, KINDS[task.input_kind], None, None)}, {"mask": (None, task.out_channels, None, None)}
     inputs = {"sketch": (None, KINDS[task.input_kind], size, size)}
     if codec is not None:
         return inputs, {name: (None, n) for name, n in codec.output_sizes.items()}

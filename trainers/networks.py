@@ -1,7 +1,8 @@
 """What each task's network needs from a training loop, behind one interface: build, step, predict, score, export.
 
 `network_for(task, settings, codec)` gives a `TaskNetwork`: `SketchNetwork` (TreeSketchNet: image -> parameter
-dictionary heads) or `Pix2PixNetwork` (U-Net generator with a PatchGAN: sketch -> depth maps). The training loop
+dictionary heads), `Pix2PixNetwork` (U-Net generator with a PatchGAN: sketch -> depth maps) or `SegmentNetwork`
+(the tree mask U-Net: photo -> tree probabilities). The training loop
 (`trainers.training`) and the predictor (`trainers.predictor`) see only this interface; the batches are dicts of
 numpy arrays as the loaders give them (`input` (B, C, S, S) float32, then the task's targets).
 """
@@ -17,13 +18,13 @@ import torch
 
 from species.errors import TreefarmError
 
-from . import pix2pix, sketchnet
+from . import pix2pix, segment, sketchnet
 from .onnx_runtime import export_onnx
 from .sketchnet_codec import ParameterCodec
 from .tasks import Task, get_task
 
 __all__ = ["SCHEDULES", "schedule_factor", "TrainSettings", "TaskNetwork", "SketchNetwork", "Pix2PixNetwork",
-           "network_for", "SettingsError", "DEFAULT_SETTINGS"]
+           "SegmentNetwork", "network_for", "SettingsError", "DEFAULT_SETTINGS"]
 
 
 SCHEDULES = ("constant", "cosine")
@@ -94,7 +95,8 @@ class TrainSettings:
 
 
 DEFAULT_SETTINGS = {"sketchnet": {"width": 1.0, "learning_rate": 1e-3},
-                    "pix2pix": {"width": 16, "learning_rate": pix2pix.LEARNING_RATE}}
+                    "pix2pix": {"width": 16, "learning_rate": pix2pix.LEARNING_RATE},
+                    "segment": {"width": 8, "learning_rate": segment.LEARNING_RATE}}
 
 
 @dataclass
@@ -283,6 +285,66 @@ class Pix2PixNetwork(TaskNetwork):
         return {name: onnx, "weights.pt": weights}
 
 
+class SegmentNetwork(TaskNetwork):
+    """The tree mask U-Net (`trainers.segment.MaskUNet`): a photo (3 channels) to its tree probabilities."""
+
+    def __init__(self, task: Task, settings: TrainSettings):
+        super().__init__(task, settings, primary=task.primary_metric, higher_is_better=task.higher_is_better,
+                         curve_metrics=("mask_iou",))
+
+    def build(self) -> "SegmentNetwork":
+        self.noise = torch.Generator().manual_seed(self.settings.seed)
+        self.modules = {"model": segment.MaskUNet(3, int(round(self.width())), generator=self.noise)}
+        return self
+
+    def optimizers(self) -> dict[str, torch.optim.Optimizer]:
+        return {"model": torch.optim.Adam(self.modules["model"].parameters(), lr=self.learning_rate())}
+
+    def train_step(self, optimizers, batch: Mapping[str, np.ndarray]) -> dict[str, float]:
+        model = self.modules["model"]
+        model.train()
+        loss = segment.mask_loss(model(torch.as_tensor(batch["input"])), torch.as_tensor(batch["target"]))
+        optimizers["model"].zero_grad()
+        loss.backward()
+        optimizers["model"].step()
+        return {"loss": float(loss.detach())}
+
+    @torch.no_grad()
+    def predict(self, inputs: np.ndarray) -> torch.Tensor:
+        model = self.modules["model"]
+        model.eval()
+        return model.probabilities(torch.tensor(np.asarray(inputs)))  # a copy: Ray's batches are read-only
+
+    def metrics(self, batches: Sequence[Mapping[str, np.ndarray]]) -> dict[str, float]:
+        predicted = torch.cat([self.predict(b["input"]) for b in batches]).numpy()
+        return {"mask_iou": segment.mask_iou(predicted, _joined(batches, "target").numpy())}
+
+    def baseline_metrics(self, batches: Sequence[Mapping[str, np.ndarray]],
+                         mean_depth: np.ndarray | None = None) -> dict[str, float]:
+        """The trivial baseline: every pixel the tree's when the training views' tree share (`mean_depth`, the
+        name the loop passes it by) is half or more, else none."""
+        target = _joined(batches, "target").numpy()
+        share = float(self.mean_depth(batches)[0] if mean_depth is None else mean_depth[0])
+        return {"mask_iou": segment.mask_iou(np.full(target.shape, share >= 0.5, np.float32), target)}
+
+    @staticmethod
+    def mean_depth(batches: Sequence[Mapping[str, np.ndarray]]) -> np.ndarray:
+        """(1,) the share of tree pixels in `batches`."""
+        return np.array([float(_joined(batches, "target").float().mean())])
+
+    def export(self, folder: Path) -> dict[str, Path]:
+        """ONNX of the network with its sigmoid (`TASK.onnx`, any height and width that are multiples of 8) and
+        the torch weights (`weights.pt`)."""
+        folder = Path(folder)
+        example = torch.zeros(1, 3, self.task.input_size, self.task.input_size)
+        name = f"{self.task.name}.onnx"
+        onnx = export_onnx(segment.with_sigmoid(self.modules["model"]), example, folder / name, ["photo"], ["mask"],
+                           spatial_axes=True)
+        weights = folder / "weights.pt"
+        torch.save(self.state_dict(), weights)
+        return {name: onnx, "weights.pt": weights}
+
+
 def _joined(batches, key: str) -> torch.Tensor:
     return torch.cat([torch.as_tensor(np.asarray(b[key])) for b in batches])
 
@@ -295,4 +357,6 @@ def network_for(task: str | Task, settings: TrainSettings, codec: ParameterCodec
             raise SettingsError("TreeSketchNet needs its parameter codec (ParameterCodec.fit on the training "
                                 "dictionaries)")
         return SketchNetwork(task, settings, codec)
+    if task.network == "segment":
+        return SegmentNetwork(task, settings)
     return Pix2PixNetwork(task, settings)

@@ -15,11 +15,12 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-__all__ = ["OnnxModelError", "OnnxModel", "export_onnx", "OPSET", "BATCH_AXIS"]
+__all__ = ["OnnxModelError", "OnnxModel", "export_onnx", "OPSET", "BATCH_AXIS", "HEIGHT_AXIS", "WIDTH_AXIS"]
 
 # One fixed opset, so a file exported today loads with the same operators in every onnxruntime >= 1.18.
 OPSET = 17
 BATCH_AXIS = "batch"
+HEIGHT_AXIS, WIDTH_AXIS = "height", "width"
 _ONNX_DTYPES = {"tensor(float)": "float32", "tensor(double)": "float64", "tensor(float16)": "float16",
                 "tensor(int64)": "int64", "tensor(int32)": "int32", "tensor(uint8)": "uint8", "tensor(bool)": "bool"}
 
@@ -69,11 +70,13 @@ def _tuple_outputs_module(model, output_names: Sequence[str]):
 
 
 def export_onnx(model, example_input, path: str | os.PathLike, input_names: Sequence[str],
-                output_names: Sequence[str]) -> Path:
+                output_names: Sequence[str], spatial_axes: bool = False) -> Path:
     """Write `model` in eval mode to an ONNX file (TorchScript exporter, dynamo=False; opset OPSET; the first
     axis of every input and output named BATCH_AXIS and dynamic). The file appears whole or not at all.
 
     example_input : a tensor, or a tuple of tensors for several inputs, of the shape the file will expect.
+    spatial_axes : also leave the last two axes (height and width, named HEIGHT_AXIS and WIDTH_AXIS) of every
+    input and output dynamic, for a fully convolutional network that runs on images of any size.
     Returns the path written. The model's train/eval mode is restored afterwards.
     """
     torch = _torch()
@@ -98,7 +101,9 @@ def export_onnx(model, example_input, path: str | os.PathLike, input_names: Sequ
             warnings.filterwarnings("ignore", message=".*legacy TorchScript-based ONNX export.*")
             torch.onnx.export(_tuple_outputs_module(model, output_names), inputs, tmp, input_names=input_names,
                               output_names=output_names, opset_version=OPSET, dynamo=False,
-                              dynamic_axes={name: {0: BATCH_AXIS} for name in input_names + output_names})
+                              dynamic_axes={name: {0: BATCH_AXIS, **({2: HEIGHT_AXIS, 3: WIDTH_AXIS}
+                                                                     if spatial_axes else {})}
+                                            for name in input_names + output_names})
         os.replace(tmp, path)
     finally:
         model.train(was_training)

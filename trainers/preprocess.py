@@ -18,8 +18,10 @@ Steps (all vectorised, OpenCV for morphology and resizing):
    at the source resolution, so a big scan of a fine pen does not fade to grey when shrunk.
 5. Resize the square to `size` (area averaging down, bilinear up) and encode ink = 1 - paper-normalised value.
 
-Kinds (`KINDS`): "sketch" (1 channel: black strokes on white; RGB input is converted to grey) and "strokes"
-(3 channels: colour strokes on white, the trunk input). The crop is returned by `prepare` so that training
+Kinds (`KINDS`): "sketch" (1 channel: black strokes on white; RGB input is converted to grey), "strokes"
+(3 channels: colour strokes on white, the trunk input) and "photo" (3 channels: a photo's RGB as it is, the tree
+mask network's input: none of the steps above, the whole image centred in a square, black outside, resized to
+`size`). The crop is returned by `prepare` so that training
 targets (depth maps of the same view) are cut by `apply_crop` exactly like their input.
 """
 from __future__ import annotations
@@ -34,7 +36,7 @@ from species.errors import TreefarmError
 __all__ = ["ink_mask", "KINDS", "MARGIN", "MIN_STROKE_PX", "SPECK_SHARE", "Crop", "Prepared", "PreprocessError", "preprocess",
            "prepare", "apply_crop", "paper_image"]
 
-KINDS = {"sketch": 1, "strokes": 3}
+KINDS = {"sketch": 1, "strokes": 3, "photo": 3}
 MARGIN = 0.05             # of the drawing's larger side, on each side of its bounding box
 # Thinnest stroke (pixels at a 256 px input) a drawing keeps after resizing: the renders' lines are 1-2 px
 # (sketches) and 4 px (trunk strokes) at the networks' sizes.
@@ -228,6 +230,8 @@ def apply_crop(image: np.ndarray, crop: Crop, size: int, fill, interpolation: in
 
 def prepare(image, kind: str, size: int) -> Prepared:
     """`preprocess` with the crop it used (for cutting a training target of the same view alike)."""
+    if kind == "photo":
+        return _prepare_photo(image, size)
     _check(image, kind, size)
     ink = paper_image(image, kind)
     mask = _ink_mask(ink)
@@ -240,6 +244,17 @@ def prepare(image, kind: str, size: int) -> Prepared:
     network = apply_crop(ink, crop, size, 0.0, cv2.INTER_LINEAR)
     if network.ndim == 2:
         network = network[..., None]
+    return Prepared(np.ascontiguousarray(np.moveaxis(network, 2, 0), np.float32), crop)
+
+
+def _prepare_photo(image, size: int) -> Prepared:
+    """A photo as the network input (kind "photo"): RGB in [0, 1], the whole image centred in a square."""
+    values = _check(image, "photo", size)
+    rgb = values[..., :3] if values.ndim == 3 else np.repeat(values[..., None], 3, axis=2)
+    h, w = rgb.shape[:2]
+    side = float(max(h, w))
+    crop = Crop((w - side) / 2.0, (h - side) / 2.0, side)
+    network = apply_crop(np.ascontiguousarray(rgb, np.float32), crop, size, 0.0, cv2.INTER_LINEAR)
     return Prepared(np.ascontiguousarray(np.moveaxis(network, 2, 0), np.float32), crop)
 
 

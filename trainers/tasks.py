@@ -21,9 +21,10 @@ __all__ = ["Task", "TASKS", "NETWORKS", "JUDGED_BY", "SPECS_DIR", "TrainingDataE
 
 SPECS_DIR = Path(__file__).resolve().parent / "specs"
 # The network families `trainers.networks.network_for` builds, with the held-out metric that judges a model of the
-# family and whether higher is better: TreeSketchNet (a sketch to a parameter dictionary and its species) and
-# pix2pix (a sketch to depth maps). The registry's tables read it without building a network.
-JUDGED_BY = {"sketchnet": ("score_overall", True), "pix2pix": ("depth_error", False)}
+# family and whether higher is better: TreeSketchNet (a sketch to a parameter dictionary and its species),
+# pix2pix (a sketch to depth maps) and segment (a photo to its tree mask). The registry's tables read it without
+# building a network.
+JUDGED_BY = {"sketchnet": ("score_overall", True), "pix2pix": ("depth_error", False), "segment": ("mask_iou", True)}
 NETWORKS = tuple(JUDGED_BY)
 
 
@@ -42,9 +43,9 @@ class Task:
     name         : the task name (`farm train NAME`).
     inputs       : views-table outputs the network reads, first = its main input style.
     styles       : further input styles of the same view that augmentation swaps in (sketchnet: `sketch_hand`).
-    targets      : views-table outputs the loss compares with (pix2pix); sketchnet's targets are the trees
-                   table's `params_json` and `species`.
-    input_kind   : `trainers.preprocess` kind of the input ("sketch" 1 channel, "strokes" 3 channels).
+    targets      : views-table outputs the loss compares with (pix2pix, segment: a label map, tree > 0);
+                   sketchnet's targets are the trees table's `params_json` and `species`.
+    input_kind   : `trainers.preprocess` kind of the input ("sketch" 1 channel, "strokes" and "photo" 3 channels).
     input_size   : the network's input width and height, pixels.
     spec_name    : the shipped job spec `trainers/specs/<spec_name>.yaml` that makes this task's data.
     model_name   : the model's name in the registry.
@@ -84,13 +85,13 @@ class Task:
         if self.network not in NETWORKS:
             raise TrainingDataError(f"task {self.name!r}: network {self.network!r} is unknown: allowed "
                                     f"{', '.join(NETWORKS)}")
-        if self.network == "pix2pix" and not (self.targets and self.channel_names):
-            raise TrainingDataError(f"task {self.name!r}: a pix2pix task names its target output and the "
+        if self.network in ("pix2pix", "segment") and not (self.targets and self.channel_names):
+            raise TrainingDataError(f"task {self.name!r}: a {self.network} task names its target output and the "
                                     f"target's channels")
 
     @property
     def out_channels(self) -> int:
-        """Channels of a pix2pix task's target (0 for sketchnet, whose targets are the trees table's)."""
+        """Channels of a pix2pix or segment task's target (0 for sketchnet, whose targets are the trees table's)."""
         return len(self.channel_names)
 
     @property
@@ -176,6 +177,13 @@ TASKS: dict[str, Task] = {
                           model_name="pix2pix-trunk", network="pix2pix", rigs=("two-view",), min_trees=63,
                           recipe={"width": 16, "batch_size": 16, "epochs": 1, "schedule": "cosine"},
                           channel_names=("depth",), depth_channels=(0,)),
+    # Issue 51's tree mask network: a photo-like render over a random backdrop -> the tree's pixels, 128 px (the
+    # network is fully convolutional: photos run at their own aspect, `reconstruct.photo_masks`).
+    "tree-mask": Task("tree-mask", inputs=("photo",), styles=(), targets=("photo_mask",), input_kind="photo",
+                      input_size=128, spec_name="tree-mask", model_name="tree-mask", network="segment",
+                      min_trees=40,
+                      recipe={"width": 8, "batch_size": 16, "epochs": 6, "schedule": "cosine"},
+                      channel_names=("tree",)),
 }
 
 

@@ -51,6 +51,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--shape", choices=("sparse", "hull"), default="hull",
                        help="photos: the crown from the SfM points (sparse) or grown inside the visual hull of the "
                             "photos' tree masks (hull; --species picks the colonization preset)")
+    group.add_argument("--masks", choices=("network", "classical"), default="network",
+                       help="photos, hull: the tree masks by the tree mask network (default; --models picks a "
+                            "registry's or a model folder's, else the shipped one) or classical (colour and sky)")
     add_ray_options(group, workers_help="batch: Ray tasks at once (default: the CPUs)",
                     address_help="batch: a Ray cluster to join (default: a local Ray)")
 
@@ -127,7 +130,8 @@ def _cloud_suffixes() -> tuple[str, ...]:
 def _options(args: argparse.Namespace, batch: bool = False) -> RunOptions:
     """What each tree's reconstruction takes; a batch's SfM runs on one thread a Ray task."""
     return RunOptions(seed=args.seed, height=args.height, up=args.up, frame=args.frame, completion=args.complete,
-                      poses=args.poses, threads=1 if batch else 0, shape=args.shape, species=args.species)
+                      poses=args.poses, threads=1 if batch else 0, shape=args.shape, species=args.species,
+                      masks=args.masks, models=args.models)
 
 
 def log_path(method: str, out: Path) -> Path | None:

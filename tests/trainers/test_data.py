@@ -19,11 +19,11 @@ from farm.pipeline import run_job
 from farm.review.export import export_reviews
 from farm.review.store import ReviewStore
 from trainers.data import PARTS, Split, TaskDataset, open_data, rejected_trees, split_part, to_ray_dataset
-from trainers.preprocess import preprocess
+from trainers.preprocess import KINDS, preprocess
 from trainers.tasks import TASKS, MissingOutputError, TrainingDataError, print_data_spec
 
 torch.set_num_threads(1)
-VIEWS_PER_TREE = {"tsn4": 4, "two-view": 2}
+VIEWS_PER_TREE = {"tsn4": 4, "two-view": 2, "orbit": 8}
 
 
 def _tiny(name: str, trees: int, seed: int | None = None):
@@ -38,7 +38,8 @@ def datasets(tmp_path_factory, ray_session) -> dict[str, Path]:
     ids, another seed, so another spec digest)."""
     root = tmp_path_factory.mktemp("trainers-data")
     jobs = {"sketchnet": _tiny("sketchnet", 3), "pix2pix-silhouette": _tiny("pix2pix-silhouette", 2),
-            "pix2pix-trunk": _tiny("pix2pix-trunk", 2), "sketchnet-b": _tiny("sketchnet", 2, seed=99)}
+            "pix2pix-trunk": _tiny("pix2pix-trunk", 2), "sketchnet-b": _tiny("sketchnet", 2, seed=99),
+            "tree-mask": _tiny("tree-mask", 1)}
     out = {}
     for name, spec in jobs.items():
         out[name] = root / name
@@ -79,15 +80,18 @@ def test_tiny_run_of_each_spec_holds_what_its_task_needs(datasets, name):
     dataset = TaskDataset(data, Split.by_hash(data.keys, (1.0, 0.0, 0.0)), "train")
     assert len(dataset) == manifest["counts"]["views"]
     item = dataset[0]
-    channels = 3 if task.input_kind == "strokes" else 1
+    channels = KINDS[task.input_kind]
     assert item["input"].shape == (channels, task.input_size, task.input_size)
     assert item["input"].dtype == torch.float32 and 0 <= item["input"].min() and item["input"].max() <= 1
     if name == "sketchnet":
         assert json.loads(item["params_json"])["species"] == item["species"]
     else:
-        out_channels = {"pix2pix-silhouette": 3, "pix2pix-trunk": 1}[name]
+        out_channels = {"pix2pix-silhouette": 3, "pix2pix-trunk": 1, "tree-mask": 1}[name]
         assert item["target"].shape == (out_channels, task.input_size, task.input_size)
-        assert item["mask"].shape == (1, task.input_size, task.input_size) and 0 < item["mask"].mean() < 1
+        assert item["mask"].shape == (1, task.input_size, task.input_size)
+        # pix2pix's loss mask is the foreground; the tree mask network's loss covers every pixel, its target the tree
+        covered = item["target"] if task.network == "segment" else item["mask"]
+        assert 0 < covered.mean() < 1
 
 
 def test_missing_output_names_the_output_and_the_spec(datasets):

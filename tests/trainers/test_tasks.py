@@ -36,12 +36,12 @@ def throwaway(monkeypatch) -> Task:
 
 
 def test_a_task_names_a_known_network_and_pix2pix_its_target_channels():
-    with pytest.raises(TrainingDataError, match="network 'gan' is unknown: allowed sketchnet, pix2pix"):
+    with pytest.raises(TrainingDataError, match="network 'gan' is unknown: allowed sketchnet, pix2pix, segment"):
         Task("x", ("sketch_edges",), (), ("trunk_depth",), "sketch", 256, "pix2pix-trunk", "x", network="gan")
     with pytest.raises(TrainingDataError, match="names its target output and the target's channels"):
         Task("x", ("sketch_edges",), (), ("trunk_depth",), "sketch", 256, "pix2pix-trunk", "x", network="pix2pix")
     with pytest.raises(TrainingDataError, match="'throwaway-depth' is unknown: allowed sketchnet, "
-                                                "pix2pix-silhouette, pix2pix-trunk"):
+                                                "pix2pix-silhouette, pix2pix-trunk, tree-mask"):
         get_task(THROWAWAY.name)
 
 
@@ -52,8 +52,8 @@ def test_farm_train_and_retrain_offer_it_in_their_choices_and_help(throwaway, ca
             farm_main([command, "--help"])
         assert exit_.value.code == 0
         help_text = capsys.readouterr().out
-        assert "{sketchnet,pix2pix-silhouette,pix2pix-trunk,throwaway-depth}" in help_text
-        assert "TASK is sketchnet, pix2pix-silhouette, pix2pix-trunk or throwaway-depth." in help_text
+        assert "{sketchnet,pix2pix-silhouette,pix2pix-trunk,tree-mask,throwaway-depth}" in help_text
+        assert "TASK is sketchnet, pix2pix-silhouette, pix2pix-trunk, tree-mask or throwaway-depth." in help_text
 
 
 def test_farm_train_prints_its_data_spec(throwaway, capsys):

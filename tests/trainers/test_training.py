@@ -264,5 +264,5 @@ def test_the_shipped_default_models_load_and_predict(task):
         assert out["species"] in TASKS["sketchnet"].spec_path.read_text()
         assert species.grow(out, np.random.default_rng(0)).n_nodes > 1
     else:
-        channels = 3 if task == "pix2pix-silhouette" else 1
-        assert out.shape == (channels, 256, 256) and 0.0 <= out.min() and out.max() <= 1.0
+        channels, size = TASKS[task].out_channels, TASKS[task].input_size
+        assert out.shape == (channels, size, size) and 0.0 <= out.min() and out.max() <= 1.0
