@@ -193,8 +193,6 @@ SPECIES_TRIED = 3   # the network's most likely species, each grown from its gue
 # network is sure of is kept (a drawing of our own renders), an unsure read is settled by the outline.
 SPECIES_SURE = 0.9
 SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the best species
-ASPECT_STEPS = 2    # tries at matching the outline's width to height by scaling branch lengths
-ASPECT_TOLERANCE = 0.03  # relative: aspects this close are left alone
 
 
 @dataclass
@@ -236,15 +234,6 @@ class ParamsFit:
 
     params: dict
     record: FitRecord
-
-
-def widened(params: dict, factor: float) -> dict:
-    """A Weber-Penn dictionary with the branches' lengths (levels 1 and up) times `factor`, within the schema's
-    range; the same dictionary for a factor of 1."""
-    if factor == 1.0:
-        return params
-    lengths = [params["length"][0], *(min(float(v) * factor, 10.0) for v in params["length"][1:])]
-    return {**params, "length": lengths}
 
 
 def _slot_columns(codec) -> list[tuple[str, int]]:
@@ -317,21 +306,6 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         value = evaluate(params)
         if value > best:
             best, best_seed, best_params = value, seed + offset, params
-    # The crown's width against its height: branch lengths scaled by the ratio of the two outlines' aspects
-    # (a crown's reach grows with its branches), kept while it scores better.
-    widen = 1.0
-    for _ in range(ASPECT_STEPS):
-        shape = outlines[int(np.argmax(trace.scores))]
-        if trace.evals >= evals or shape.size == 0:
-            break
-        ratio = (target.shape[1] / target.shape[0]) / (shape.shape[1] / shape.shape[0])
-        if abs(ratio - 1.0) < ASPECT_TOLERANCE:
-            break
-        params = widened(decoded(best_outputs, best_seed), widen * ratio)
-        value = evaluate(params)
-        if value <= best:
-            break
-        best, best_params, widen = value, params, widen * ratio
     left = evals - trace.evals
     if left > 0:
         columns = _slot_columns(codec)
@@ -350,7 +324,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
             return outs
 
         def score(x: np.ndarray) -> float:
-            params = widened(decoded(moved(x), best_seed), widen)
+            params = decoded(moved(x), best_seed)
             value = evaluate(params)
             chosen[x.tobytes()] = params
             return value
