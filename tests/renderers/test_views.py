@@ -47,7 +47,7 @@ def test_float_and_metric_names_follow_the_entries_even_one_registered_later(mon
 
 
 def test_label_maps_follow_the_entries_and_the_contact_sheet_spreads_them(monkeypatch):
-    assert set(LABEL_MAPS) == {"mask", "order"}
+    assert set(LABEL_MAPS) == {"mask", "order", "photo_mask"}
     monkeypatch.setitem(OUTPUTS, "test_classes", Output(lambda frame: frame.visible[1], np.uint8, label=True))
     labels = np.array([[0, 1, 2]], np.uint8)
     assert "test_classes" in LABEL_MAPS and "test_classes" not in FLOAT_OUTPUTS

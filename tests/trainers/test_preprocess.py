@@ -119,7 +119,7 @@ def test_blank_image_is_refused(image):
     ((np.zeros((4, 4, 2), np.uint8), "sketch", 64), "shape"),
     ((np.zeros((64, 64), np.int32), "sketch", 64), "dtype"),
     ((np.full((64, 64), 2.0), "sketch", 64), r"\[0, 1\]"),
-    ((np.zeros((64, 64), np.uint8), "photo", 64), "kind 'photo'"),
+    ((np.zeros((64, 64), np.uint8), "painting", 64), "kind 'painting'"),
     ((np.zeros((64, 64), np.uint8), "sketch", 3), "size 3"),
 ])
 def test_bad_input_is_refused_naming_the_value(args, match):
