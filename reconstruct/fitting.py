@@ -32,7 +32,8 @@ from species.errors import TreefarmError
 
 from .fit_budget import FitError
 
-__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "front_outline", "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
+__all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "front_outline",
+           "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
 
 OUTLINE_HEIGHT = 128  # outlines are compared this many pixels tall
 OUTLINE_CLOSING = 5   # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
