@@ -23,8 +23,8 @@ from trainers.sketchnet_codec import REGRESSION_HEADS, ParameterCodec
 
 __all__ = ["MetricError", "PointSetDistances", "SkeletonMatch", "RADIUS_MULTIPLES", "DENSIFY_DIVISIONS",
            "SURFACE_SAMPLES", "foreground_depth_error", "node_distances", "unit_cube_hausdorff", "surface_distances",
-           "point_set_distances", "skeleton_precision_recall", "bark_distances", "cloud_fit", "FIT_TOLERANCE_M",
-           "silhouette_iou", "parameter_scores", "height_crown_errors"]
+           "point_set_distances", "image_plane_hausdorff", "skeleton_precision_recall", "bark_distances", "cloud_fit",
+           "FIT_TOLERANCE_M", "silhouette_iou", "parameter_scores", "height_crown_errors"]
 
 # The radius multiples t at which skeleton precision, recall and F1 are taken: 0, 0.01, ..., 1 (101 values); the
 # area under the F1 curve is the trapezoid rule over them.
@@ -181,6 +181,21 @@ def unit_cube_hausdorff(predicted, true, box: np.ndarray | None = None) -> float
         raise MetricError("the true node set spans no volume (a single point): the unit cube needs a box with a "
                           "positive extent; pass `box`")
     return point_set_distances(predicted, truth, (1.0 + ORTHO_MARGIN) * extent).hausdorff
+
+
+def image_plane_hausdorff(predicted, true, camera) -> float:
+    """Symmetric Hausdorff distance between two node sets seen in one view, inside the view's unit square: both
+    projected to the camera's pixels, the distance divided by the image's longer side (the views are framed on
+    the tree, so the square is the tree's). What a drawing fixes of its main branches: where they lie in the image
+    plane, not their depth.
+
+    predicted, true : Skeletons or (N, 3) points, metres.   camera : a `renderers.Camera` of that view.
+    """
+    planes = []
+    for points, name in ((predicted, "predicted node set"), (true, "true node set")):
+        pixels = camera.project(_points(points, name))[0]
+        planes.append(np.column_stack([pixels, np.zeros(len(pixels))]))
+    return point_set_distances(*planes, float(max(camera.width, camera.height))).hausdorff
 
 
 def _surface_points(mesh: TreeMesh, n: int, rng: np.random.Generator, name: str) -> np.ndarray:

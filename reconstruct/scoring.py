@@ -6,7 +6,7 @@ the input views and in the unseen views: azimuths of rig UNSEEN_RIG, 45 deg apar
 opposite), then scores any number of reconstructions of it: silhouette and crown IoU in both sets of views, node
 Hausdorff / Chamfer over the true height, node Hausdorff in the unit orthographic cube, surface distances (when
 `surface_samples` > 0), the skeleton F1 AUC, height and crown errors and, given the main-branch nodes, the main
-skeleton's unit-cube Hausdorff. The keys are METRICS' names.
+skeleton's unit-cube Hausdorff and its Hausdorff in the input views' image planes. The keys are METRICS' names.
 """
 from __future__ import annotations
 
@@ -27,8 +27,8 @@ from trainers.tasks import get_task
 
 from . import metrics
 
-__all__ = ["TreeScorer", "Metric", "METRICS", "UNSEEN_RIG", "CROWN_CLOSING_PX", "main_branch_nodes", "crowns", "depth_picture",
-           "network_depth_error"]
+__all__ = ["TreeScorer", "Metric", "METRICS", "UNSEEN_RIG", "CROWN_CLOSING_PX", "main_branch_nodes",
+           "main_branch_points", "crowns", "depth_picture", "network_depth_error"]
 
 # Unseen views: azimuths of this rig (45 deg apart, level) that no input view looked along (or opposite).
 UNSEEN_RIG = "orbit:8:0"
@@ -65,6 +65,7 @@ METRICS: dict[str, Metric] = {
     "crown_radius_rel_error": Metric("crown radius rel. error", False),
     "main_skeleton_unit_cube_hausdorff": Metric("main skeleton, unit-cube Hausdorff", False,
                                                 "0.098 (thesis, trunk nodes, units n.g.)", "sketch-depth"),
+    "main_skeleton_view_hausdorff": Metric("main skeleton, input-view Hausdorff", False),
     "depth_error_silhouette": Metric("depth error, silhouette network", False, "0.041 (thesis, GTX 1080 Ti)",
                                      "sketch-depth"),
     "depth_error_trunk": Metric("depth error, trunk network", False, "0.032 (thesis)", "sketch-depth"),
@@ -90,6 +91,22 @@ def main_branch_nodes(skeleton: Skeleton) -> np.ndarray:
     return skeleton.positions[np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))]
 
 
+def main_branch_points(skeleton: Skeleton, divisions: int = metrics.DENSIFY_DIVISIONS) -> np.ndarray:
+    """(K, 3) float64 metres: points along the main branches' segments (`main_branch_nodes`' edges, each branch
+    joined to its parent node), at most height / divisions apart: the drawn curves, not only their nodes."""
+    paths = skeleton.branch_paths
+    child = np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))
+    child = child[skeleton.parent[child] >= 0]
+    start = skeleton.positions[skeleton.parent[child]].astype(np.float64)
+    end = skeleton.positions[child].astype(np.float64)
+    spacing = max(float(skeleton.height), 1e-9) / divisions
+    steps = np.maximum(np.ceil(np.linalg.norm(end - start, axis=1) / spacing).astype(np.int64), 1)
+    segment = np.repeat(np.arange(len(child)), steps)
+    t = (np.arange(len(segment)) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[segment]
+    inner = start[segment] + t[:, None] * (end[segment] - start[segment])
+    return np.concatenate([inner, end, skeleton.positions[:1].astype(np.float64)])
+
+
 def crowns(masks: np.ndarray) -> np.ndarray:
     """(V, H, W) bool crown outlines of silhouette masks: gaps up to ~2 x CROWN_CLOSING_PX closed."""
     return np.stack([closed_silhouette(m, CROWN_CLOSING_PX) for m in masks])
@@ -111,6 +128,7 @@ class TreeScorer:
         self.masks = {k: renderer.silhouette_masks(mesh, cams) for k, cams in self.cameras.items() if cams}
         self.crowns = {k: crowns(m) for k, m in self.masks.items()}
         self.main_nodes = main_branch_nodes(skeleton)
+        self.main_points = main_branch_points(skeleton)
 
     def __call__(self, skeleton: Skeleton, mesh: TreeMesh, main_nodes: np.ndarray | None = None) -> dict[str, float]:
         truth, height = self.skeleton, self.skeleton.height
@@ -133,6 +151,9 @@ class TreeScorer:
         if main_nodes is not None:
             row["main_skeleton_unit_cube_hausdorff"] = metrics.unit_cube_hausdorff(main_nodes, self.main_nodes,
                                                                                    box=truth.bounds)
+            row["main_skeleton_view_hausdorff"] = float(np.mean([
+                metrics.image_plane_hausdorff(main_nodes, self.main_points, camera)
+                for camera in self.cameras["input"]]))
         return {k: float(v) for k, v in row.items()}
 
 

@@ -1,5 +1,6 @@
 """Two orthogonal sketches to a tree (seed 001, the network-free method): 2D skeletons of both drawings, the
-skeleton point cloud by equal-height matching, the lifted 3D main skeleton, twigs clipped by both crowns, mesh.
+front skeleton lifted to 3D on the side drawing's strokes (or, as seed 001 lifts it, through the point cloud of
+equal-height matching), twigs clipped by both crowns, mesh.
 
 In: a front and a side drawing (dark strokes on white; the front looks along +Y, the side along -X, as the
 renderers' "two-view" rig). Out: a `Reconstruction` (method "two-view": Skeleton in metres, Z up, base at the
@@ -17,7 +18,8 @@ from species.timing import StageTimer
 from trainers.preprocess import SPECK_SHARE, PreprocessError, paper_image
 
 from ._two_view_brush import skeleton_2d_from_brush, stroke_centres
-from ._two_view_lift import LIFT_DISTANCE_PX, lift_main_skeleton, match_equal_height, skeleton_pixels
+from ._two_view_lift import (LIFT_DISTANCE_PX, lift_main_skeleton, lift_on_side_strokes, match_equal_height,
+                              skeleton_pixels)
 from ._two_view_lines import LINE_RADIUS_PX, Skeleton2D, TwoViewError, skeleton_2d_from_lines
 from ._two_view_twigs import (LEAF_DEFAULTS, TWIG_DEFAULTS, CrownOutline, add_leaves, grow_twigs,
                               resample_skeleton)
@@ -27,10 +29,11 @@ from .result import Reconstruction
 
 __all__ = ["two_view", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
            "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
-           "lift_main_skeleton", "grow_twigs", "add_leaves", "resample_skeleton", "ink_mask", "crown_outline",
+           "lift_main_skeleton", "lift_on_side_strokes", "LIFTS", "grow_twigs", "add_leaves", "resample_skeleton", "ink_mask", "crown_outline",
            "is_brush_drawing", "DEFAULT_HEIGHT", "MESH_PARAMS", "TWIG_DEFAULTS", "LEAF_DEFAULTS",
            "LIFT_DISTANCE_PX", "LINE_RADIUS_PX", "OUTLINE_MARGIN", "NODE_SPACING", "BRUSH_SHARE", "INK_LEVEL"]
 
+LIFTS = ("side-strokes", "equal-height")  # `two_view`'s lifts of the front skeleton to 3D, the default first
 DEFAULT_HEIGHT = 8.0   # metres, when the caller gives none: a mid-sized garden or street tree
 INK_LEVEL = 0.5        # a pixel at least half way from paper to ink (trainers.preprocess levels) is a stroke
 # The crown outline of a view: the convex hull of its ink grown sideways by this share of the view's tree height,
@@ -150,7 +153,8 @@ def _check_height(height) -> float:
 
 def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None, rng: np.random.Generator,
              brush: bool | None = None, front_outline=None, side_outline=None, twig_options: dict | None = None,
-             leaf_options: dict | None = None, fit_evals: int = DEFAULT_FIT_EVALS) -> Reconstruction:
+             leaf_options: dict | None = None, fit_evals: int = DEFAULT_FIT_EVALS,
+             lift: str = "side-strokes") -> Reconstruction:
     """A tree from two orthogonal drawings (seed 001, digest 2).
 
     front, side : (H, W) grey or (H, W, 3) colour uint8 images of one size, dark strokes on light paper: the trunk
@@ -165,14 +169,16 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     front_outline, side_outline : optional (H, W) bool crown masks in each image's pixels; default
                   `crown_outline` of the ink (convex hull + OUTLINE_MARGIN of the tree height).
     twig_options, leaf_options : overrides of TWIG_DEFAULTS and LEAF_DEFAULTS (the fit's start).
+    lift        : "side-strokes" (`lift_on_side_strokes`: every branch kept on the side drawing's strokes) or
+                  "equal-height" (seed 001's: `lift_main_skeleton` through `match_equal_height`'s cloud).
     fit_evals   : candidate trees the fit may grow and redraw in both views (`reconstruct.fit_two_view`: the
                   outline margin and the twig and leaf settings move, the main skeleton stays); 0 grows the first
                   guess as it is, with the options above.
-    Timings: "ink", "skeleton_2d", "match", "lift", "main_skeleton", "twigs" (fit_evals 0) or "fit" (which grows
+    Timings: "ink", "skeleton_2d", "lift", "main_skeleton", "twigs" (fit_evals 0) or "fit" (which grows
     every candidate's twigs), "mesh". Maps: "brush" (bool, the
     stroke kind used), "metres_per_pixel" and "side_scale" (front pixels per side pixel), "front_2d" and "side_2d"
-    (Skeleton2D; the side mapped into the front's pixels), "cloud" (M, 3) and "lifted" (N, 3) pixels (front column,
-    row, side column), "main" (the main Skeleton, metres) and "main_skeleton" (its nodes), "twig_level" (N,)
+    (Skeleton2D; the side mapped into the front's pixels), "lifted" (N, 3) pixels (front column, row, side
+    column), "main" (the main Skeleton, metres) and "main_skeleton" (its nodes), "twig_level" (N,)
     uint8, "outlines" (front, side) CrownOutline; with fitting, "fit" (a `reconstruct.fitting.FitRecord`, both
     views side by side) and "growth" (the `GrowthSettings` chosen).
     Radii: the pipe model with exponent 2.5 (TWIG_DEFAULTS) and tips 0.002 x height; with brush strokes the main skeleton keeps
@@ -188,6 +194,8 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
                            f"(numpy.random.default_rng(seed))")
     height = _check_height(height)
     fit_evals = check_fit_evals(fit_evals)
+    if lift not in LIFTS:
+        raise TwoViewError(f"lift {lift!r} is not known: allowed {', '.join(map(repr, LIFTS))}")
     front_ink, side_ink = ink_mask(front, "front image"), ink_mask(side, "side image")
     if front_ink.shape != side_ink.shape:
         raise TwoViewError(f"the front image is {front_ink.shape[1]} x {front_ink.shape[0]} px and the side image "
@@ -210,10 +218,11 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     scale = front_frame.height_px / side_frame.height_px  # front pixels per side pixel
     side_in_front = side_2d.transformed(scale, (side_frame.base_col, side_frame.base_row),
                                         (front_frame.base_col, front_frame.base_row))
-    cloud = match_equal_height(front_2d, side_in_front)
-    lap("match")
     dense = front_2d.densified(1.0)
-    lifted = lift_main_skeleton(dense, cloud)
+    if lift == "side-strokes":
+        lifted = lift_on_side_strokes(dense, side_in_front)
+    else:
+        lifted = lift_main_skeleton(dense, match_equal_height(front_2d, side_in_front))
     lap("lift")
     mpp = height / front_frame.height_px
     world = np.column_stack([lifted[:, 0] - front_frame.base_col, lifted[:, 2] - front_frame.base_col,
@@ -255,7 +264,7 @@ def two_view(front: np.ndarray, side: np.ndarray, *, height: float | None = None
     mesh = build_mesh(skeleton, MESH_PARAMS)
     lap("mesh")
     maps.update({"brush": brush, "metres_per_pixel": mpp, "side_scale": scale, "front_2d": front_2d,
-                 "side_2d": side_in_front, "cloud": cloud, "lifted": lifted, "main": main,
+                 "side_2d": side_in_front, "lifted": lifted, "main": main,
                  "main_skeleton": main.positions, "twig_level": level, "outlines": outlines})
     return Reconstruction("two-view", skeleton, mesh, timings=timings, maps=maps)
 

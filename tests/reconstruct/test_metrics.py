@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
+from scipy.spatial import cKDTree
 
 import farm.dataset as dataset
 import species
@@ -19,8 +20,10 @@ from farm.pipeline import plan_shards, run_shard
 from farm.dataset.storage import Location
 from farm.tree_chain import SpeciesChain
 from reconstruct.metrics import (RADIUS_MULTIPLES, MetricError, foreground_depth_error, height_crown_errors,
-                                 node_distances, parameter_scores, silhouette_iou, skeleton_precision_recall,
-                                 surface_distances, unit_cube_hausdorff)
+                                 image_plane_hausdorff, node_distances, parameter_scores, silhouette_iou,
+                                 skeleton_precision_recall, surface_distances, unit_cube_hausdorff)
+from reconstruct.scoring import main_branch_nodes, main_branch_points
+from renderers.camera import orthographic_camera
 from species import MeshPart, Skeleton, TreeMesh
 from trainers.sketchnet_codec import REGRESSION_HEADS, ParameterCodec
 
@@ -114,6 +117,24 @@ def test_unit_cube_hausdorff_of_a_skeleton_uses_its_bounds():
     tree = _tree()
     extent = float((tree.bounds[1] - tree.bounds[0]).max())
     assert unit_cube_hausdorff(_tree((0, 0, 0.1)), tree) == pytest.approx(0.1 / (1.05 * extent), rel=1e-6)
+
+
+def test_image_plane_hausdorff_ignores_depth_and_divides_by_the_image():
+    true = np.array([[0.0, 0, 0], [0, 0, 4.0], [1.0, 0, 2.0]])
+    camera = orthographic_camera(true, 0.0, 0.0, 200)  # looks along +y: depth is y
+    pixels_per_metre = camera.K[0, 0]
+    assert image_plane_hausdorff(true + [0.0, 3.0, 0.0], true, camera) == pytest.approx(0.0, abs=1e-9)
+    shifted = true + [0.0, 0.0, 0.2]
+    assert image_plane_hausdorff(shifted, true, camera) == pytest.approx(0.2 * pixels_per_metre / 200, rel=1e-6)
+
+
+def test_main_branch_points_lie_on_the_main_branches_no_farther_apart_than_asked():
+    tree = _tree()
+    points = main_branch_points(tree, divisions=64)
+    nodes = main_branch_nodes(tree)
+    assert cKDTree(points).query(nodes)[0].max() < 1e-6  # every main node is among the points
+    gaps = cKDTree(points).query(points, k=2)[0][:, 1]
+    assert gaps.max() <= tree.height / 64 + 1e-6
 
 
 def _square(z: float) -> TreeMesh:

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from reconstruct.two_view import (DEFAULT_HEIGHT, TwoViewError, ink_mask, lift_main_skeleton, match_equal_height,
-                                  skeleton_2d_from_brush, skeleton_2d_from_lines, two_view)
+from reconstruct.two_view import (DEFAULT_HEIGHT, TwoViewError, ink_mask, lift_main_skeleton, lift_on_side_strokes,
+                                  match_equal_height, skeleton_2d_from_brush, skeleton_2d_from_lines, two_view)
 
 SIZE = 256
 BASE = (128, 236)  # (column, row) of the tree base in every drawing
@@ -28,15 +28,21 @@ NODES = np.array([[0, 0, 0], [0, 0, 100], [60, 60, 160], [-50, -50, 150], [0, 0,
 EDGES = [(0, 1), (1, 2), (1, 3), (1, 4), (2, 5)]
 
 
-def projection(axis: int, width: int = 1, scale: float = 1.0) -> np.ndarray:
-    """The known tree drawn orthographically: column = base + scale * NODES[:, axis], row = base - scale * z."""
-    pixel = np.column_stack([BASE[0] + scale * NODES[:, axis], BASE[1] - scale * NODES[:, 2]]).round()
-    return drawing([(pixel[a], pixel[b]) for a, b in EDGES], width)
+# A known tree whose branches swap sides between the views (rank matching pairs them wrongly), with a branch
+# reaching mostly toward the side view's viewer (a short stub in the front view, long in the side view).
+CROSSED_NODES = np.array([[0, 0, 0], [0, 0, 100], [60, -60, 160], [-50, 50, 150], [0, 0, 200], [6, 90, 130]], float)
+CROSSED_EDGES = [(0, 1), (1, 2), (1, 3), (1, 4), (1, 5)]
 
 
-def known_nodes_px() -> np.ndarray:
-    """(6, 3) the known nodes as (front column, row, side column)."""
-    return np.column_stack([BASE[0] + NODES[:, 0], BASE[1] - NODES[:, 2], BASE[0] + NODES[:, 1]])
+def projection(axis: int, width: int = 1, scale: float = 1.0, nodes=NODES, edges=EDGES) -> np.ndarray:
+    """A known tree drawn orthographically: column = base + scale * nodes[:, axis], row = base - scale * z."""
+    pixel = np.column_stack([BASE[0] + scale * nodes[:, axis], BASE[1] - scale * nodes[:, 2]]).round()
+    return drawing([(pixel[a], pixel[b]) for a, b in edges], width)
+
+
+def known_nodes_px(nodes=NODES) -> np.ndarray:
+    """(K, 3) a known tree's nodes as (front column, row, side column)."""
+    return np.column_stack([BASE[0] + nodes[:, 0], BASE[1] - nodes[:, 2], BASE[0] + nodes[:, 1]])
 
 
 def test_traces_a_drawn_y_as_three_branches_meeting_at_the_fork():
@@ -123,6 +129,31 @@ def test_lifted_main_skeleton_passes_through_the_known_nodes():
     assert distance.max() <= 1.0
     steps = np.linalg.norm(lifted[1:] - lifted[dense.parent[1:]], axis=1)
     assert steps.max() < 5.0
+
+
+@pytest.mark.parametrize("nodes, edges", [(NODES, EDGES), (CROSSED_NODES, CROSSED_EDGES)], ids=["ordered", "crossed"])
+def test_lift_on_side_strokes_passes_through_the_known_nodes(nodes, edges):
+    front = skeleton_2d_from_lines(ink_mask(projection(0, nodes=nodes, edges=edges)))
+    side = skeleton_2d_from_lines(ink_mask(projection(1, nodes=nodes, edges=edges)))
+    lifted = lift_on_side_strokes(front.densified(), side)
+    distance, _ = cKDTree(lifted).query(known_nodes_px(nodes))
+    assert distance.max() <= 2.0
+    # Every lifted point lies on a side stroke, and every side stroke pixel lies by a lifted segment.
+    side_px = np.argwhere(ink_mask(projection(1, nodes=nodes, edges=edges)))[:, ::-1]
+    on_side = lifted[:, [2, 1]]
+    assert cKDTree(side_px).query(on_side)[0].max() <= 3.0
+    dense = front.densified()
+    t = np.linspace(0.0, 1.0, 9)[:, None, None]
+    segments = (on_side[dense.parent[1:]] + t * (on_side[1:] - on_side[dense.parent[1:]])).reshape(-1, 2)
+    assert cKDTree(segments).query(side_px)[0].max() <= 3.0
+
+
+def test_rank_matching_lift_misses_crossed_branches():
+    """Why the side-stroke lift is the default: seed 001's equal-height ranks pair swapped branches wrongly."""
+    front = skeleton_2d_from_lines(ink_mask(projection(0, nodes=CROSSED_NODES, edges=CROSSED_EDGES)))
+    side = skeleton_2d_from_lines(ink_mask(projection(1, nodes=CROSSED_NODES, edges=CROSSED_EDGES)))
+    lifted = lift_main_skeleton(front.densified(), match_equal_height(front, side))
+    assert cKDTree(lifted).query(known_nodes_px(CROSSED_NODES))[0].max() > 10.0
 
 
 @pytest.fixture(scope="module")
@@ -226,3 +257,13 @@ def test_disconnected_one_pixel_strokes_are_rejected_by_the_method():
 def test_bad_heights_are_rejected(height):
     with pytest.raises(TwoViewError, match="height"):
         two_view(projection(0), projection(1), height=height, rng=np.random.default_rng(0))
+
+
+def test_an_unknown_lift_is_rejected_and_seed_001s_lift_still_runs():
+    with pytest.raises(TwoViewError, match=r"lift 'rank' is not known: allowed 'side-strokes', 'equal-height'"):
+        two_view(projection(0), projection(1), rng=np.random.default_rng(0), lift="rank", fit_evals=0)
+    paper = two_view(projection(0), projection(1), height=6.0, rng=np.random.default_rng(0), lift="equal-height",
+                     fit_evals=0)
+    ours = two_view(projection(0), projection(1), height=6.0, rng=np.random.default_rng(0), fit_evals=0)
+    # On a tree whose branches keep one order in both views the two lifts agree to about a pixel (6 m / 200 px).
+    assert cKDTree(paper.maps["main_skeleton"]).query(ours.maps["main_skeleton"])[0].max() < 0.1
