@@ -116,16 +116,20 @@ def test_the_levels_are_the_ordered_children_of_an_fbx_lod_group_node(exported, 
     assert [props[f"DisplayLevels|Level{i}"] for i in range(len(entry["names"]))] == [0] * len(entry["names"])
 
 
+# Each list the binding hands out is kept in a name while its items are read: reading through a temporary list
+# crashed the binding (ufbx 0.0.5) now and then.
 UFBX_READ = """
 import json, sys, ufbx
 scene = ufbx.load_file(sys.argv[1])
-groups = [scene.lod_groups[i] for i in range(len(scene.lod_groups))]
-out = []
-for group in groups:
-    node = group.instances[0]
+groups, out = scene.lod_groups, []
+for g in range(len(groups)):
+    group = groups[g]
+    instances, levels = group.instances, group.lod_levels
+    node = instances[0]
+    children = node.children
     out.append({"node": node.name, "type": node.attrib_type.name, "relative": group.relative_distances,
-                "children": [node.children[i].name for i in range(len(node.children))],
-                "distances": [group.lod_levels[i].distance for i in range(len(group.lod_levels))]})
+                "children": [children[i].name for i in range(len(children))],
+                "distances": [levels[i].distance for i in range(len(levels))]})
 print(json.dumps(out))
 """
 
