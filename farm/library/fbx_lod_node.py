@@ -4,9 +4,9 @@ levels being its children in order.
 
 In: a binary FBX holding each level at the top of its scene (`<id>_LOD0`, ... as `lod_group` names them), the
 group's name and the thresholds between the levels (percent of the screen height). Out: the same file with one
-more Model (`LodGroup`, identity transform) whose children are those level nodes in order, its NodeAttribute
-(thresholds used as percentages, every level shown by LOD), and the Definitions' counts raised to match; every
-other record keeps its bytes.
+more Model (`LodGroup`, identity transform) whose children are those level nodes in order (an empty one for a
+level the exporter left without a node of its own), its NodeAttribute (thresholds used as percentages, every
+level shown by LOD), and the Definitions' counts raised to match; every other record keeps its bytes.
 """
 from __future__ import annotations
 
@@ -55,6 +55,7 @@ def _attribute(uid: int, group: str, levels: int, thresholds: list[float]) -> Fb
                _p("MaxDistance", "double", "Number", scalar(b"D", MAX_DISTANCE)),
                _p("WorldSpace", "bool", "", scalar(b"I", 0)),
                _p("ThresholdsUsedAsPercentage", "bool", "", scalar(b"I", 1))]
+    # A Distance property carries its unit after the value; the SDK writes "cm" for percentages too.
     entries += [_p(f"Thresholds|Level{i}", "Distance", "", scalar(b"D", float(value)), string("cm"))
                 for i, value in enumerate(thresholds)]
     entries += [_p(f"DisplayLevels|Level{i}", "enum", "", scalar(b"I", 0)) for i in range(levels)]  # use LOD

@@ -150,6 +150,12 @@ def test_ufbx_reads_the_lod_group_as_asset_json_says(exported):
         assert group["distances"][1:] == pytest.approx(lod_group_thresholds(entry))
 
 
+def _object_counts(data: bytes) -> dict:
+    """{object type: count} as the file's Definitions say."""
+    definitions = next(r for r in read_fbx_bytes(data).records if r.name == b"Definitions")
+    return {r.values()[0]: r.first(b"Count").values()[0] for r in definitions.children if r.name == b"ObjectType"}
+
+
 def test_fbx_records_round_trip_and_the_group_is_added_only_once_levels_are_found(exported):
     record, folder = exported["cards"]
     for path in [record["files"]["fbx"], *(record["files"][f"fbx_{lv['name']}"] for lv in record["levels"])]:
@@ -165,13 +171,9 @@ def test_fbx_records_round_trip_and_the_group_is_added_only_once_levels_are_foun
         add_lod_group_node(b"; FBX 7.4.0 project file", ident, [f"{ident}_LOD0"], [])
     one = add_lod_group_node(level, ident, [f"{ident}_LOD0"], [])
     assert one == add_lod_group_node(level, ident, [f"{ident}_LOD0"], [])  # same bytes: ids from names
-    counts = {r.values()[0]: r.first(b"Count").values()[0]
-              for r in next(r for r in read_fbx_bytes(one).records if r.name == b"Definitions").children
-              if r.name == b"ObjectType"}
-    before = {r.values()[0]: r.first(b"Count").values()[0]
-              for r in next(r for r in read_fbx_bytes(level).records if r.name == b"Definitions").children
-              if r.name == b"ObjectType"}
-    assert counts == {**before, b"Model": before[b"Model"] + 1, b"NodeAttribute": before[b"NodeAttribute"] + 1}
+    before = _object_counts(level)
+    assert _object_counts(one) == {**before, b"Model": before[b"Model"] + 1,
+                                   b"NodeAttribute": before[b"NodeAttribute"] + 1}
 
 
 def test_cutout_leaves_reach_fbx_as_opaque_polygons(exported, read_back):
