@@ -2,7 +2,8 @@
 levels of detail, an impostor, wind data, collision capsules and textures, in GLB, USD, OBJ, FBX and `.blend`.
 
 Modules, from the bottom up: `spec` (LibrarySpec), `lod_fit` and `asset` (one asset in memory), `gltf_asset`,
-`usd_asset`, `lod_group` (the engine LOD-group FBX), `png_cache`, `previews`, `wind_viewer` (its files),
+`usd_asset`, `fbx_binary` and `fbx_lod_node` (binary FBX records; the LodGroup node Blender cannot write),
+`lod_group` (the engine LOD-group FBX), `png_cache`, `previews`, `wind_viewer` (its files),
 `records` (what a library folder records), `blender_catalog` (the Blender catalogs), `catalog` (catalog,
 sheets, gallery, validation) and `job` (the job);
 `glb_scene` reads a library GLB back into trimesh with its instanced leaves drawn.

@@ -27,7 +27,7 @@ from ..tree_chain import BuiltTree, to_json, tree_seed
 from .asset import LibraryAsset, build_asset
 from .catalog import write_catalog
 from .gltf_asset import asset_to_glb, glb_size
-from .lod_group import lod_group_entry, lod_group_job
+from .lod_group import lod_group_entry, lod_group_job, write_lod_group_node
 from .png_cache import PngCache
 from .previews import thumbnail, turntable
 from .records import (ASSETS, BLENDER_FAILED, BLENDER_PENDING, LIBRARY_RECORD, LibraryError, asset_record_path,
@@ -164,8 +164,9 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
             key = "fbx" if name is None else f"fbx_{name}"  # None: the LOD-group file
             record["files"][key] = relative
             record["sizes"][key] = int(row["bytes"])
-            if name is None:
+            if name is None:  # Blender's exporter cannot write the LodGroup node: added to its file here
                 record["lod_group"] = lod_group_entry(record)
+                record["sizes"][key] = write_lod_group_node(job["fbx"], record["id"], record["lod_group"])
             record["all_files"] = sorted([*record["all_files"], relative])
             record["blender"] = "written"
     for item in pending:

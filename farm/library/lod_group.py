@@ -3,17 +3,20 @@ impostor last (Unity builds an LOD Group from those suffixes on import), texture
 sizes an engine needs, worked out from the library's switch sizes.
 
 In: an asset's record (`asset.json` as `stage_asset_files` makes it) and its library folder. Out: the Blender
-worker's export job for the file (`renderers.blender_assets.export_fbx_batch`), and the record's `lod_group`
-entry: level names, Unity transition heights, Unreal screen sizes.
+worker's export job for the file (`renderers.blender_assets.export_fbx_batch`), the record's `lod_group`
+entry (level names, Unity transition heights, Unreal screen sizes), and the file Blender wrote given the FBX
+LodGroup node Unreal needs (`fbx_lod_node`), its thresholds from the Unity transitions.
 """
 from __future__ import annotations
 
 import math
+import os
 
+from .fbx_lod_node import add_lod_group_node
 from .gltf_asset import SCREEN_HEIGHT_PX
 
 __all__ = ["LOD_GROUP_FILE", "lod_group_names", "lod_group_job", "lod_group_entry", "unity_transitions",
-           "unreal_screen_sizes"]
+           "unreal_screen_sizes", "lod_group_thresholds", "write_lod_group_node"]
 
 LOD_GROUP_FILE = "{ident}.fbx"  # beside the asset's GLB and USD; the per-level files stay in fbx/
 
@@ -56,3 +59,22 @@ def lod_group_entry(record: dict) -> dict:
     return {"names": lod_group_names(record["id"], len(switch)), "levels": [lv["name"] for lv in record["levels"]],
             "unity_transition": unity_transitions(switch, height, radius),
             "unreal_screen_size": unreal_screen_sizes(switch, height, radius)}
+
+
+def lod_group_thresholds(entry: dict) -> list[float]:
+    """The FBX LodGroup node's thresholds, one per switch: the Unity transitions as percentages of the screen
+    height (the node says its thresholds are percentages; an engine reading distances would misread them)."""
+    return [round(100.0 * t, 4) for t in entry["unity_transition"][:-1]]
+
+
+def write_lod_group_node(path: str, ident: str, entry: dict) -> int:
+    """Rewrite the LOD-group FBX at `path` (a local file, as Blender wrote it) with its LodGroup node `ident`
+    holding the levels `entry["names"]` in order; whole files only (a temporary sibling renamed over it).
+    Returns the file's new size in bytes."""
+    with open(path, "rb") as f:
+        data = add_lod_group_node(f.read(), ident, entry["names"], lod_group_thresholds(entry))
+    temporary = f"{path}.lod_group.tmp"
+    with open(temporary, "wb") as f:
+        f.write(data)
+    os.replace(temporary, path)
+    return len(data)

@@ -317,7 +317,8 @@ def run(job: dict, out_dir: str) -> dict:
 
 def info(job: dict, out_dir: str) -> dict:
     """Job kind `fbx_info`: import an FBX with Blender's default settings; the `scene.mesh_stats` dictionary
-    with the scene's images (`_image_row`) and, per material, the images bound to its inputs (`_bindings`)."""
+    with the scene's images (`_image_row`), per material the images bound to its inputs (`_bindings`), and
+    the file's LodGroup nodes (`lod_groups`)."""
     path = require(job, "fbx")
     if not os.path.isfile(path):
         raise JobError(f"fbx {path!r} does not exist")
@@ -333,7 +334,38 @@ def info(job: dict, out_dir: str) -> dict:
     stats["bindings"] = {material.name: _bindings(material) for material in bpy.data.materials}
     stats["unit_scale"] = bpy.context.scene.unit_settings.scale_length
     stats.update(animation_stats(objects))
+    stats["lod_groups"] = lod_groups(path)
     return stats
+
+
+def _name(elem) -> str:
+    """An object's name without the class binary FBX joins to it (`name\\x00\\x01Class`)."""
+    return elem.props[1].split(b"\x00\x01")[0].decode()
+
+
+def lod_groups(path: str) -> list[dict]:
+    """The file's LodGroup nodes as Blender's own FBX parser reads the records (its importer turns them into
+    empties): per group its name, its child nodes' names in connection order (the order engines take as the
+    levels'), and its NodeAttribute's properties {name: first value}."""
+    from io_scene_fbx import parse_fbx  # Blender's bundled reader: there only when bpy is
+
+    root, _ = parse_fbx.parse(path)
+    tops = {elem.id: elem for elem in root.elems}
+    objects = {elem.props[0]: elem for elem in tops[b"Objects"].elems}
+    links = [c.props[1:3] for c in tops[b"Connections"].elems if c.props[0] == b"OO"]
+    groups = []
+    for uid, elem in objects.items():
+        if elem.id != b"Model" or elem.props[2] != b"LodGroup":
+            continue
+        attached = [objects[child] for child, parent in links if parent == uid and child in objects]
+        attribute = next((e for e in attached if e.id == b"NodeAttribute" and e.props[2] == b"LodGroup"), None)
+        properties = {}
+        for record in (r for r in (attribute.elems if attribute is not None else ()) if r.id == b"Properties70"):
+            properties.update({p.props[0].decode(): p.props[4] if len(p.props) > 4 else None
+                               for p in record.elems})
+        groups.append({"name": _name(elem), "children": [_name(e) for e in attached if e.id == b"Model"],
+                       "attribute": attribute is not None, "properties": properties})
+    return groups
 
 
 def _image_row(image) -> dict:

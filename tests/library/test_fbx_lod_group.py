@@ -1,7 +1,9 @@
 """The engine LOD-group FBX (`farm.library.lod_group`): one file per asset holding every level as `<id>_LOD0` ...
 with the impostor last, read back by Blender's importer with each level's triangle count from asset.json and each
-image embedded once; the per-level files stay. `leaves: cutout` assets carry their outline polygons into FBX
-with an opaque leaf material. And `fbx` asked for without Blender: one line, exit 2, nothing written.
+image embedded once; the per-level files stay. The levels are the ordered children of an FBX LodGroup node whose
+thresholds are asset.json's Unity transitions in percent, as Blender's own FBX parser and, where the `ufbx`
+package is installed, ufbx read it. `leaves: cutout` assets carry their outline polygons into FBX with an opaque
+leaf material. And `fbx` asked for without Blender: one line, exit 2, nothing written.
 
 Blender runs for real (`.venv-blender`, built by `make env`): one export batch for the module, then one import
 per file read back.
@@ -9,14 +11,19 @@ per file read back.
 from __future__ import annotations
 
 import hashlib
+import json
 import re
+import subprocess
+import sys
 
 import pytest
 import yaml
 
 import farm.library.job as library_job
 from farm.cli import main as farm_main
-from farm.library.lod_group import unity_transitions, unreal_screen_sizes
+from farm.library.fbx_binary import FbxFile, read_fbx_bytes, write_fbx_bytes
+from farm.library.fbx_lod_node import add_lod_group_node
+from farm.library.lod_group import lod_group_thresholds, unity_transitions, unreal_screen_sizes
 
 PNG_START, PNG_END = b"\x89PNG\r\n\x1a\n", b"IEND\xaeB`\x82"
 ASSETS = {"cards": ("maple", 5), "cutout": ("sc_young_sapling", 0)}
@@ -91,6 +98,86 @@ def test_the_lod_group_file_embeds_each_image_once_and_every_image_of_its_levels
         per_level |= set(_embedded_pngs((folder / record["files"][f"fbx_{level['name']}"]).read_bytes()))
     assert set(embedded) == per_level
     assert record["sizes"]["fbx"] < sum(record["sizes"][f"fbx_{lv['name']}"] for lv in record["levels"])
+
+
+@pytest.mark.parametrize("leaves", list(ASSETS))
+def test_the_levels_are_the_ordered_children_of_an_fbx_lod_group_node(exported, read_back, leaves):
+    record, _ = exported[leaves]
+    entry = record["lod_group"]
+    (group,) = read_back[leaves]["lod_groups"]  # as Blender's own FBX parser reads the records
+    assert group["name"] == record["id"] and group["attribute"]
+    assert group["children"] == entry["names"]
+    props = group["properties"]
+    assert props["ThresholdsUsedAsPercentage"] == 1 and props["MinMaxDistance"] == 0
+    thresholds = [props[f"Thresholds|Level{i}"] for i in range(len(entry["names"]) - 1)]
+    assert f"Thresholds|Level{len(entry['names']) - 1}" not in props
+    assert thresholds == pytest.approx([100 * t for t in entry["unity_transition"][:-1]])
+    assert all(a > b > 0 for a, b in zip(thresholds, thresholds[1:]))
+    assert [props[f"DisplayLevels|Level{i}"] for i in range(len(entry["names"]))] == [0] * len(entry["names"])
+
+
+# Each list the binding hands out is kept in a name while its items are read: reading through a temporary list
+# crashed the binding (ufbx 0.0.5) now and then.
+UFBX_READ = """
+import json, sys, ufbx
+scene = ufbx.load_file(sys.argv[1])
+groups, out = scene.lod_groups, []
+for g in range(len(groups)):
+    group = groups[g]
+    instances, levels = group.instances, group.lod_levels
+    node = instances[0]
+    children = node.children
+    out.append({"node": node.name, "type": node.attrib_type.name, "relative": group.relative_distances,
+                "children": [children[i].name for i in range(len(children))],
+                "distances": [levels[i].distance for i in range(len(levels))]})
+print(json.dumps(out))
+"""
+
+
+def test_ufbx_reads_the_lod_group_as_asset_json_says(exported):
+    """An independent reader (ufbx, a C library): the group node, its levels in order, the thresholds. It runs
+    in a child process, so a crash of the binding fails this test rather than the session."""
+    pytest.importorskip("ufbx")
+    for record, folder in exported.values():
+        run = subprocess.run([sys.executable, "-c", UFBX_READ, str(folder / record["files"]["fbx"])],
+                             capture_output=True, text=True, timeout=60)
+        assert run.returncode == 0, run.stderr
+        (group,) = json.loads(run.stdout)
+        entry = record["lod_group"]
+        assert group["node"] == record["id"] and group["type"] == "LOD_GROUP" and group["relative"]
+        assert group["children"] == entry["names"]
+        # ufbx lists one level more than the thresholds: the first, shown from the full screen down.
+        assert group["distances"][1:] == pytest.approx(lod_group_thresholds(entry))
+
+
+def _object_counts(data: bytes) -> dict:
+    """{object type: count} as the file's Definitions say."""
+    definitions = next(r for r in read_fbx_bytes(data).records if r.name == b"Definitions")
+    return {r.values()[0]: r.first(b"Count").values()[0] for r in definitions.children if r.name == b"ObjectType"}
+
+
+def test_fbx_records_round_trip_and_the_group_is_added_only_once_levels_are_found(exported):
+    record, folder = exported["cards"]
+    for path in [record["files"]["fbx"], *(record["files"][f"fbx_{lv['name']}"] for lv in record["levels"])]:
+        data = (folder / path).read_bytes()
+        fbx = read_fbx_bytes(data)
+        assert write_fbx_bytes(fbx) == data
+    # Version 7500 stores offsets and counts in 64 bits: the same records through that layout and back.
+    wide = read_fbx_bytes(write_fbx_bytes(FbxFile(7500, fbx.records, fbx.footer)))
+    assert wide.version == 7500 and write_fbx_bytes(FbxFile(fbx.version, wide.records, wide.footer)) == data
+    level = (folder / record["files"]["fbx_LOD0"]).read_bytes()  # one level at the top: LOD0's own node
+    ident = record["id"]
+    with pytest.raises(ValueError, match="LOD1"):
+        add_lod_group_node(level, ident, [f"{ident}_LOD0", f"{ident}_LOD1"], [50.0])
+    with pytest.raises(ValueError, match="2 levels need 1 thresholds"):
+        add_lod_group_node(level, ident, [f"{ident}_LOD0", f"{ident}_LOD1"], [])
+    with pytest.raises(ValueError, match="not a binary FBX"):
+        add_lod_group_node(b"; FBX 7.4.0 project file", ident, [f"{ident}_LOD0"], [])
+    one = add_lod_group_node(level, ident, [f"{ident}_LOD0"], [])
+    assert one == add_lod_group_node(level, ident, [f"{ident}_LOD0"], [])  # same bytes: ids from names
+    before = _object_counts(level)
+    assert _object_counts(one) == {**before, b"Model": before[b"Model"] + 1,
+                                   b"NodeAttribute": before[b"NodeAttribute"] + 1}
 
 
 def test_cutout_leaves_reach_fbx_as_opaque_polygons(exported, read_back):
