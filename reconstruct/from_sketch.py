@@ -393,7 +393,9 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     axis01 = float((base_depth[0] - camera.near) / (camera.far - camera.near))
     front_c, back_c, crown_mask = crown_maps(front, back, mask, (base_u, base_v), axis01, camera)
     _, _, bottom_z, top_z = _axis_extent(camera, base, 1.0)  # metres above the base, image bottom and top edges
-    top_row = int(np.flatnonzero(crown_mask.any(axis=1))[0])
+    # The tree's top is the highest thing drawn: a bare leader's strokes can stand above the crown.
+    drawn = crown_mask | (stroke_labels(strokes)[0] >= 0)
+    top_row = int(np.flatnonzero(drawn.any(axis=1))[0])
     tree_height = top_z - top_row / camera.height * (top_z - bottom_z)  # to the top edge of the crown's top row
     if not tree_height > 0:
         raise SketchError("the crown lies below the lowest trunk stroke: allowed strokes that start at the "
@@ -402,7 +404,7 @@ def from_maps(silhouette_maps: np.ndarray, trunk_maps: np.ndarray, strokes: np.n
     crown = CameraCrown(front_c, back_c, crown_mask, camera, origin=base, scale=scale)
     lap("crown")
 
-    region = crown_mask | (stroke_labels(strokes)[0] >= 0)
+    region = drawn
     root = (int(np.clip(np.rint(base_u), 0, camera.width - 1)), int(np.clip(np.rint(base_v), 0, camera.height - 1)))
     directions, geodesic = geodesic_field(region, root, _BIN_PX * max(camera.width, camera.height) / _REFERENCE_PX)
     steering = MarkerSteering(attraction=revolved_field(directions, _axis_extent(camera, base, scale)))

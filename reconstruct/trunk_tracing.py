@@ -102,20 +102,47 @@ def _trace_nodes(labels: np.ndarray, depth01: np.ndarray):
 
     add((int(cols[start]), int(rows[start])), -1)
     queue = deque([0])
-    while queue:
-        k = queue.popleft()
-        hits = np.rint(nodes[k] + probes).astype(np.int64)
-        inside = (hits[:, 0] >= 0) & (hits[:, 0] < w) & (hits[:, 1] >= 0) & (hits[:, 1] < h)
-        for u, v in hits[inside]:
-            if labels[v, u] >= 0 and not consumed[v, u]:
-                add((int(u), int(v)), k)
-                queue.append(len(nodes) - 1)
+    while True:
+        while queue:
+            k = queue.popleft()
+            hits = np.rint(nodes[k] + probes).astype(np.int64)
+            inside = (hits[:, 0] >= 0) & (hits[:, 0] < w) & (hits[:, 1] >= 0) & (hits[:, 1] < h)
+            for u, v in hits[inside]:
+                if labels[v, u] >= 0 and not consumed[v, u]:
+                    add((int(u), int(v)), k)
+                    queue.append(len(nodes) - 1)
+        # A branch leaving a stroke at a shallow angle, or touching it only where the probes fell on traced
+        # pixels, is missed by the probes: go on from the untraced stroke nearest the traced nodes.
+        restart = _untraced_start(labels, consumed, np.asarray(nodes))
+        if restart is None:
+            break
+        pixel, parent = restart
+        add(pixel, parent)
+        queue.append(len(nodes) - 1)
     depth = np.asarray(node_depth, np.float64)
     if np.isnan(depth).all():
         raise SketchError("the trunk depth map has no stroke depth (every pixel under the strokes is 1 = "
                           "background): allowed a trunk depth map that covers the strokes")
     return (np.asarray(nodes), np.asarray(node_label, np.int64), np.asarray(node_parent, np.int64),
             np.where(np.isnan(depth), np.nanmedian(depth), depth))
+
+
+def _untraced_start(labels: np.ndarray, consumed: np.ndarray, nodes: np.ndarray):
+    """((u, v), nearest node) where tracing goes on: the pixel, of all untraced stroke pieces long enough to be a
+    branch (_MIN_BRANCH_NODES probe steps), nearest to a traced node; None when no such piece is left."""
+    untraced = (labels >= 0) & ~consumed
+    pieces, n = ndimage.label(untraced, np.ones((3, 3), bool))
+    if n == 0:
+        return None
+    boxes = ndimage.find_objects(pieces)
+    reach = np.array([max(b[0].stop - b[0].start, b[1].stop - b[1].start) for b in boxes])
+    long_enough = np.flatnonzero(reach >= _MIN_BRANCH_NODES * TRACE_STEP_PX) + 1
+    if long_enough.size == 0:
+        return None
+    rows, cols = np.nonzero(np.isin(pieces, long_enough))
+    offsets = (cols[:, None] - nodes[None, :, 0]) ** 2 + (rows[:, None] - nodes[None, :, 1]) ** 2
+    pixel, node = np.unravel_index(np.argmin(offsets), offsets.shape)
+    return (int(cols[pixel]), int(rows[pixel])), int(node)
 
 
 def _branches(pixels: np.ndarray, label: np.ndarray, bfs_parent: np.ndarray) -> tuple[list[np.ndarray], list[int]]:

@@ -120,6 +120,23 @@ def test_trace_of_a_drawn_y_gives_two_branches_meeting_at_the_fork(hand_drawn):
     np.testing.assert_allclose(camera.depth01(camera.project(main.positions)[1]), 0.5, atol=1e-3)
 
 
+@pytest.mark.parametrize("gap", [5, 9])
+def test_a_branch_whose_base_is_hidden_is_traced_from_the_nearest_trunk_node(gap):
+    """A branch seen only from a few pixels past its parent (its base hidden behind another stroke) is not
+    reached by the probes; tracing goes on from the untraced stroke nearest the traced ones."""
+    strokes = np.full((64, 64, 3), 255, np.uint8)
+    _draw(strokes, (32, 60), (32, 4), PALETTE[0].astype(float), 4.0)
+    _draw(strokes, (34 + gap, 36), (56, 12), PALETTE[3].astype(float), 4.0)
+    depth = np.where((strokes < 200).any(axis=2), 0.5, 1.0).astype(np.float32)
+    camera = orthographic_camera(_corners(BOX), 0.0, 0.0, 64)
+    main = trace_trunk(strokes, depth, camera)
+    assert main.n_branches == 2
+    pixels, _ = camera.project(main.positions)
+    branch = main.branch_paths[1]
+    assert abs(pixels[branch[0], 0] - 32) <= 1 and abs(pixels[branch[0], 1] - 36) <= TRACE_STEP_PX  # on the trunk
+    assert np.linalg.norm(pixels[branch[-1]] - (56, 12)) <= TRACE_STEP_PX  # and out to the branch's end
+
+
 def test_camera_crown_holds_the_points_between_front_and_back_depth():
     camera = _cameras(32)[1]
     mask = np.zeros((32, 32), bool)
@@ -194,6 +211,19 @@ def test_tree_stands_on_the_traced_trunk_base_at_the_asked_height(sketch, result
     assert result.params["height"] == truth.height and result.params["generator"] == "colonization"
     main = result.maps["main_skeleton"]
     np.testing.assert_array_equal(tree.positions[:len(main)], main)  # the guide's nodes come first, as given
+
+
+def test_strokes_above_the_crown_set_the_trees_top(sketch):
+    """A bare leader drawn above the crown (here: the crown's top third cut from the silhouette) is the tree's
+    top: the traced main skeleton reaches the asked height, not a taller one scaled to the crown alone."""
+    skeleton, view = sketch
+    silhouette = view.images["silhouette"].copy()
+    rows = np.flatnonzero((silhouette[..., 2] >= 0.5).any(axis=1))
+    silhouette[: rows[0] + (rows[-1] - rows[0]) // 3, :, 2] = 0.0
+    cut = from_maps(silhouette, view.images["trunk_depth"], view.images["trunk_strokes"], view.camera,
+                    height=skeleton.height, rng=np.random.default_rng(1))
+    top = cut.maps["main_skeleton"][:, 2].max()
+    assert skeleton.height * 0.9 <= top <= skeleton.height * 1.01
 
 
 def test_height_sets_the_metric_scale_and_defaults_to_the_presets_draw(sketch, result):
