@@ -213,7 +213,7 @@ METHODS: dict[str, Method] = {
                      Input("side", "image", "the side drawing", help="the side drawing, 90 degrees from the front",
                            flag=True, rendered=Rendered("two-view:shared", "side", "sketch_strokes"))),
         _run_two_view, options=("brush", "fit_evals"),
-        summary="no network: 2D skeletons, equal-height matching, twigs clipped by both outlines",
+        summary="no network: 2D skeletons, the front lifted on the side strokes, twigs clipped by both outlines",
         source="seed 001"),
     "cloud": Method(
         "cloud", (Input("cloud", "cloud", "a point cloud (.xyz, .txt, .csv, .pts, .ply, .las, .laz)"),),
