@@ -31,7 +31,8 @@ from .fit_budget import FitError
 from .fitting import FitRecord, FitTrace, outline, search
 
 __all__ = ["Knob", "SKETCH_DEPTH_KNOBS", "SketchDepthFit", "knob_settings", "fit_sketch_depth", "GUESS_SETTINGS",
-           "window_outline", "window_iou", "WINDOW_PX", "WINDOW_PAD", "settings_params", "offset_mask"]
+           "window_outline", "window_iou", "WINDOW_PX", "WINDOW_PAD", "settings_params", "offset_mask",
+           "FIT_NODE_BUDGET", "evaluations_for"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,10 @@ WINDOW_PX = 256
 WINDOW_PAD = 32
 WINDOW_CLOSING = 6
 GUESS_SETTINGS = {knob.name: knob.guess for knob in SKETCH_DEPTH_KNOBS}
+# A candidate's cost grows with its tree (the colonization's nodes): a fit stops once its candidates would have
+# grown about this many nodes together, counted from the guess's size, so a drawing of a large tree stays near the
+# time target; a count, like the budget, so the same drawing and seed still give the same bytes.
+FIT_NODE_BUDGET = 64_000
 
 
 def knob_settings(x: np.ndarray) -> dict[str, float]:
@@ -137,10 +142,18 @@ def window_iou(a: np.ndarray, b: np.ndarray) -> float:
     return silhouette_iou(a, b) if a.any() or b.any() else 0.0
 
 
+def evaluations_for(evals: int, guess_nodes: int) -> int:
+    """The evaluations a fit of budget `evals` spends on a tree whose guess has `guess_nodes` nodes: the budget,
+    or fewer when that many candidates of the guess's size would pass FIT_NODE_BUDGET nodes (at least 1, the
+    guess itself)."""
+    return max(1, min(int(evals), FIT_NODE_BUDGET // max(int(guess_nodes), 1)))
+
+
 def fit_sketch_depth(grow: Callable[[dict[str, float]], Grown], first: Grown, ink: np.ndarray, evals: int,
                      rng: np.random.Generator, renderer, camera: Camera) -> SketchDepthFit:
     """Search SKETCH_DEPTH_KNOBS for the tree whose filled outline in `camera` best matches the drawing's, within
-    `evals` (>= 1) evaluations, the first being the guess `first` = grow(GUESS_SETTINGS) as already grown.
+    `evals` (>= 1) evaluations (fewer for a large guess: `evaluations_for`), the first being the guess `first` =
+    grow(GUESS_SETTINGS) as already grown.
 
     ink    : (H, W) bool, the drawing's ink over its window (the window the maps and the input camera share).
     camera : the input camera in the grown tree's frame, widened to WINDOW_PX + 2 WINDOW_PAD px with the window
@@ -174,6 +187,7 @@ def fit_sketch_depth(grow: Callable[[dict[str, float]], Grown], first: Grown, in
             best["first_outline"] = shape
         return trace.add(value)
 
+    evals = evaluations_for(evals, len(first[1]))
     first_score = evaluate(dict(GUESS_SETTINGS), first)
     x0 = np.array([knob.coordinate(knob.guess) for knob in SKETCH_DEPTH_KNOBS])
     search(lambda x: evaluate(knob_settings(x)), x0, evals - 1, rng, x0_score=first_score)

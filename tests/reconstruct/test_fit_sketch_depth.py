@@ -7,8 +7,10 @@ import contextlib
 import numpy as np
 import pytest
 
+import reconstruct.fit_sketch_depth as fit_module
 import species
-from reconstruct.fit_sketch_depth import SKETCH_DEPTH_KNOBS, GUESS_SETTINGS, knob_settings, window_iou, window_outline
+from reconstruct.fit_sketch_depth import (FIT_NODE_BUDGET, GUESS_SETTINGS, SKETCH_DEPTH_KNOBS, evaluations_for,
+                                          knob_settings, window_iou, window_outline)
 from reconstruct.fit_budget import FitError
 from reconstruct.fitting import FitRecord
 from reconstruct.from_sketch import from_maps
@@ -96,3 +98,17 @@ def test_knobs_hold_the_guess_at_its_coordinate():
     x0 = np.array([knob.coordinate(knob.guess) for knob in SKETCH_DEPTH_KNOBS])
     assert np.all((x0 > 0) & (x0 < 1))
     np.testing.assert_allclose(list(knob_settings(x0).values()), list(GUESS_SETTINGS.values()), atol=1e-12)
+
+
+def test_a_large_guess_gets_fewer_evaluations_never_none():
+    assert evaluations_for(32, 1000) == 32
+    assert evaluations_for(32, FIT_NODE_BUDGET // 8) == 8
+    assert evaluations_for(32, 10 * FIT_NODE_BUDGET) == 1  # the guess is always scored
+    assert evaluations_for(5, 10) == 5  # never more than asked
+
+
+
+def test_the_fit_stops_at_the_node_budget(drawn, renderer, monkeypatch):
+    guess_nodes = len(_grown(drawn, renderer, 0).skeleton)
+    monkeypatch.setattr(fit_module, "FIT_NODE_BUDGET", 3 * guess_nodes)
+    assert _grown(drawn, renderer, EVALS).maps["fit"].trace.evals == 3
