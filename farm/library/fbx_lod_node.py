@@ -5,7 +5,8 @@ levels being its children in order.
 In: a binary FBX holding each level at the top of its scene (`<id>_LOD0`, ... as `lod_group` names them), the
 group's name and the thresholds between the levels (percent of the screen height). Out: the same file with one
 more Model (`LodGroup`, identity transform) whose children are those level nodes in order, its NodeAttribute
-(thresholds used as percentages, every level shown by LOD), and the Definitions' counts raised to match; every other record keeps its bytes.
+(thresholds used as percentages, every level shown by LOD), and the Definitions' counts raised to match; every
+other record keeps its bytes.
 """
 from __future__ import annotations
 

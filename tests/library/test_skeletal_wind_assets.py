@@ -13,11 +13,9 @@ from pathlib import Path
 import pytest
 
 from farm.cli import main as farm_main
-from farm.library.job import add_asset
-from farm.library.records import write_library_record
-from farm.library.spec import default_library_spec, parse_library_spec
-from farm.dataset.storage import Location
+from farm.library.spec import default_library_spec
 from gltf_validator import assert_valid_glb
+from one_asset_library import one_asset_library
 from usd_validator import assert_valid_usd
 from renderers.blender import blender_available, glb_info
 from species.meshing.gltf import read_accessor, read_glb_chunks
@@ -30,10 +28,7 @@ SPEC = {"name": "skeletal", "seed": 1, "species": {"palm": 1}, "formats": ["glb"
 @pytest.fixture(scope="module")
 def asset(tmp_path_factory) -> Path:
     """The palm's asset folder (treat as read-only)."""
-    folder = tmp_path_factory.mktemp("skeletal") / "library"
-    write_library_record(Location.resolve(str(folder)), parse_library_spec(SPEC))
-    add_asset(str(folder), "palm", 3)
-    return next(folder.glob("assets/*/asset.json")).parent
+    return one_asset_library(tmp_path_factory.mktemp("skeletal") / "library", SPEC, "palm", 3)
 
 
 @pytest.fixture(scope="module")

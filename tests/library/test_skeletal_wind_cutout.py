@@ -14,11 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from farm.dataset.storage import Location
-from farm.library.job import add_asset
-from farm.library.records import write_library_record
-from farm.library.spec import parse_library_spec
 from gltf_validator import assert_valid_glb
+from one_asset_library import one_asset_library
 from renderers.blender import blender_available
 from species.meshing.gltf import read_accessor, read_glb_chunks
 from species.studio.pbr_textures import SEASONS
@@ -33,10 +30,7 @@ SPEC = {"name": "skeletal_cutout", "seed": 1, "species": {"sc_young_sapling": 1}
 @pytest.fixture(scope="module")
 def asset(tmp_path_factory) -> Path:
     """The sapling's asset folder (treat as read-only)."""
-    folder = tmp_path_factory.mktemp("skeletal_cutout") / "library"
-    write_library_record(Location.resolve(str(folder)), parse_library_spec(SPEC))
-    add_asset(str(folder), "sc_young_sapling", 0)
-    return next(folder.glob("assets/*/asset.json")).parent
+    return one_asset_library(tmp_path_factory.mktemp("skeletal_cutout") / "library", SPEC, "sc_young_sapling", 0)
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +62,8 @@ def test_the_glb_is_valid_with_lod0s_outline_polygons_under_the_joints_the_clip_
                 continue
             (card,) = doc["meshes"][node["mesh"]]["primitives"]
             assert _material(doc, card) == "leaf_cutout_summer" and _triangles(doc, card) > 2  # a polygon, not a card
-            count = doc["accessors"][node["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["TRANSLATION"]]["count"]
+            instances = node["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["TRANSLATION"]
+            count = doc["accessors"][instances]["count"]
             holders.add(j)
             drawn += count * _triangles(doc, card)
     assert len(holders) >= 2 and _triangles(doc, bark) + drawn == record["levels"][0]["triangles"]
