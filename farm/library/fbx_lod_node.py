@@ -4,9 +4,9 @@ levels being its children in order.
 
 In: a binary FBX holding each level at the top of its scene (`<id>_LOD0`, ... as `lod_group` names them), the
 group's name and the thresholds between the levels (percent of the screen height). Out: the same file with one
-more Model (`LodGroup`, identity transform) whose children are those level nodes in order (an empty one for a
-level the exporter left without a node of its own), its NodeAttribute (thresholds used as percentages, every
-level shown by LOD), and the Definitions' counts raised to match; every other record keeps its bytes.
+more Model (`LodGroup`, identity transform) whose children are those level nodes in order, its NodeAttribute
+(thresholds used as percentages, every level shown by LOD), and the Definitions' counts raised to match; every
+other record keeps its bytes.
 """
 from __future__ import annotations
 
@@ -65,8 +65,8 @@ def _attribute(uid: int, group: str, levels: int, thresholds: list[float]) -> Fb
                            FbxRecord.make(b"TypeFlags", [string("LodGroup")])])
 
 
-def _model(uid: int, name: str, kind: str, like: FbxRecord) -> FbxRecord:
-    """A new Model (`kind` LodGroup or Null) at identity, its records as the Model `like` has them (Blender's
+def _group_model(uid: int, name: str, like: FbxRecord) -> FbxRecord:
+    """A new Model of type LodGroup at identity, its records as the Model `like` has them (Blender's
     types and values)."""
     children = []
     for record in like.children:
@@ -76,7 +76,7 @@ def _model(uid: int, name: str, kind: str, like: FbxRecord) -> FbxRecord:
             kept = [p for p in record.children if p.values()[:1] and p.values()[0] in MODEL_PROPERTIES]
             children.append(FbxRecord.make(b"Properties70", [], kept))
     return FbxRecord.make(b"Model", [scalar(b"L", uid), string(name.encode() + NAME_SEPARATOR + b"Model"),
-                                     string(kind)], children)
+                                     string("LodGroup")], children)
 
 
 def _raise_counts(definitions: FbxRecord, models: int) -> None:
@@ -110,47 +110,32 @@ def add_lod_group_node(data: bytes, group: str, levels: list[str], thresholds: l
     """`data` with a LodGroup node `group` holding the levels (in that order) as its children; `thresholds`
     (one fewer than the levels) are the screen-height percentages below which each next level is drawn.
 
-    A level is the top-level node named as it is or, where the exporter left no such node (a skinned level
-    whose node was its armature), a new empty node of that name holding the top-level nodes named
-    `<level>_...`. ValueError when a level has neither."""
+    A level is the top-level node named as it is (an empty, or the armature of a skinned level). ValueError when
+    a level has none."""
     if len(thresholds) != len(levels) - 1 or not levels:
         raise ValueError(f"{len(levels)} levels need {max(len(levels) - 1, 0)} thresholds, got {len(thresholds)}")
     fbx = read_fbx_bytes(data)
     objects, connections = _top(fbx, b"Objects"), _top(fbx, b"Connections")
     roots = _roots(objects, connections)
-    parts = {level: [roots[level]] if level in roots else
-             [roots[name] for name in roots if name.startswith(f"{level}_")] for level in levels}
-    missing = [level for level, found in parts.items() if not found]
+    missing = [level for level in levels if level not in roots]
     if missing:
         raise ValueError(f"FBX: the levels {missing} are not nodes at the top of the scene: it has "
                          f"{sorted(roots)}")
     taken = {values[0] for record in objects.children if (values := record.values())[:1]
              and isinstance(values[0], int)} | {0}
     group_id, attribute_id = _new_id(f"{group}\x00Model", taken), _new_id(f"{group}\x00NodeAttribute", taken)
-    like = objects.children[min(index for found in parts.values() for _, index in found)]
-    added = [_attribute(attribute_id, group, len(levels), thresholds), _model(group_id, group, "LodGroup", like)]
-    level_ids, moved = [], {}  # moved: {id of a top-level node: its new parent}
-    for level, found in parts.items():
-        if level in roots:
-            level_ids.append(roots[level][0])
-            moved[roots[level][0]] = group_id
-            continue
-        uid = _new_id(f"{level}\x00Model", taken)
-        added.append(_model(uid, level, "Null", like))
-        level_ids.append(uid)
-        moved.update({part: uid for part, _ in found})
-    first = min(index for found in parts.values() for _, index in found)
-    objects.children[first:first] = added
-
-    links = [(i, values[1]) for i, c in enumerate(connections.children)
-             if (values := c.values())[:1] == [b"OO"] and len(values) > 2 and values[2] == 0 and values[1] in moved]
+    first = min(roots[level][1] for level in levels)
+    objects.children[first:first] = [_attribute(attribute_id, group, len(levels), thresholds),
+                                     _group_model(group_id, group, objects.children[first])]
+    level_ids = [roots[level][0] for level in levels]
+    links = [i for i, c in enumerate(connections.children)  # the levels' links to the scene's root, in order
+             if (values := c.values())[:1] == [b"OO"] and len(values) > 2 and values[2] == 0
+             and values[1] in level_ids]
     new_links = [_connection(group_id, 0)] + [_connection(uid, group_id) for uid in level_ids]
-    new_links += [_connection(part, moved[part]) for _, part in links if moved[part] != group_id]
     new_links.append(_connection(attribute_id, group_id))
-    dropped = {i for i, _ in links}
+    dropped = set(links)
     kept = [c for i, c in enumerate(connections.children) if i not in dropped]
-    first_link = min(dropped)
-    kept[first_link:first_link] = new_links
+    kept[links[0]:links[0]] = new_links
     connections.children = kept
-    _raise_counts(_top(fbx, b"Definitions"), len(added) - 1)
+    _raise_counts(_top(fbx, b"Definitions"), 1)
     return write_fbx_bytes(fbx)

@@ -209,17 +209,25 @@ def _skinned_level(writer: GlbWriter, asset, level, skin, bark_prim: dict, mater
         if instanced:
             for joint, leaves in _leaves_nodes(writer, asset, level, materials, variant_maps, True, skin.leaf_joint):
                 writer.nodes[joints[joint]].setdefault("children", []).append(leaves)
+        elif level.leaf_outline is not None:  # single leaves as their outline polygons, clumps as cards
+            for _, prim, chosen, per_card in _flat_cutout_primitives(writer, level, materials, variant_maps):
+                prims.append(_rigidly_skinned(writer, prim, np.repeat(skin.leaf_joint[chosen], per_card)))
         else:
             flat = _flat_leaves_primitive(writer, level, materials, variant_maps)
-            rigid = np.repeat(skin.leaf_joint, 4)
-            weights = np.zeros((len(rigid), 4), np.float32)
-            weights[:, 0] = 1.0
-            prims.append(add_skin_attributes(writer, flat, np.stack([rigid] + [np.zeros_like(rigid)] * 3, axis=1),
-                                             weights))
-    mesh = writer.mesh(f"{level.name}_bark", prims[0])
+            prims.append(_rigidly_skinned(writer, flat, np.repeat(skin.leaf_joint, 4)))
+    # Named as the level's bark node is without wind: Blender names the skinned mesh's object after the mesh (the
+    # level's node becomes its armature), and the FBX files keep that name.
+    mesh = writer.mesh(f"{asset.asset_id}_{level.name}_bark", prims[0])
     writer.meshes[mesh]["primitives"] += prims[1:]
     node["mesh"] = mesh
     return [joints[0]], joints
+
+
+def _rigidly_skinned(writer: GlbWriter, primitive: dict, joint: np.ndarray) -> dict:
+    """The primitive skinned wholly to one joint per vertex (`joint` (V,)): a leaf moves with its joint."""
+    weights = np.zeros((len(joint), 4), np.float32)
+    weights[:, 0] = 1.0
+    return add_skin_attributes(writer, primitive, np.stack([joint] + [np.zeros_like(joint)] * 3, axis=1), weights)
 
 
 def _flat_leaves_primitive(writer: GlbWriter, level, materials, variant_maps) -> dict:
@@ -240,10 +248,10 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
     skeleton = level.skeleton
     clumps = card_clumps(level.mesh.leaves)
     outline = level.leaf_outline
-    cutout_maps = [{"material": materials[f"cutout_{season}"], "variants": [i]} for i, season in enumerate(SEASONS)] \
-        if outline is not None else None
     if not instanced and outline is not None:
-        return _flat_cutout_nodes(writer, asset, level, materials, variant_maps, cutout_maps, clumps)
+        return [writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
+                             "mesh": writer.mesh(f"{level.name}_{kind}", prim)})
+                for kind, prim, _, _ in _flat_cutout_primitives(writer, level, materials, variant_maps)]
     if not instanced:
         prim = _flat_leaves_primitive(writer, level, materials, variant_maps)
         return [writer.node({"name": f"{asset.asset_id}_{level.name}_leaves",
@@ -267,7 +275,7 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
             card = _primitive(writer, _card_to_local(outline.card_points), _card_to_local(normals),
                               _leaf_tile_uvs(outline.uvs, np.zeros(k, bool)), outline.faces, materials["cutout_summer"],
                               {"_WIND": (np.zeros((k, 4)), "VEC4"), "_WIND_PIVOT": (np.zeros((k, 3)), "VEC3")},
-                              cutout_maps)
+                              _cutout_maps(materials))
         else:
             card = _primitive(writer, _card_to_local(LEAF_CARD_CORNERS), _card_to_local(card_normals),
                               _leaf_tile_uvs(CARD_UVS, np.full(4, clump)), CARD_FACES, materials["summer"],
@@ -295,11 +303,12 @@ def _leaves_nodes(writer: GlbWriter, asset, level, materials, variant_maps, inst
     return nodes
 
 
-def _flat_cutout_nodes(writer: GlbWriter, asset, level, materials, variant_maps, cutout_maps,
-                       clumps: np.ndarray) -> list[int]:
-    """Baked leaves of a `cutout` asset: `_leaves`, every single-leaf card's outline polygon (opaque), and
-    `_clumps`, the cards that merge several leaves (alpha-tested clump tile), when the level has any."""
-    part, nodes = level.mesh.leaves, []
+def _flat_cutout_primitives(writer: GlbWriter, level, materials, variant_maps) -> list[tuple]:
+    """Baked leaves of a `cutout` level: `leaves`, every single-leaf card's outline polygon (opaque), then
+    `clumps`, the cards that merge several leaves (alpha-tested clump tile), when the level has any. Per kind
+    present: (kind, primitive, its cards (M,) bool, vertices per card)."""
+    part, out = level.mesh.leaves, []
+    clumps = card_clumps(part)
     for clump, kind in ((False, "leaves"), (True, "clumps")):
         chosen = clumps == clump
         if not chosen.any():
@@ -313,14 +322,18 @@ def _flat_cutout_nodes(writer: GlbWriter, asset, level, materials, variant_maps,
             shape = outline_leaves(part, level.leaf_outline, chosen)
             shape = MeshPart(shape.vertices, shape.faces, shape.normals,
                              _leaf_tile_uvs(shape.uvs, np.zeros(shape.n_vertices, bool)))
-            material, maps = materials["cutout_summer"], cutout_maps
+            material, maps = materials["cutout_summer"], _cutout_maps(materials)
         per_card = shape.n_vertices // int(chosen.sum())
         wind = {"_WIND": (np.repeat(level.leaf_wind[chosen], per_card, axis=0), "VEC4"),
                 "_WIND_PIVOT": (z_up_to_y_up(np.repeat(level.leaf_pivot[chosen], per_card, axis=0)), "VEC3")}
-        prim = _primitive(writer, shape.vertices, shape.normals, shape.uvs, shape.faces, material, wind, maps)
-        nodes.append(writer.node({"name": f"{asset.asset_id}_{level.name}_{kind}",
-                                  "mesh": writer.mesh(f"{level.name}_{kind}", prim)}))
-    return nodes
+        out.append((kind, _primitive(writer, shape.vertices, shape.normals, shape.uvs, shape.faces, material, wind,
+                                     maps), chosen, per_card))
+    return out
+
+
+def _cutout_maps(materials) -> list[dict]:
+    """KHR_materials_variants mappings of the opaque outline polygons: each season's `leaf_cutout_<season>`."""
+    return [{"material": materials[f"cutout_{season}"], "variants": [i]} for i, season in enumerate(SEASONS)]
 
 
 def _card_to_local(vectors: np.ndarray) -> np.ndarray:

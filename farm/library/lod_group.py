@@ -44,12 +44,15 @@ def unreal_screen_sizes(switch_px, height_m: float, crown_radius_m: float) -> li
 
 def lod_group_job(record: dict, location, folder: str) -> dict:
     """The export job of the asset's LOD-group FBX from its flat GLB (`record["files"]["glb_flat"]`): every
-    level node (`<id>_<LEVEL>`) renamed `<id>_LOD<i>`."""
+    level node (`<id>_<LEVEL>`) renamed `<id>_LOD<i>`. An asset with skeletal wind (`record["skeletal_wind"]`)
+    exports them animated: each skinned level is its armature with its mesh, the impostor's lean node keyed,
+    one take of the clip, as in the per-level files."""
     ident = record["id"]
     levels = [level["name"] for level in record["levels"]]
     return {"glb": location.path(record["files"]["glb_flat"]),
             "fbx": location.path(f"{folder}/{LOD_GROUP_FILE.format(ident=ident)}"),
-            "nodes": [f"{ident}_{name}" for name in levels], "names": lod_group_names(ident, len(levels))}
+            "nodes": [f"{ident}_{name}" for name in levels], "names": lod_group_names(ident, len(levels)),
+            **({"animated": True} if "skeletal_wind" in record else {})}
 
 
 def lod_group_entry(record: dict) -> dict:

@@ -222,6 +222,7 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
         UsdGeom.Xform.Define(stage, geom)
     lod_set = root.GetVariantSets().AddVariantSet("lod")
     prototype_names: set[str] = set()  # the leaf prototypes of every level (under Geom/leaves) each season binds
+    outlined: set[str] = set()  # with skeletal wind: every joint's outline polygon prototype (a `cutout` asset)
     for k, level in enumerate(asset.levels):
         lod_set.AddVariant(level.name)
         lod_set.SetVariantSelection(level.name)
@@ -244,8 +245,10 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                     translation, rotation, scale = leaf_instances(level.skeleton)
                     per_level = (translation, unit_quaternions(rotation), scale, card_clumps(level.mesh.leaves))
                     for joint in np.unique(leaf_joint):
-                        _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
-                                        asset.wind_rig.position[joint], per_level)
+                        made = _leaf_instancer(stage, f"{joint_prims[joint]}/cards", level, None, leaf_joint == joint,
+                                               asset.wind_rig.position[joint], per_level)
+                        if level.leaf_outline is not None and PROTOTYPE_NAMES[False] in made:
+                            outlined.add(f"{joint_prims[joint]}/cards/prototypes/{PROTOTYPE_NAMES[False]}")
                 elif level.skeleton.n_leaves:
                     made = _leaf_instancer(stage, f"{geom}/leaves", level, leaves["summer"],
                                            cutout_material=cutout.get("summer"))
@@ -269,6 +272,8 @@ def asset_to_usdc(asset: LibraryAsset) -> bytes:
                 over.SetActive(False)
             elif skins:  # every joint's cards under Geom/leaves take the season's binding from it
                 UsdShade.MaterialBindingAPI.Apply(over).Bind(leaves[season])
+                for path in sorted(outlined):  # but the outline polygons, which are opaque
+                    UsdShade.MaterialBindingAPI.Apply(stage.OverridePrim(path)).Bind(cutout[season])
             else:
                 for name in sorted(prototype_names):
                     card = stage.OverridePrim(f"{geom}/leaves/{name}")

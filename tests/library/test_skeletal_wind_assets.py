@@ -1,8 +1,8 @@
 """An asset with baked skeletal wind, read by real clients: the GLB passes the Khronos validator with every level
 skinned to the same joints, leaves instanced under them and a `wind` animation of the clip's length; the USD
 passes UsdValidation with a UsdSkel Skeleton and SkelAnimation; Blender imports the GLB and the FBX with armatures
-and an action of the clip's length, and the LOD-group FBX with its levels under its LodGroup node. Bad wind
-settings are refused in one line with exit status 2.
+and an action of the clip's length, and the LOD-group FBX with every skinned level's armature under its LodGroup
+node. Bad wind settings are refused in one line with exit status 2.
 
 One palm built by `farm library add` (no Ray, 32 px textures, a 4 s clip, at most 16 joints)."""
 from __future__ import annotations
@@ -13,11 +13,9 @@ from pathlib import Path
 import pytest
 
 from farm.cli import main as farm_main
-from farm.library.job import add_asset
-from farm.library.records import write_library_record
-from farm.library.spec import default_library_spec, parse_library_spec
-from farm.dataset.storage import Location
+from farm.library.spec import default_library_spec
 from gltf_validator import assert_valid_glb
+from one_asset_library import one_asset_library
 from usd_validator import assert_valid_usd
 from renderers.blender import blender_available, glb_info
 from species.meshing.gltf import read_accessor, read_glb_chunks
@@ -30,10 +28,7 @@ SPEC = {"name": "skeletal", "seed": 1, "species": {"palm": 1}, "formats": ["glb"
 @pytest.fixture(scope="module")
 def asset(tmp_path_factory) -> Path:
     """The palm's asset folder (treat as read-only)."""
-    folder = tmp_path_factory.mktemp("skeletal") / "library"
-    write_library_record(Location.resolve(str(folder)), parse_library_spec(SPEC))
-    add_asset(str(folder), "palm", 3)
-    return next(folder.glob("assets/*/asset.json")).parent
+    return one_asset_library(tmp_path_factory.mktemp("skeletal") / "library", SPEC, "palm", 3)
 
 
 @pytest.fixture(scope="module")
@@ -138,14 +133,22 @@ def test_blender_imports_the_fbx_with_an_armature_and_an_action_of_the_clips_len
     assert any(a["seconds"] == pytest.approx(PERIOD_S) for a in impostor["actions"])
 
 
-def test_the_lod_group_fbx_holds_the_skinned_levels_under_its_lod_group_node(asset, record):
-    """The exporter leaves no node of a skinned level's name (its node was the armature): the LodGroup's
-    child for that level is an empty of the level's name holding its meshes."""
+def test_the_lod_group_fbx_holds_every_skinned_level_as_its_armature_under_its_lod_group_node(asset, record):
+    """Every level with branches is its armature (bones named as the joints) holding its skinned mesh, named as
+    the file without wind names it; one action of the clip's length per armature, and the impostor's lean."""
+    if not blender_available():
+        pytest.skip("Blender is not installed (.venv-blender): run `make env`")
     from renderers.blender_assets import read_fbx
 
     read = read_fbx(asset.parent.parent / record["files"]["fbx"])
     (group,) = read["lod_groups"]
-    assert group["name"] == record["id"] and group["children"] == record["lod_group"]["names"]
+    names = record["lod_group"]["names"]
+    assert group["name"] == record["id"] and group["children"] == names
+    joints = record["skeletal_wind"]["joints"]
+    assert read["armatures"] == [{"name": name, "bones": joints} for name in names[:-1]]
+    assert {a["name"].split("|")[0] for a in read["actions"]} >= {*names[:-1], f"{names[-1]}_lean"}
+    assert all(a["seconds"] == pytest.approx(PERIOD_S) for a in read["actions"])
+    assert sorted(o["name"] for o in read["objects"]) == [f"{name}_bark" for name in names[:-1]] + [f"{names[-1]}_card"]
     triangles = {name: sum(o["triangles"] for o in read["objects"] if o["name"].startswith(f"{name}_"))
                  for name in group["children"]}
     assert list(triangles.values()) == [level["triangles"] for level in record["levels"]]

@@ -289,12 +289,13 @@ def test_the_octahedral_impostor_turns_with_the_camera(octahedral_page):
     assert problems == []
 
 
-SKELETAL_SPEC = {**SPEC, "skeletal_wind": True, "wind_period_s": 4.0}
+SKELETAL_SPEC = {**OCTAHEDRAL_SPEC, "skeletal_wind": True, "wind_period_s": 4.0}
 
 
 @pytest.fixture(scope="module")
 def clip_page(chromium, tmp_path_factory):
-    """The example page showing a palm with baked skeletal wind (a 4 s clip): yields (page, problems)."""
+    """The example page showing a palm with baked skeletal wind (a 4 s clip) and an octahedral impostor: yields
+    (page, problems)."""
     with palm_page(chromium, tmp_path_factory.mktemp("skeletal"), SKELETAL_SPEC) as opened:
         yield opened
 
@@ -316,4 +317,18 @@ def test_the_clip_moves_the_tree_and_one_period_later_gives_the_same_image(clip_
     assert np.array_equal(start, looped)
     leaves_start, leaves_later = frame(page, 0.0, 1.0, "leaves"), frame(page, 1.3, 1.0, "leaves")
     assert changed_share(leaves_start, leaves_later) > 0.05 * covered_share(leaves_start)
+    assert problems == []
+
+
+def test_the_clip_leans_the_impostor_whole_and_one_period_later_gives_the_same_image(clip_page):
+    # The impostor's level node is outside the scene the tree's mixer plays on: the clip's lean of it plays on a
+    # mixer of its own, and the shader's own lean (not periodic in the clip's period) is off.
+    page, problems = clip_page
+    assert page.evaluate("window.__wind.parts.impostor") == {"frames": 8, "tile": 48}
+    start, later, looped = (frame(page, t, 1.0, "impostor") for t in (0.0, 1.3, 4.0))
+    assert covered_share(start) > 0.01
+    assert changed_share(start, later) > 0.05 * covered_share(start)
+    assert np.array_equal(start, looped)
+    rest_start, rest_later = frame(page, 0.0, 0.0, "impostor"), frame(page, 1.3, 0.0, "impostor")
+    assert np.array_equal(rest_start, rest_later)  # the clip's weight 0: the rest pose
     assert problems == []
