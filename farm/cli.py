@@ -12,7 +12,14 @@ import os
 import sys
 import traceback
 
-from species.errors import TreefarmError
+# OpenBLAS (numpy and scipy load a copy each) starts a thread per core as it loads, and its threads spin while they
+# wait: CPU time that `farm reconstruct`, whose matrix products are too small to share out, would pay at start-up
+# and after each product. One thread there, unless the user set a number; set before numpy's first import (through
+# species below), as OpenBLAS reads it only when it loads.
+if next((word for word in sys.argv[1:] if not word.startswith("-")), None) == "reconstruct":
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from species.errors import TreefarmError  # noqa: E402 - after the thread count above
 
 # Each module defines `register(subparsers)`, adding its parsers with `set_defaults(run=function)`: command name ->
 # the module that registers it, in the order `farm --help` lists them.

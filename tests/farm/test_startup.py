@@ -17,6 +17,7 @@ from farm.cli import COMMANDS, build_parser, main
 
 REPO = Path(__file__).resolve().parents[2]
 TREE1 = REPO.parent / "shared" / "data" / "pointclouds" / "tree1.xyz"
+AHN = REPO.parent / "shared" / "data" / "pointclouds" / "street_trees_ahn" / "ahn" / "filtered_tree_121922_487459.las"
 
 # Imported only by the commands that run them, and only once their arguments are checked.
 RUNTIMES = ("torch", "ray", "pycolmap", "onnxruntime", "mlflow", "pyrender", "OpenGL", "bpy", "matplotlib")
@@ -133,6 +134,36 @@ def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
     assert status == 0 and (tmp_path / "q.csv").is_file() and (tmp_path / "b.csv").is_file()
     assert not imported & set(RUNTIMES), imported & set(RUNTIMES)
     assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES
+
+
+@pytest.mark.skipif(not AHN.is_file(), reason="shared/data/pointclouds/street_trees_ahn is missing")
+def test_an_uncompressed_las_scan_is_read_without_laspy(tmp_path):
+    # laspy imports an HTTP client (for COPC files): a plain LAS file is read by numpy, a LAZ file still by laspy
+    status, imported = _imported(["reconstruct", str(AHN), "--out", str(tmp_path / "tree.glb")], tmp_path)
+    assert status == 0 and (tmp_path / "tree.glb").is_file()
+    assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES
+
+
+_BLAS_PROBE = """
+import os, sys
+from farm.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:
+    pass
+print(os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+@pytest.mark.parametrize("argv, given, expected", [(["reconstruct", "none.xyz", "--out", "t.glb"], None, "1"),
+                                                   (["reconstruct", "none.xyz", "--out", "t.glb"], "2", "2"),
+                                                   (["species"], None, "None")])
+def test_reconstruct_runs_openblas_on_one_thread_unless_the_user_chose(argv, given, expected, tmp_path):
+    # OpenBLAS's idle threads spin: a reconstruction's small matrix products gain nothing from them
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", **({"OPENBLAS_NUM_THREADS": given} if given else {})}
+    done = subprocess.run([sys.executable, "-c", _BLAS_PROBE, *argv], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=120, env=env)
+    assert done.stdout.split()[-1] == expected, done.stderr
 
 
 @pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
