@@ -21,12 +21,14 @@ LEAF_ON_SHARE = 0.4
 CROWN_SHARE = 0.3
 
 
-def scattering(points: np.ndarray, k: int = NEIGHBOURS) -> np.ndarray:
-    """(N,) l3 / l1 of each point's k-neighbourhood covariance, in [0, 1] (batched 3x3 eigenvalues)."""
+def scattering(points: np.ndarray, k: int = NEIGHBOURS, of: np.ndarray | None = None) -> np.ndarray:
+    """(N,) l3 / l1 of each point's k-neighbourhood covariance, in [0, 1] (batched 3x3 eigenvalues); with `of`
+    ((N,) bool), (M,) of those points only, their neighbours still found among all."""
     points = np.asarray(points, np.float64)
     k = min(k, len(points))
-    _, index = cKDTree(points).query(points, k=k)
-    local = points[index] - points[index].mean(axis=1, keepdims=True)
+    _, index = cKDTree(points).query(points if of is None else points[of], k=k)
+    neighbourhood = points[index]
+    local = neighbourhood - neighbourhood.mean(axis=1, keepdims=True)
     covariance = np.einsum("nki,nkj->nij", local, local) / k
     eigen = np.linalg.eigvalsh(covariance)                 # ascending
     return eigen[:, 0] / np.maximum(eigen[:, 2], 1e-18)
@@ -46,4 +48,4 @@ def leaf_on_share(points: np.ndarray, threshold: float = SCATTER_LEAF) -> float:
     crown = points[:, 2] > points[:, 2].min() + CROWN_SHARE * np.ptp(points[:, 2])
     if crown.sum() < NEIGHBOURS:
         return 0.0
-    return float((scattering(points)[crown] > threshold).mean())
+    return float((scattering(points, of=crown) > threshold).mean())
