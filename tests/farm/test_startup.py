@@ -188,3 +188,16 @@ def test_a_point_cloud_reconstructions_import_set_does_not_grow(tmp_path):
     extra = {name for name in modules - set(base) if name.split(".")[0] not in OURS + ("PIL",)}
     assert extra <= CLOUD_RUN_EXTRA, extra - CLOUD_RUN_EXTRA
     assert not sorted(name for name in modules if name.startswith(CLOUD_RUN_NOT_OURS))
+
+
+def test_the_program_ends_with_its_whole_output_and_status(tmp_path, capsys):
+    # Run as the program (`python -m farm.cli`), main freezes the run's objects out of the exit's last collection:
+    # the output is still whole and the statuses are the commands'
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
+    listed = subprocess.run([sys.executable, "-m", "farm.cli", "species"], capture_output=True, text=True,
+                            cwd=tmp_path, timeout=120, env=env)
+    assert listed.returncode == 0 and main(["species"]) == 0
+    assert listed.stdout == capsys.readouterr().out
+    refused = subprocess.run([sys.executable, "-m", "farm.cli", "reconstruct", "none.xyz", "--out", "t.glb"],
+                             capture_output=True, text=True, cwd=tmp_path, timeout=120, env=env)
+    assert refused.returncode == 2 and refused.stderr.startswith("farm: error: ") and refused.stderr.count("\n") == 1
