@@ -3,15 +3,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
 from reconstruct.skeleton import (SkeletonSettings, cloud_skeleton, fit_circle, graph_edges, nearest_kept, path_sums,
                                   statistical_inliers, unique_points)
 from reconstruct.wood import scattering
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
 

@@ -48,7 +48,7 @@ def test_from_cloud_measures_the_trunk_and_writes_valid_files(y_points, tmp_path
     assert not list(tmp_path.glob("*.partial"))
 
 
-def test_a_scans_glb_has_the_smallest_files_textures_and_geometry_at_its_fastest_level(y_points):
+def test_a_scans_glb_has_level_9s_geometry_and_pixels_with_its_textures_at_the_fastest_level(y_points):
     # The command writes a scan's texture PNGs at zlib's fastest level (its start-up and end): the same pixels and
     # the same geometry bytes as at level 9, the file a few kilobytes larger
     from PIL import Image
