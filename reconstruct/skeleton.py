@@ -56,8 +56,8 @@ from species.timing import StageTimer
 from .clouds import CloudError, PointCloud, read_cloud
 from .robust_fit import soft_l1_fit
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT",
-           "MAX_BAND_M"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "GRAPHS", "PRUNE_RATIO",
+           "RADIUS_EXPONENT", "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
 # Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
@@ -208,6 +208,14 @@ def statistical_inliers(points: np.ndarray, k: int = OUTLIER_NEIGHBOURS, sigma: 
     _, group = connected_components(_adjacency(np.column_stack([rows, index[:, 1:][linked]]), len(points)),
                                     directed=False)
     return inlier | (np.bincount(group)[group] > k)
+
+
+def cloud_neighbours(cloud) -> tuple[np.ndarray, np.ndarray]:
+    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 1 nearest points of each point of a PointCloud
+    or an (N, 3) array (itself first, float64 distances), the query the outlier filter and `reconstruct.wood`'s
+    scattering share."""
+    points = np.asarray(cloud.points if isinstance(cloud, PointCloud) else cloud, np.float64)
+    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 1, len(points)))
 
 
 def nearest_kept(distance: np.ndarray, index: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
@@ -670,11 +678,14 @@ def hermite_midpoints(positions: np.ndarray, parent: np.ndarray, radius: np.ndar
 
 
 # ------------------------------------------------------------------------------------------------ all stages
-def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str = "z") -> CloudSkeleton:
+def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str = "z",
+                   neighbours: tuple[np.ndarray, np.ndarray] | None = None) -> CloudSkeleton:
     """The skeleton of a tree's point cloud (stages 1-11 of the module's docstring).
 
     cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
     settings : the constants (SkeletonSettings()).
+    neighbours : `cloud_neighbours(cloud)` where the caller has it already; used when no point is a duplicate and
+               the cloud needs no thinning (it is then the outlier filter's own query).
     Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
     """
     settings = SkeletonSettings() if settings is None else settings
@@ -686,8 +697,10 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)
     points = unique_points(cloud.points.astype(np.float64), settings.max_points)
-    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`).
-    neighbours = cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 1, len(points)))
+    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`); unique_points keeps
+    # every point in its order when it merges and thins none.
+    if neighbours is None or len(points) != len(cloud.points):
+        neighbours = cloud_neighbours(points)
     kept = np.ones(len(points), bool)
     if settings.outlier_sigma > 0 and len(points) > 20:
         kept = statistical_inliers(points, OUTLIER_NEIGHBOURS, settings.outlier_sigma, neighbours=neighbours)

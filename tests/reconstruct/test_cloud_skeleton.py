@@ -9,8 +9,8 @@ from scipy.spatial import cKDTree
 
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
-from reconstruct.skeleton import (SkeletonSettings, cloud_skeleton, fit_circle, graph_edges, nearest_kept, path_sums,
-                                  statistical_inliers, unique_points)
+from reconstruct.skeleton import (SkeletonSettings, cloud_neighbours, cloud_skeleton, fit_circle, graph_edges,
+                                  nearest_kept, path_sums, statistical_inliers, unique_points)
 from reconstruct.wood import scattering
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
@@ -144,6 +144,23 @@ def test_scattering_of_some_points_is_theirs_among_all():
     points = _clumps(np.random.default_rng(1))
     some = np.random.default_rng(2).random(len(points)) < 0.3
     assert scattering(points, of=some).tobytes() == scattering(points)[some].tobytes()
+
+
+def test_the_leaf_test_and_the_skeleton_read_one_shared_query_as_their_own():
+    # from_cloud queries the cloud once for both; points on a 1 cm grid have rows of equal distances, which the
+    # leaf test queries again for its own 16
+    rng = np.random.default_rng(6)
+    grid = np.round(_clumps(rng) * 100) / 100
+    for points, tied in ((_clumps(rng), False), (unique_points(grid, len(grid)), True)):
+        neighbours = cloud_neighbours(points)
+        assert (np.diff(neighbours[0], axis=1) == 0).any() == tied
+        some = rng.random(len(points)) < 0.5
+        assert scattering(points, of=some, neighbours=neighbours).tobytes() == scattering(points, of=some).tobytes()
+    if TREE1.is_file():
+        cloud = read_cloud(TREE1)
+        shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
+        assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes()
+        assert shared.spacing == own.spacing and shared.n_used == own.n_used
 
 
 def test_the_knn_graph_of_several_pieces_is_one_piece_of_unique_sorted_edges():
