@@ -7,12 +7,20 @@ and exit status 1. `farm --debug COMMAND` prints the traceback of a user error t
 from __future__ import annotations
 
 import argparse
+import gc
 import importlib
 import os
 import sys
 import traceback
 
-from species.errors import TreefarmError
+# OpenBLAS (numpy and scipy load a copy each) starts a thread per core as it loads, and its threads spin while they
+# wait: CPU time that `farm reconstruct`, whose matrix products are too small to share out, would pay at start-up
+# and after each product. One thread there, unless the user set a number; set before numpy's first import (through
+# species below), as OpenBLAS reads it only when it loads.
+if next((word for word in sys.argv[1:] if not word.startswith("-")), None) == "reconstruct":
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+from species.errors import TreefarmError  # noqa: E402 - after the thread count above
 
 # Each module defines `register(subparsers)`, adding its parsers with `set_defaults(run=function)`: command name ->
 # the module that registers it, in the order `farm --help` lists them.
@@ -108,7 +116,17 @@ def _user_error_message(exc: BaseException, argv: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
+    """Run `farm ARGV` (the program's own arguments when None) and return its exit status."""
+    status = _run_command(sys.argv[1:] if argv is None else list(argv))
+    if argv is None:
+        # The program ends next, and Python's exit would walk every object the run made (scipy's many included)
+        # looking for reference cycles, for memory the system takes back whole anyway: they are frozen out of that
+        # last collection. The commands close their own files; atexit handlers still run.
+        gc.freeze()
+    return status
+
+
+def _run_command(argv: list[str]) -> int:
     parser = build_parser(_command_named(argv))
     args = parser.parse_args(argv)
     try:

@@ -9,6 +9,7 @@ whose one line names the value and what is allowed.
 """
 from __future__ import annotations
 
+import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,7 +146,54 @@ def _ply_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     return vertices, colours
 
 
+# An uncompressed LAS file's public header (ASPRS LAS 1.0-1.4): where its fields start, and its least size by minor
+# version; a point format's least record size, and where red (then green, blue: uint16) starts in the formats that
+# have colours. Every record starts with X Y Z as int32, scaled and offset by the header's float64 triples.
+_LAS_HEADER_FIELDS = {"minor": (25, "<B"), "header_size": (94, "<H"), "point_offset": (96, "<I"),
+                      "format": (104, "<B"), "record_size": (105, "<H"), "count": (107, "<I"), "scales": (131, "<3d"),
+                      "offsets": (155, "<3d"), "count_64": (247, "<Q")}
+_LAS_HEADER_SIZES = {0: 227, 1: 227, 2: 227, 3: 235, 4: 375}
+_LAS_RECORD_SIZES = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+_LAS_RED_AT = {2: 20, 3: 28, 5: 28, 7: 30, 8: 30, 10: 30}
+
+
+def _plain_las_points(path: Path) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """`_las_points` of an uncompressed LAS file (versions 1.0-1.4, point formats 0-10), read by numpy from the
+    header's fields; None for anything else (LAZ, another version, a header or file shorter than it says), which
+    laspy reads or refuses. Here, not by laspy, for the command's start-up time: laspy imports an HTTP client."""
+    with path.open("rb") as handle:
+        header = handle.read(_LAS_HEADER_SIZES[4])
+    if len(header) < _LAS_HEADER_SIZES[0] or header[:4] != b"LASF" or header[24] != 1 or header[25] > 4:
+        return None
+    field = {name: struct.unpack_from(layout, header, at) for name, (at, layout) in _LAS_HEADER_FIELDS.items()
+             if at + struct.calcsize(layout) <= len(header)}
+    minor, fmt, record_size = field["minor"][0], field["format"][0], field["record_size"][0]
+    count = field["count_64" if minor >= 4 else "count"][0]
+    if (field["header_size"][0] < _LAS_HEADER_SIZES[minor] or field["point_offset"][0] < field["header_size"][0]
+            or fmt not in _LAS_RECORD_SIZES or record_size < _LAS_RECORD_SIZES[fmt]
+            or path.stat().st_size < field["point_offset"][0] + count * record_size):
+        return None
+    layout = {"names": ["xyz"], "formats": [("<i4", 3)], "offsets": [0], "itemsize": record_size}
+    if fmt in _LAS_RED_AT:
+        layout = {**layout, "names": ["xyz", "rgb"], "formats": [("<i4", 3), ("<u2", 3)],
+                  "offsets": [0, _LAS_RED_AT[fmt]]}
+    records = np.fromfile(path, dtype=np.dtype(layout), count=count, offset=field["point_offset"][0])
+    scales, offsets = np.array(field["scales"]), np.array(field["offsets"])
+    points = np.column_stack([records["xyz"][:, k] * scales[k] + offsets[k] for k in range(3)])
+    return points, _las_colours(records["rgb"]) if fmt in _LAS_RED_AT else None
+
+
+def _las_colours(rgb: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 colours from a LAS file's (N, 3) red, green, blue: 16-bit values scaled to 8 bits, values
+    that fit 8 bits as they are."""
+    rgb = rgb.astype(np.float64)
+    return (rgb / 257.0 if rgb.max(initial=0) > 255 else rgb).round().astype(np.uint8)
+
+
 def _las_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    plain = _plain_las_points(path)
+    if plain is not None:
+        return plain
     import laspy
 
     try:
@@ -156,8 +204,7 @@ def _las_points(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
                               np.asarray(las.z, np.float64)])
     colours = None
     if {"red", "green", "blue"} <= set(las.point_format.dimension_names):
-        rgb = np.column_stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)]).astype(np.float64)
-        colours = (rgb / 257.0 if rgb.max(initial=0) > 255 else rgb).round().astype(np.uint8)
+        colours = _las_colours(np.column_stack([np.asarray(las.red), np.asarray(las.green), np.asarray(las.blue)]))
     return points, colours
 
 

@@ -39,6 +39,7 @@ DEGREE_DIFF, DIST_DIFF_PERCENT = 10.0, 0.15
 MAX_GRAFTS_PER_GAP = 3
 # Issue 50: nothing added lies farther than this outside the scan's convex hull.
 HULL_MARGIN_M = 1.0
+_ROWS_AT_ONCE = 1024  # positions measured against the hull's planes at a time (`ScanReach.outside`)
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,8 +69,13 @@ class ScanReach:
         low = (xyz[:, 2] - radius < self.ground) | (xyz[:, 2] > self.points[:, 2].max(initial=-np.inf))
         if not len(self._planes):
             return low
-        beyond = (xyz @ self._planes[:, :3].T + self._planes[:, 3]).max(axis=1, initial=-np.inf) + radius
-        return low | (beyond > self.margin)
+        farthest = np.empty(len(xyz))
+        normals, offsets = self._planes[:, :3].T, self._planes[:, 3]
+        for start in range(0, len(xyz), _ROWS_AT_ONCE):  # rows by the block: a block's products stay in the cache
+            block = xyz[start:start + _ROWS_AT_ONCE] @ normals
+            block += offsets
+            block.max(axis=1, initial=-np.inf, out=farthest[start:start + _ROWS_AT_ONCE])
+        return low | (farthest + radius > self.margin)
 
 
 def keep_within_reach(skeleton: Skeleton, reach: ScanReach, first_added: int) -> Skeleton:

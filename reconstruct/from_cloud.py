@@ -21,7 +21,7 @@ from .clouds import CloudError, PointCloud, read_cloud
 from .completion import ScanReach, complete
 from .qsm import qsm_measures
 from .result import Reconstruction, ScanRecord
-from .skeleton import SkeletonSettings, _adjacency, cloud_skeleton
+from .skeleton import SkeletonSettings, _adjacency, cloud_neighbours, cloud_skeleton
 from .wood import LEAF_ON_SHARE, leaf_on_share, wood_points
 
 __all__ = ["from_cloud", "FRAMES", "check_single_tree", "stem_groups"]
@@ -87,7 +87,8 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
     check_single_tree(cloud)
     warnings: list[str] = []
     points = cloud.points
-    share = leaf_on_share(points)
+    neighbours = cloud_neighbours(cloud)  # the leaf test's and the skeleton's outlier filter's, queried once
+    share = leaf_on_share(points, neighbours=neighbours)
     looks_leafy = share >= LEAF_ON_SHARE
     if separate_leaves:
         keep = wood_points(points)
@@ -100,7 +101,7 @@ def from_cloud(cloud, *, up: str = "z", frame: str = "base", completion: bool = 
     timer.lap("read")
     working = cloud if len(points) == len(cloud.points) else PointCloud(
         points, cloud.offset, cloud.up, cloud.up_rotation, None, cloud.source)
-    fit = cloud_skeleton(working, settings)  # timed by its own stages
+    fit = cloud_skeleton(working, settings, neighbours=neighbours if working is cloud else None)  # its own stages
     if fit.n_reached < fit.n_used:
         warnings.append(f"{fit.n_used - fit.n_reached} of {fit.n_used} points could not be joined to the tree")
     with timer.stage("measures"):

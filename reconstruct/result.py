@@ -18,6 +18,10 @@ from .skeleton import CloudSkeleton
 
 __all__ = ["Reconstruction", "ScanRecord"]
 
+# A scan's GLB holds megabytes of measured geometry and is written once, by a command that should end soon after
+# it: its two texture PNGs at zlib's fastest level, a few kilobytes more than the smallest (the same pixels).
+SCAN_TEXTURE_LEVEL = 1
+
 
 @dataclass(frozen=True, eq=False)
 class ScanRecord:
@@ -113,7 +117,8 @@ class Reconstruction:
         extras = self.extras
         if timings:
             extras["treefarm"]["timings_s"] = {stage: round(float(s), 3) for stage, s in self.timings.items()}
-        return self.mesh.to_glb(transform=None if scan.frame == "base" else scan.transform, extras=extras)
+        return self.mesh.to_glb(transform=None if scan.frame == "base" else scan.transform, extras=extras,
+                                compress_level=SCAN_TEXTURE_LEVEL)
 
     def write(self, out: str | Path, *, skeleton_ply: str | Path | None = None, qsm_csv: str | Path | None = None,
               branches_csv: str | Path | None = None, timings: bool = False) -> None:

@@ -56,8 +56,8 @@ from species.timing import StageTimer
 from .clouds import CloudError, PointCloud, read_cloud
 from .robust_fit import soft_l1_fit
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT",
-           "MAX_BAND_M"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "GRAPHS", "PRUNE_RATIO",
+           "RADIUS_EXPONENT", "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
 # Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
@@ -74,6 +74,7 @@ RADIUS_EXPONENT = 1.1      # AdTree: radius ~ (reach / trunk reach) ^ 1.1
 # the spacing says nothing of a twig's width, and tubes that thick would stand off the points of thin branches.
 MIN_RADIUS_CAP_M = 0.01
 DUPLICATE_M = 1e-3         # points closer than this are one point
+OUTLIER_NEIGHBOURS = 16    # the outlier filter's k nearest neighbours
 
 
 @dataclass(frozen=True)
@@ -189,12 +190,14 @@ def _first_per_cell(points: np.ndarray, cell: float) -> np.ndarray:
     return np.sort(first)
 
 
-def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0, link: float = 2.0) -> np.ndarray:
+def statistical_inliers(points: np.ndarray, k: int = OUTLIER_NEIGHBOURS, sigma: float = 2.0, link: float = 2.0,
+                        neighbours: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """(N,) bool: points whose mean distance to their k nearest neighbours is within the cloud's mean + `sigma`
     standard deviations of it (digest 3.1's outlier filter; stray returns in the air are far from everything),
     and the points above that bound that still hang together with more than k others (each linked to a neighbour
-    within `link` x the bound): the sparse top of a crown is thinly sampled, not stray."""
-    distance, index = cKDTree(points).query(points, k=min(k + 1, len(points)))
+    within `link` x the bound): the sparse top of a crown is thinly sampled, not stray. `neighbours`: the points'
+    own cKDTree query with k + 1 (itself first), where the caller has it already."""
+    distance, index = cKDTree(points).query(points, k=min(k + 1, len(points))) if neighbours is None else neighbours
     mean = distance[:, 1:].mean(axis=1)
     bound = mean.mean() + sigma * mean.std()
     inlier = mean <= bound
@@ -205,6 +208,24 @@ def statistical_inliers(points: np.ndarray, k: int = 16, sigma: float = 2.0, lin
     _, group = connected_components(_adjacency(np.column_stack([rows, index[:, 1:][linked]]), len(points)),
                                     directed=False)
     return inlier | (np.bincount(group)[group] > k)
+
+
+def cloud_neighbours(cloud) -> tuple[np.ndarray, np.ndarray]:
+    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 1 nearest points of each point of a PointCloud
+    or an (N, 3) array (itself first, float64 distances), the query the outlier filter and `reconstruct.wood`'s
+    scattering share."""
+    points = np.asarray(cloud.points if isinstance(cloud, PointCloud) else cloud, np.float64)
+    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 1, len(points)))
+
+
+def nearest_kept(distance: np.ndarray, index: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
+    """(M,) each kept point's distance to the nearest other kept point, read from the k-NN query of all the
+    points ((N, k) sorted rows, each point itself first): the first kept neighbour in its row is the nearest;
+    None when a kept point has no kept neighbour in its row (the caller queries the kept points then)."""
+    rows = kept[index[kept, 1:]]
+    if not rows.any(axis=1).all():
+        return None
+    return distance[kept, 1:][np.arange(len(rows)), np.argmax(rows, axis=1)]
 
 
 # ------------------------------------------------------------------------------------------------ stages 2, 3
@@ -283,11 +304,15 @@ def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
     tree = cKDTree(points)
     _, index = tree.query(points, k=min(knn + 1, n))
     edges = _unique_edges(np.column_stack([np.repeat(np.arange(n), index.shape[1] - 1), index[:, 1:].ravel()]), n)
-    while True:
-        count, label = connected_components(_adjacency(edges, n), directed=False)
-        if count == 1:
-            return edges
-        edges = _unique_edges(np.concatenate([edges, _bridges(points, tree, label, count)]), n)
+    count, label = connected_components(_adjacency(edges, n), directed=False)
+    while count > 1:
+        links = _bridges(points, tree, label, count)
+        edges = _with_edges(edges, links, n)
+        # The pieces the links join, found on the graph of pieces: the labels the whole graph's would have (each
+        # piece's label follows its first point's index, and so does each joined piece's).
+        count, joined = connected_components(_adjacency(label[links], count), directed=False)
+        label = joined[label]
+    return edges
 
 
 _BRIDGE_NEIGHBOURS = 32  # neighbours searched for a link out of a piece of the k-NN graph
@@ -298,6 +323,19 @@ def _unique_edges(pairs: np.ndarray, n: int) -> np.ndarray:
     flat = np.sort(pairs[:, 0] * n + pairs[:, 1])   # a sort and a neighbour test: numpy's hashing unique is slower
     flat = flat[np.r_[True, flat[1:] != flat[:-1]] & (flat // n != flat % n)]
     return np.column_stack([flat // n, flat % n])
+
+
+def _with_edges(edges: np.ndarray, pairs: np.ndarray, n: int) -> np.ndarray:
+    """`_unique_edges` of `edges` (its own output) and a few more `pairs`: the new ones put in their places, not
+    the whole graph sorted again."""
+    added = _unique_edges(pairs, n)
+    if not len(edges):
+        return added
+    flat = edges[:, 0] * n + edges[:, 1]
+    added_flat = added[:, 0] * n + added[:, 1]
+    at = np.searchsorted(flat, added_flat)
+    new = (at == len(flat)) | (flat[np.minimum(at, len(flat) - 1)] != added_flat)
+    return np.insert(edges, at[new], added[new], axis=0)
 
 
 def _adjacency(edges: np.ndarray, n: int) -> sparse.coo_matrix:
@@ -640,11 +678,14 @@ def hermite_midpoints(positions: np.ndarray, parent: np.ndarray, radius: np.ndar
 
 
 # ------------------------------------------------------------------------------------------------ all stages
-def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str = "z") -> CloudSkeleton:
+def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str = "z",
+                   neighbours: tuple[np.ndarray, np.ndarray] | None = None) -> CloudSkeleton:
     """The skeleton of a tree's point cloud (stages 1-11 of the module's docstring).
 
     cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
     settings : the constants (SkeletonSettings()).
+    neighbours : `cloud_neighbours(cloud)` where the caller has it already; used when no point is a duplicate and
+               the cloud needs no thinning (it is then the outlier filter's own query).
     Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
     """
     settings = SkeletonSettings() if settings is None else settings
@@ -656,11 +697,18 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)
     points = unique_points(cloud.points.astype(np.float64), settings.max_points)
+    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`); unique_points keeps
+    # every point in its order when it merges and thins none.
+    if neighbours is None or len(points) != len(cloud.points):
+        neighbours = cloud_neighbours(points)
+    kept = np.ones(len(points), bool)
     if settings.outlier_sigma > 0 and len(points) > 20:
-        points = points[statistical_inliers(points, sigma=settings.outlier_sigma)]
+        kept = statistical_inliers(points, OUTLIER_NEIGHBOURS, settings.outlier_sigma, neighbours=neighbours)
+    points = points[kept]
     if len(points) < 20:
         raise CloudError(f"{cloud.source} has {len(points)} distinct points: allowed at least 20")
-    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+    gaps = nearest_kept(*neighbours, kept)
+    spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1] if gaps is None else gaps))
     lap("duplicates")
     moved, trunk, axis_centres, radius0 = centralise_trunk(points, settings.trunk_base_share, spacing)
     lap("trunk")

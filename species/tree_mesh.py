@@ -166,13 +166,14 @@ class TreeMesh:
             raise MeshError(f"mesh file format {file_format!r} is unknown: allowed {', '.join(sorted(MESH_WRITERS))}")
         return MESH_WRITERS[file_format](self, **options)
 
-    def to_glb(self, transform=None, extras: dict | None = None) -> bytes:
+    def to_glb(self, transform=None, extras: dict | None = None, compress_level: int = 9) -> bytes:
         """A binary glTF 2.0 file: Y up, two named meshes (bark, leaves) with textured PBR materials.
 
         transform : optional (4, 4) Z-up matrix placing the tree in a world frame (the root node's matrix);
-        extras : optional JSON-able dict kept on the root node (`species.meshing.tree_mesh_to_glb`).
+        extras : optional JSON-able dict kept on the root node (`species.meshing.tree_mesh_to_glb`);
+        compress_level : the texture PNGs' zlib level (9 the smallest files, lower levels faster).
         """
-        return self.export("glb", transform=transform, extras=extras)
+        return self.export("glb", transform=transform, extras=extras, compress_level=compress_level)
 
     def to_obj(self, compress_level: int = 9) -> dict[str, bytes]:
         """OBJ text, its MTL and the texture PNGs (at zlib level `compress_level`), by file name (`<name>.obj`,

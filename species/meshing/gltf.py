@@ -249,7 +249,7 @@ def _check_extras(extras) -> dict:
     return extras
 
 
-def tree_mesh_to_glb(tree: TreeMesh, transform=None, extras: dict | None = None) -> bytes:
+def tree_mesh_to_glb(tree: TreeMesh, transform=None, extras: dict | None = None, compress_level: int = 9) -> bytes:
     """GLB bytes for `tree`: Y up, one scene, a root node named tree.name with children "bark" and "leaves".
 
     Each part becomes one mesh with POSITION (with min/max), NORMAL, TEXCOORD_0 (v flipped) and indices
@@ -260,6 +260,7 @@ def tree_mesh_to_glb(tree: TreeMesh, transform=None, extras: dict | None = None)
     scan's frame), written as the root node's `matrix` (`node_matrix`; the identity writes none).
     extras : optional JSON-able dict, the root node's `extras` (what frame the file is in, measures, ...).
     With neither, the bytes are those this function wrote before it took them.
+    compress_level : the textures' zlib level (`png_bytes`: 9 the smallest, lower levels faster; same pixels).
     """
     if not isinstance(tree, TreeMesh):
         raise GlbError(f"tree_mesh_to_glb needs a TreeMesh; got {type(tree).__name__}")
@@ -267,8 +268,8 @@ def tree_mesh_to_glb(tree: TreeMesh, transform=None, extras: dict | None = None)
     extras = None if extras is None else _check_extras(extras)
     writer = GlbWriter()
     root = writer.node({"name": tree.name, "children": []})
-    parts = (("bark", tree.bark, bark_png(tree.bark_color), REPEAT),
-             ("leaves", tree.leaves, leaf_png(tree.leaf_color), CLAMP_TO_EDGE))
+    parts = (("bark", tree.bark, bark_png(tree.bark_color, compress_level), REPEAT),
+             ("leaves", tree.leaves, leaf_png(tree.leaf_color, compress_level), CLAMP_TO_EDGE))
     for name, part, png, wrap in parts:
         if part.n_faces == 0:
             continue

@@ -17,6 +17,7 @@ from farm.cli import COMMANDS, build_parser, main
 
 REPO = Path(__file__).resolve().parents[2]
 TREE1 = REPO.parent / "shared" / "data" / "pointclouds" / "tree1.xyz"
+AHN = REPO.parent / "shared" / "data" / "pointclouds" / "street_trees_ahn" / "ahn" / "filtered_tree_121922_487459.las"
 
 # Imported only by the commands that run them, and only once their arguments are checked.
 RUNTIMES = ("torch", "ray", "pycolmap", "onnxruntime", "mlflow", "pyrender", "OpenGL", "bpy", "matplotlib")
@@ -135,6 +136,36 @@ def test_a_point_cloud_reconstruction_needs_no_torch_ray_or_pycolmap(tmp_path):
     assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES
 
 
+@pytest.mark.skipif(not AHN.is_file(), reason="shared/data/pointclouds/street_trees_ahn is missing")
+def test_an_uncompressed_las_scan_is_read_without_laspy(tmp_path):
+    # laspy imports an HTTP client (for COPC files): a plain LAS file is read by numpy, a LAZ file still by laspy
+    status, imported = _imported(["reconstruct", str(AHN), "--out", str(tmp_path / "tree.glb")], tmp_path)
+    assert status == 0 and (tmp_path / "tree.glb").is_file()
+    assert imported <= CLOUD_RUN_LIBRARIES, imported - CLOUD_RUN_LIBRARIES
+
+
+_BLAS_PROBE = """
+import os, sys
+from farm.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit:
+    pass
+print(os.environ.get("OPENBLAS_NUM_THREADS"))
+"""
+
+
+@pytest.mark.parametrize("argv, given, expected", [(["reconstruct", "none.xyz", "--out", "t.glb"], None, "1"),
+                                                   (["reconstruct", "none.xyz", "--out", "t.glb"], "2", "2"),
+                                                   (["species"], None, "None")])
+def test_reconstruct_runs_openblas_on_one_thread_unless_the_user_chose(argv, given, expected, tmp_path):
+    # OpenBLAS's idle threads spin: a reconstruction's small matrix products gain nothing from them
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin", **({"OPENBLAS_NUM_THREADS": given} if given else {})}
+    done = subprocess.run([sys.executable, "-c", _BLAS_PROBE, *argv], capture_output=True, text=True, cwd=tmp_path,
+                          timeout=120, env=env)
+    assert done.stdout.split()[-1] == expected, done.stderr
+
+
 @pytest.mark.skipif(not TREE1.is_file(), reason="shared/data/pointclouds/tree1.xyz is missing")
 def test_a_batch_of_one_cloud_runs_without_ray(tmp_path):
     # A folder --out is a batch; with one tree and no --address it runs in-process, with the batch's files.
@@ -157,3 +188,16 @@ def test_a_point_cloud_reconstructions_import_set_does_not_grow(tmp_path):
     extra = {name for name in modules - set(base) if name.split(".")[0] not in OURS + ("PIL",)}
     assert extra <= CLOUD_RUN_EXTRA, extra - CLOUD_RUN_EXTRA
     assert not sorted(name for name in modules if name.startswith(CLOUD_RUN_NOT_OURS))
+
+
+def test_the_program_ends_with_its_whole_output_and_status(tmp_path, capsys):
+    # Run as the program (`python -m farm.cli`), main freezes the run's objects out of the exit's last collection:
+    # the output is still whole and the statuses are the commands'
+    env = {"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"}
+    listed = subprocess.run([sys.executable, "-m", "farm.cli", "species"], capture_output=True, text=True,
+                            cwd=tmp_path, timeout=120, env=env)
+    assert listed.returncode == 0 and main(["species"]) == 0
+    assert listed.stdout == capsys.readouterr().out
+    refused = subprocess.run([sys.executable, "-m", "farm.cli", "reconstruct", "none.xyz", "--out", "t.glb"],
+                             capture_output=True, text=True, cwd=tmp_path, timeout=120, env=env)
+    assert refused.returncode == 2 and refused.stderr.startswith("farm: error: ") and refused.stderr.count("\n") == 1

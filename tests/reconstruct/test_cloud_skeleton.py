@@ -3,10 +3,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
-from reconstruct.skeleton import SkeletonSettings, cloud_skeleton, fit_circle, path_sums, unique_points
+from reconstruct.skeleton import (SkeletonSettings, cloud_neighbours, cloud_skeleton, fit_circle, graph_edges,
+                                  nearest_kept, path_sums, statistical_inliers, unique_points)
+from reconstruct.wood import scattering
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
 
@@ -112,3 +117,63 @@ def test_bad_input_is_one_line():
         SkeletonSettings(graph="mst")
     with pytest.raises(CloudError, match="knn = 1"):
         SkeletonSettings(knn=1)
+
+
+def _clumps(rng, n: int = 600, strays: int = 12) -> np.ndarray:
+    """Points in a few tight clumps far apart (a k-NN graph of several pieces), and `strays` outliers."""
+    centres = rng.normal(size=(5, 3)) * 2.0
+    points = rng.normal(size=(n, 3)) * 0.05 + centres[rng.integers(0, len(centres), n)]
+    return np.concatenate([points, rng.uniform(-6, 6, (strays, 3))])
+
+
+def test_the_spacing_read_from_the_outlier_query_is_the_kept_points_own():
+    # cloud_skeleton reads each kept point's nearest kept neighbour from the outlier filter's query of all points
+    for seed in range(5):
+        points = _clumps(np.random.default_rng(seed))
+        neighbours = cKDTree(points).query(points, k=17)
+        kept = statistical_inliers(points, neighbours=neighbours)
+        assert not kept.all() and np.array_equal(kept, statistical_inliers(points))
+        own = cKDTree(points[kept]).query(points[kept], k=2)[0][:, 1]
+        assert nearest_kept(*neighbours, kept).tobytes() == own.tobytes()
+    # point 2's one neighbour in the query went: the caller must query the kept points again
+    lonely = np.array([True, True, True, False])
+    assert nearest_kept(np.ones((4, 2)), np.array([[0, 1], [1, 0], [2, 3], [3, 2]]), lonely) is None
+
+
+def test_scattering_of_some_points_is_theirs_among_all():
+    points = _clumps(np.random.default_rng(1))
+    some = np.random.default_rng(2).random(len(points)) < 0.3
+    assert scattering(points, of=some).tobytes() == scattering(points)[some].tobytes()
+
+
+def test_the_leaf_test_and_the_skeleton_read_one_shared_query_as_their_own():
+    # from_cloud queries the cloud once for both; points on a 1 cm grid have rows of equal distances, which the
+    # leaf test queries again for its own 16
+    rng = np.random.default_rng(6)
+    grid = np.round(_clumps(rng) * 100) / 100
+    for points, tied in ((_clumps(rng), False), (unique_points(grid, len(grid)), True)):
+        neighbours = cloud_neighbours(points)
+        assert (np.diff(neighbours[0], axis=1) == 0).any() == tied
+        some = rng.random(len(points)) < 0.5
+        assert scattering(points, of=some, neighbours=neighbours).tobytes() == scattering(points, of=some).tobytes()
+    if TREE1.is_file():
+        cloud = read_cloud(TREE1)
+        shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
+        assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes()
+        assert shared.spacing == own.spacing and shared.n_used == own.n_used
+
+
+def test_the_knn_graph_of_several_pieces_is_one_piece_of_unique_sorted_edges():
+    points = _clumps(np.random.default_rng(3), strays=0)
+    edges = graph_edges(points, "knn", 4)
+    n = len(points)
+    flat = edges[:, 0] * n + edges[:, 1]
+    assert (edges[:, 0] < edges[:, 1]).all() and (np.diff(flat) > 0).all()
+    knn = cKDTree(points).query(points, k=5)[1]
+    pairs = np.sort(np.column_stack([np.repeat(np.arange(n), 4), knn[:, 1:].ravel()]), axis=1)
+    assert np.isin(pairs[:, 0] * n + pairs[:, 1], flat).all()  # every k-NN edge, and the links that join the pieces
+    adjacency = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    assert connected_components(adjacency, directed=False)[0] == 1
+    pieces = connected_components(coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)),
+                                  directed=False)[0]
+    assert pieces > 2 and len(edges) - len(np.unique(pairs[:, 0] * n + pairs[:, 1])) >= pieces - 1

@@ -93,3 +93,47 @@ def test_bad_clouds_are_one_line_errors_that_say_what_is_allowed(tree1, tmp_path
     binary = tmp_path / "noise.ply"
     binary.write_bytes(b"\x00\xff" * 500)
     _one_line(lambda: read_cloud(binary), "not a readable PLY")
+
+
+# Every LAS point format, each in a version that has it; the last two with extra bytes after each record.
+LAS_FORMATS = [("1.2", f, 0) for f in range(4)] + [("1.3", f, 0) for f in (4, 5)] + [
+    ("1.4", f, 0) for f in range(6, 11)] + [("1.2", 3, 5), ("1.4", 7, 3)]
+
+
+@pytest.mark.parametrize("version, point_format, extra", LAS_FORMATS,
+                         ids=[f"{v}-format{f}{'-extra' if e else ''}" for v, f, e in LAS_FORMATS])
+def test_a_las_file_reads_as_laspy_reads_it(tree1, tmp_path, version, point_format, extra):
+    # Uncompressed LAS is read by numpy from the header (the command's start-up): the same bytes as laspy's reading
+    import laspy
+
+    points = tree1[:300] + [1.2e5, 4.8e5, 2.0]  # georeferenced, so the offsets and scales matter
+    rgb = np.random.default_rng(point_format).integers(0, 65536, (len(points), 3))
+    header = laspy.LasHeader(point_format=point_format, version=version)
+    if extra:
+        header.add_extra_dim(laspy.ExtraBytesParams(name="spare", type=f"{extra}u1"))
+    header.scales, header.offsets = np.array([0.001, 0.002, 0.0005]), points.min(axis=0) - 0.37
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = points[:, 0], points[:, 1], points[:, 2]
+    has_colour = "red" in las.point_format.dimension_names
+    if has_colour:
+        las.red, las.green, las.blue = (rgb[:, k].astype(np.uint16) for k in range(3))
+    las.write(tmp_path / "tree.las")
+    cloud = read_cloud(tmp_path / "tree.las")
+    read = laspy.read(tmp_path / "tree.las")
+    by_laspy = read_cloud(np.column_stack([np.asarray(read.x), np.asarray(read.y), np.asarray(read.z)]))
+    assert cloud.points.tobytes() == by_laspy.points.tobytes() and cloud.offset.tobytes() == by_laspy.offset.tobytes()
+    if has_colour:
+        assert np.array_equal(cloud.colours, np.round(rgb / 257.0).astype(np.uint8))
+    else:
+        assert cloud.colours is None
+
+
+def test_a_las_file_shorter_than_its_header_says_is_a_one_line_error(tree1, tmp_path):
+    import laspy
+
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.x, las.y, las.z = tree1[:, 0], tree1[:, 1], tree1[:, 2]
+    las.write(tmp_path / "tree.las")
+    cut = tmp_path / "cut.las"
+    cut.write_bytes((tmp_path / "tree.las").read_bytes()[:-1000])
+    _one_line(lambda: read_cloud(cut), "is not a readable LAS/LAZ file")

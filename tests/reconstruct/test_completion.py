@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial import ConvexHull
 
 from reconstruct.completion import (ScanReach, complete, crown_sector_lengths, fill_gaps, GAP_RATIO, identify_trunk,
                                     prune_long_twigs)
@@ -223,3 +224,18 @@ def test_the_reach_bounds_by_ground_top_and_hull_margin():
     inside = reach.outside(np.array([[0.5, 0.5, 1.0], [1.5, 0.5, 1.0], [0.5, 0.5, -0.1], [0.5, 0.5, 2.1],
                                      [3.5, 0.5, 1.0], [0.5, 0.5, 0.05]]), np.array([0, 0, 0, 0, 0, 0.1]))
     assert inside.tolist() == [False, False, True, True, True, True]
+
+
+def test_the_reach_measures_many_positions_block_by_block_as_one_product():
+    # ScanReach.outside takes the hull's planes a block of rows at a time: the same answer as the whole product
+    rng = np.random.default_rng(4)
+    reach = ScanReach(rng.normal(size=(400, 3)) * [2.0, 2.0, 3.0] + [0, 0, 4.0], ground=0.0)
+    planes = ConvexHull(reach.points).equations
+    for n in (1, 1023, 1024, 1025, 3000):
+        xyz = rng.normal(size=(n, 3)) * 4.0 + [0, 0, 4.0]
+        radius = rng.random(n) * 0.5
+        whole = (xyz @ planes[:, :3].T + planes[:, 3]).max(axis=1) + radius > reach.margin
+        low = (xyz[:, 2] - radius < reach.ground) | (xyz[:, 2] > reach.points[:, 2].max())
+        expected = low | whole
+        assert 0 < expected.sum() < n or n == 1
+        assert np.array_equal(reach.outside(xyz, radius), expected)

@@ -1,5 +1,6 @@
 """reconstruct.from_cloud and `farm reconstruct --method cloud`: a scan to a measured, completed, written tree."""
 import csv
+import io
 import json
 import subprocess
 import sys
@@ -45,6 +46,28 @@ def test_from_cloud_measures_the_trunk_and_writes_valid_files(y_points, tmp_path
     assert len(rows) == result.scan.measured.n_branches
     assert sum(float(r["length_m"]) for r in rows) == pytest.approx(result.scan.measured.total_length, rel=1e-4)
     assert not list(tmp_path.glob("*.partial"))
+
+
+def test_a_scans_glb_has_level_9s_geometry_and_pixels_with_its_textures_at_the_fastest_level(y_points):
+    # The command writes a scan's texture PNGs at zlib's fastest level (its start-up and end): the same pixels and
+    # the same geometry bytes as at level 9, the file a few kilobytes larger
+    from PIL import Image
+
+    from species.meshing.gltf import read_glb_chunks
+
+    result = from_cloud(y_points)
+    views = {}
+    for name, data in (("fast", result.glb()), ("smallest", result.mesh.to_glb(extras=result.extras))):
+        document, binary = read_glb_chunks(data)
+        images = [image["bufferView"] for image in document["images"]]
+        starts = [view.get("byteOffset", 0) for view in document["bufferViews"]]
+        chunks = [binary[at:at + view["byteLength"]] for at, view in zip(starts, document["bufferViews"])]
+        views[name] = ([chunk for i, chunk in enumerate(chunks) if i not in images],
+                       [np.asarray(Image.open(io.BytesIO(chunks[i]))) for i in images], len(data))
+    assert views["fast"][0] == views["smallest"][0]
+    assert len(views["fast"][1]) == 2 and all(np.array_equal(a, b) for a, b in zip(views["fast"][1],
+                                                                                  views["smallest"][1]))
+    assert 0 < views["fast"][2] - views["smallest"][2] < 0.01 * views["smallest"][2]
 
 
 def test_scan_frame_puts_the_tree_back_where_the_scan_had_it(y_points, tmp_path):
