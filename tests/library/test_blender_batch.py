@@ -27,9 +27,17 @@ def shard_run(tmp_path_factory):
         batches.append(list(jobs))
         return [{"bytes": 100 + i} for i in range(len(jobs))]
 
+    def record_group_node(path, ident, entry):
+        grouped.append((ident, entry["names"]))
+        return 200
+
+    grouped = []
     patch = pytest.MonkeyPatch()
     patch.setattr(job, "blender_available", lambda: True)
     patch.setattr(job, "export_fbx_batch", record_batch)
+    # No file is written by the recorder: the LodGroup post-pass (tests/library/test_fbx_lod_group.py) is
+    # recorded too.
+    patch.setattr(job, "write_lod_group_node", record_group_node)
     try:
         spec = parse_library_spec(SPEC)
         out = tmp_path_factory.mktemp("library")
@@ -37,6 +45,7 @@ def shard_run(tmp_path_factory):
         records = [run_shard(spec, plan, Location.resolve(str(out)), chain) for plan in plan_shards(spec)]
     finally:
         patch.undo()
+    assert len(grouped) == 3 and all(len(names) == 5 for _, names in grouped)  # 4 LODs and the impostor
     return out, batches, records
 
 
@@ -94,6 +103,7 @@ def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypa
         return [{"bytes": 100 + i} for i in range(len(jobs))]
 
     monkeypatch.setattr(job, "export_fbx_batch", record_batch)
+    monkeypatch.setattr(job, "write_lod_group_node", lambda path, ident, entry: 200)  # the recorder wrote no file
     glb_before = {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")}
     assert job.retry_failed_fbx(location, spec) == 3
     assert [len(batch) for batch in batches] == [3 * 6]
