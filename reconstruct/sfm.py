@@ -15,7 +15,8 @@ each pair's verification RANSAC is seeded from `SfmSettings.seed` (otherwise it 
 whichever thread takes the pair). Triangulation at known poses is then the same bytes too. Incremental mapping is
 seeded as well, but with more than one thread an estimated model can still differ run to run where it needs
 COLMAP's structure-less registration (a RANSAC run in parallel) or a bundle adjustment large enough to be
-multi-threaded; `threads=1` makes it the same bytes at the cost of time (docs/reconstruct.md).
+multi-threaded; one thread (`threads=1`, COLMAP's own advice) is the way to the same bytes there, at a cost in
+time (docs/reconstruct.md).
 """
 from __future__ import annotations
 
