@@ -7,8 +7,16 @@ triangulated points with their colours in the cameras' world frame; `reconstruct
 and metric, isolates the tree and grows it (docs/reconstruct.md records what was measured).
 
 Pixel centres: OpenCV puts pixel (0, 0)'s centre at (0, 0), COLMAP at (0.5, 0.5), so a known principal point moves
-by half a pixel on the way in. pycolmap's random seed is set from `SfmSettings.seed`; with more than one thread,
-bundle adjustment's sums may run in another order and an estimated model can differ in its last digits.
+by half a pixel on the way in.
+
+Same photos and seed, same points, on any number of threads up to the mapping: the photos enter COLMAP's database
+in name order before the threads extract their features (otherwise the first to finish is numbered first), and
+each pair's verification RANSAC is seeded from `SfmSettings.seed` (otherwise it draws from the random state of
+whichever thread takes the pair). Triangulation at known poses is then the same bytes too. Incremental mapping is
+seeded as well, but with more than one thread an estimated model can still differ run to run where it needs
+COLMAP's structure-less registration (a RANSAC run in parallel) or a bundle adjustment large enough to be
+multi-threaded; one thread (`threads=1`, COLMAP's own advice) is the way to the same bytes there, at a cost in
+time (docs/reconstruct.md).
 """
 from __future__ import annotations
 
@@ -56,7 +64,8 @@ class SfmSettings:
                      walks) or "auto" (exhaustive up to `exhaustive_max` photos).
     poses          : "known" (cameras.json, triangulation only), "estimate" (incremental mapping) or "auto"
                      (known when cameras.json lists every photo).
-    min_registered : the share of photos the model must hold. threads : 0 = all CPUs. seed : pycolmap's PRNG.
+    min_registered : the share of photos the model must hold. threads : 0 = all CPUs (estimated poses may then
+                     differ run to run: the module docstring says where). seed : pycolmap's PRNG and RANSACs.
     mapping_attempts : incremental mappings tried with estimated poses, seeded seed, seed + 1, ...; the model
                      with the most registered photos, then the most points, is kept. Which initial pair and
                      RANSAC draws a seed gives depends on the CPU's floating point: on ten test renders one seed
@@ -301,6 +310,10 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     extraction.sift.max_num_features = int(settings.max_features)
     extraction.sift.peak_threshold = float(settings.peak_threshold)
     progress("features", 0, len(names))
+    # The photos go into the database first, one by one in name order: the extractor's threads would otherwise
+    # number them in the order they finish, and matching and mapping follow the numbers.
+    pycolmap.Database.open(database).close()
+    pycolmap.import_images(database, folder, camera_mode=mode, image_names=names, options=reader)
     pycolmap.extract_features(database, folder, image_names=names, camera_mode=mode, reader_options=reader,
                               extraction_options=extraction, device=pycolmap.Device.cpu)
     progress("features", len(names), len(names))
@@ -317,15 +330,19 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     matching.num_threads = threads
     matching.guided_matching = bool(settings.guided)
     matching.sift.max_ratio = float(settings.max_ratio)
+    verification = pycolmap.TwoViewGeometryOptions()
+    # each pair's RANSAC seeded alike: unseeded, a thread's random state runs on over whichever pairs it takes
+    verification.ransac.random_seed = int(settings.seed)
     exhaustive = settings.matcher == "exhaustive" or (settings.matcher == "auto"
                                                       and len(names) <= settings.exhaustive_max)
     if exhaustive:
-        pycolmap.match_exhaustive(database, matching_options=matching, device=pycolmap.Device.cpu)
+        pycolmap.match_exhaustive(database, matching_options=matching, verification_options=verification,
+                                  device=pycolmap.Device.cpu)
     else:
         pairing = pycolmap.SequentialPairingOptions()
         pairing.overlap = int(settings.overlap)
         pycolmap.match_sequential(database, matching_options=matching, pairing_options=pairing,
-                                  device=pycolmap.Device.cpu)
+                                  verification_options=verification, device=pycolmap.Device.cpu)
     linked = _linked(database)
     progress("matching", len(names), len(names))
     if linked < needed:

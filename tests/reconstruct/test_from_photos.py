@@ -192,6 +192,13 @@ def test_the_hull_crown_holds_the_tree_and_the_growth_stays_in_it(photos, photo_
     assert {"hull.masks", "hull.hull", "hull.growth"} <= set(grown.timings)
 
 
+def test_same_photos_and_seed_give_the_same_tree_on_every_thread_count(photos, grown):
+    # SfM on all CPUs (the command's default) against `grown`'s one thread: the same GLB, byte for byte
+    again = from_photos(photos.cameras_json.parent, settings=SfmSettings(threads=0), shape="hull")
+    assert again.scan.cloud.points.tobytes() == grown.scan.cloud.points.tobytes()
+    assert again.glb() == grown.glb()
+
+
 def test_a_bad_shape_or_species_is_one_line(photos):
     folder = photos.cameras_json.parent
     with pytest.raises(PhotoError, match="shape 'dense' is not known: allowed sparse, hull"):

@@ -45,8 +45,10 @@ def test_triangulated_points_lie_on_the_rendered_surfaces(photos, known):
     assert len(ground) >= 20 and np.median(np.abs(ground[:, 2])) < 0.05   # Blender's ground is z = 0
 
 
-def test_same_photos_and_seed_give_the_same_points(photos, known):
-    again = sfm_points(photos.cameras_json.parent, SfmSettings(threads=1))
+def test_same_photos_and_seed_give_the_same_points_on_every_thread_count(photos, known):
+    # all CPUs against `known`'s one thread: the extractor's threads finish photos in any order and the
+    # verification's RANSAC runs on whichever thread takes a pair, and neither may show in the points
+    again = sfm_points(photos.cameras_json.parent, SfmSettings(threads=0))
     assert again.points.tobytes() == known.points.tobytes()
     assert again.colours.tobytes() == known.colours.tobytes()
 
