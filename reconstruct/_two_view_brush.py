@@ -22,6 +22,7 @@ _SWEEP_FACTOR = 2.0
 _MIN_SWEEP = 2.0
 # A tip path shorter than this multiple of the stroke radius at its fork is a spur of the centres, not a branch.
 _SPUR_FACTOR = 4.0
+_FORK_WINDOW = 4.0  # pixels around a fork where its stroke's half width is read
 _EIGHT = np.array([(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)])
 _SIXTEEN = np.array([(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if max(abs(dy), abs(dx)) == 2])
 
@@ -219,8 +220,9 @@ def skeleton_2d_from_brush(mask, name: str = "sketch") -> Skeleton2D:
 
 def _prune_spurs(skeleton: Skeleton2D, mask: np.ndarray) -> Skeleton2D:
     """The skeleton without spurs: tip paths (from a tip up to its nearest fork) shorter than _SPUR_FACTOR x the
-    stroke's half width at the fork (its distance to the paper, robust where run widths are not: at stroke ends
-    and in fork wedges, whose centres leave such spurs)."""
+    stroke's half width at the fork (the largest distance to the paper of the skeleton points within _FORK_WINDOW
+    px of it, robust where run widths are not: at stroke ends and in fork wedges, whose centres leave such
+    spurs)."""
     points, parent = skeleton.points, skeleton.parent
     paper_distance = cv2.distanceTransform(np.pad(mask, 1).astype(np.uint8), cv2.DIST_L2, 5)[1:-1, 1:-1]
     pixel = points.astype(np.int64)
@@ -236,9 +238,14 @@ def _prune_spurs(skeleton: Skeleton2D, mask: np.ndarray) -> Skeleton2D:
             node = int(parent[node])
         if children[node] > 1:
             spurs.append((length, node, path))
+    # A fork at a stroke's end (the trunk's base, where a round end's centres splay) lies a pixel from the paper:
+    # its stroke's half width is the widest within _FORK_WINDOW px of it.
+    forks = np.array([fork for _, fork, _ in spurs], np.int64)
+    near = cKDTree(points).query_ball_point(points[forks], _FORK_WINDOW) if len(forks) else []
+    width = {int(fork): float(radius[around].max()) for fork, around in zip(forks, near)}
     # Shortest first, so of two short paths at one fork the longer one stays as the branch.
     for length, fork, path in sorted(spurs, key=lambda s: s[0]):
-        if length < _SPUR_FACTOR * radius[fork] and children[fork] > 1:
+        if length < _SPUR_FACTOR * width[fork] and children[fork] > 1:
             keep[path] = False
             children[fork] -= 1
     if keep.all():

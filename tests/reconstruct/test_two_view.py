@@ -110,6 +110,16 @@ def test_brush_y_has_one_fork_near_the_drawn_one():
     assert (skeleton.n_children == 0).sum() == 2
 
 
+@pytest.mark.parametrize("flare", [14, 20])
+def test_a_brush_trunk_flared_at_its_base_leaves_no_spurs_at_the_root(flare):
+    """The base is a stroke's end, a pixel from the paper: the stroke's width there is read around it."""
+    image = drawing([((128, 230), (128, 150)), ((128, 150), (80, 60)), ((128, 150), (180, 70))], width=9)
+    foot = np.array([[124, 215], [132, 215], [128 + flare // 2, 245], [128 - flare // 2, 245]], np.int32)
+    cv2.fillPoly(image, [foot], 0)
+    skeleton = skeleton_2d_from_brush(ink_mask(image))
+    assert (skeleton.n_children == 0).sum() == 2 and skeleton.n_children[0] == 1
+
+
 def test_equal_height_matching_recovers_a_known_skeleton_within_a_pixel():
     front = skeleton_2d_from_lines(ink_mask(projection(0)))
     side = skeleton_2d_from_lines(ink_mask(projection(1)))
