@@ -29,6 +29,7 @@ DEPTH_STEP_COST = 0.25
 REUSE_COST_PX = 3.0
 REUSED_WITHIN_PX = 2  # side stroke pixels this close to a lifted point count as explained
 DISTANCE_CAP_PX = 16  # a point farther than this from every side stroke costs no more for being farther
+SIDE_MARGIN_PX = 8    # depths this far past the side drawing's strokes stay possible
 _NEIGHBOURS = [(dx, dy) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dx, dy) != (0, 0)]
 
 
@@ -144,18 +145,17 @@ def lift_on_side_strokes(front: Skeleton2D, side: Skeleton2D, step_cost: float =
     rows = np.floor(front.points[:, 1] + 0.5).astype(np.int64)
     low = int(min(rows.min(), side_px[:, 1].min()))
     high = int(max(rows.max(), side_px[:, 1].max()))
-    margin = 8
-    left = int(side_px[:, 0].min()) - margin
-    width = int(side_px[:, 0].max()) - left + 1 + margin
+    left = int(side_px[:, 0].min()) - SIDE_MARGIN_PX
+    width = int(side_px[:, 0].max()) - left + 1 + SIDE_MARGIN_PX
     strokes = np.zeros((high - low + 1, width), np.uint8)
     strokes[side_px[:, 1] - low, side_px[:, 0] - left] = 1
     drawn_rows = strokes.any(axis=1)
     unexplained = strokes.copy()
-    to_any = np.minimum(_distance_to(strokes), DISTANCE_CAP_PX) + reuse_px
+    to_any = _distance_to(strokes) + reuse_px
     tips = np.zeros_like(strokes)
     side_tips = np.floor(side.points[side.n_children == 0] + 0.5).astype(np.int64)
     tips[side_tips[:, 1] - low, side_tips[:, 0] - left] = 1
-    to_any_tip = np.minimum(_distance_to(tips), DISTANCE_CAP_PX) + reuse_px
+    to_any_tip = _distance_to(tips) + reuse_px
     columns = np.arange(width, dtype=np.float64)
     near = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * REUSED_WITHIN_PX + 1,) * 2)
     z = np.zeros(len(front))
