@@ -166,7 +166,7 @@ def finish_assets(pending: list[dict], location: Location, spec, timer: StageTim
             record["sizes"][key] = int(row["bytes"])
             if name is None:  # Blender's exporter cannot write the LodGroup node: added to its file here
                 record["lod_group"] = lod_group_entry(record)
-                record["sizes"][key] = write_lod_group_node(job["fbx"], record["id"], record["lod_group"])
+                record["sizes"][key] = write_lod_group_node(location, relative, record["id"], record["lod_group"])
             record["all_files"] = sorted([*record["all_files"], relative])
             record["blender"] = "written"
     for item in pending:

@@ -10,7 +10,6 @@ LodGroup node Unreal needs (`fbx_lod_node`), its thresholds from the Unity trans
 from __future__ import annotations
 
 import math
-import os
 
 from .fbx_lod_node import add_lod_group_node
 from .gltf_asset import SCREEN_HEIGHT_PX
@@ -70,14 +69,10 @@ def lod_group_thresholds(entry: dict) -> list[float]:
     return [round(100.0 * t, 4) for t in entry["unity_transition"][:-1]]
 
 
-def write_lod_group_node(path: str, ident: str, entry: dict) -> int:
-    """Rewrite the LOD-group FBX at `path` (a local file, as Blender wrote it) with its LodGroup node `ident`
-    holding the levels `entry["names"]` in order; whole files only (a temporary sibling renamed over it).
+def write_lod_group_node(location, relative: str, ident: str, entry: dict) -> int:
+    """Rewrite the LOD-group FBX at `relative` in the library `location` (as Blender wrote it) with its LodGroup
+    node `ident` holding the levels `entry["names"]` in order (`Location.write_atomic`: whole files only).
     Returns the file's new size in bytes."""
-    with open(path, "rb") as f:
-        data = add_lod_group_node(f.read(), ident, entry["names"], lod_group_thresholds(entry))
-    temporary = f"{path}.lod_group.tmp"
-    with open(temporary, "wb") as f:
-        f.write(data)
-    os.replace(temporary, path)
+    data = add_lod_group_node(location.read_bytes(relative), ident, entry["names"], lod_group_thresholds(entry))
+    location.write_atomic(relative, data)
     return len(data)

@@ -27,7 +27,7 @@ def shard_run(tmp_path_factory):
         batches.append(list(jobs))
         return [{"bytes": 100 + i} for i in range(len(jobs))]
 
-    def record_group_node(path, ident, entry):
+    def record_group_node(location, relative, ident, entry):
         grouped.append((ident, entry["names"]))
         return 200
 
@@ -103,7 +103,7 @@ def test_a_failed_blender_batch_keeps_every_asset_and_says_so(tmp_path, monkeypa
         return [{"bytes": 100 + i} for i in range(len(jobs))]
 
     monkeypatch.setattr(job, "export_fbx_batch", record_batch)
-    monkeypatch.setattr(job, "write_lod_group_node", lambda path, ident, entry: 200)  # the recorder wrote no file
+    monkeypatch.setattr(job, "write_lod_group_node", lambda location, relative, ident, entry: 200)  # the recorder wrote no file
     glb_before = {path: path.read_bytes() for path in tmp_path.glob("assets/*/*.glb")}
     assert job.retry_failed_fbx(location, spec) == 3
     assert [len(batch) for batch in batches] == [3 * 6]
