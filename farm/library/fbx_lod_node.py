@@ -94,10 +94,14 @@ def _raise_counts(definitions: FbxRecord, models: int) -> None:
         bump(entry, by)
 
 
-def _roots(objects: FbxRecord, connections: FbxRecord) -> dict:
-    """{name: (id, index in Objects)} of the Models at the top of the scene (connected to the root, id 0)."""
-    at_root = {values[1] for c in connections.children
-               if (values := c.values())[:1] == [b"OO"] and len(values) > 2 and values[2] == 0}
+def _links_to_root(connections: FbxRecord) -> dict[int, int]:
+    """{object id: index in Connections} of the objects linked to the scene's root (id 0)."""
+    return {values[1]: index for index, c in enumerate(connections.children)
+            if (values := c.values())[:1] == [b"OO"] and len(values) > 2 and values[2] == 0}
+
+
+def _roots(objects: FbxRecord, at_root: dict[int, int]) -> dict:
+    """{name: (id, index in Objects)} of the Models at the top of the scene (`at_root`: `_links_to_root`)."""
     roots = {}
     for index, record in enumerate(objects.children):
         values = record.values()
@@ -116,7 +120,8 @@ def add_lod_group_node(data: bytes, group: str, levels: list[str], thresholds: l
         raise ValueError(f"{len(levels)} levels need {max(len(levels) - 1, 0)} thresholds, got {len(thresholds)}")
     fbx = read_fbx_bytes(data)
     objects, connections = _top(fbx, b"Objects"), _top(fbx, b"Connections")
-    roots = _roots(objects, connections)
+    at_root = _links_to_root(connections)
+    roots = _roots(objects, at_root)
     missing = [level for level in levels if level not in roots]
     if missing:
         raise ValueError(f"FBX: the levels {missing} are not nodes at the top of the scene: it has "
@@ -128,9 +133,7 @@ def add_lod_group_node(data: bytes, group: str, levels: list[str], thresholds: l
     objects.children[first:first] = [_attribute(attribute_id, group, len(levels), thresholds),
                                      _group_model(group_id, group, objects.children[first])]
     level_ids = [roots[level][0] for level in levels]
-    links = [i for i, c in enumerate(connections.children)  # the levels' links to the scene's root, in order
-             if (values := c.values())[:1] == [b"OO"] and len(values) > 2 and values[2] == 0
-             and values[1] in level_ids]
+    links = sorted(at_root[uid] for uid in level_ids)  # the levels' links to the scene's root, in file order
     new_links = [_connection(group_id, 0)] + [_connection(uid, group_id) for uid in level_ids]
     new_links.append(_connection(attribute_id, group_id))
     dropped = set(links)
