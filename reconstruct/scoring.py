@@ -87,15 +87,19 @@ METRICS: dict[str, Metric] = {
 def main_branch_nodes(skeleton: Skeleton) -> np.ndarray:
     """(K, 3) float32 metres: the nodes of a tree's main branches (`renderers.main_branches`: what the strokes
     draw), the set a traced or lifted main skeleton is compared with."""
+    return skeleton.positions[_main_branch_indices(skeleton)]
+
+
+def _main_branch_indices(skeleton: Skeleton) -> np.ndarray:
+    """Sorted node indices of the main branches (`renderers.main_branches`)."""
     paths = skeleton.branch_paths
-    return skeleton.positions[np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))]
+    return np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))
 
 
 def main_branch_points(skeleton: Skeleton, divisions: int = metrics.DENSIFY_DIVISIONS) -> np.ndarray:
     """(K, 3) float64 metres: points along the main branches' segments (`main_branch_nodes`' edges, each branch
     joined to its parent node), at most height / divisions apart: the drawn curves, not only their nodes."""
-    paths = skeleton.branch_paths
-    child = np.unique(np.concatenate([paths[int(b)] for b in main_branches(skeleton)]))
+    child = _main_branch_indices(skeleton)
     child = child[skeleton.parent[child] >= 0]
     start = skeleton.positions[skeleton.parent[child]].astype(np.float64)
     end = skeleton.positions[child].astype(np.float64)

@@ -29,8 +29,8 @@ from .result import Reconstruction
 
 __all__ = ["two_view", "TwoViewError", "Skeleton2D", "CrownOutline", "skeleton_2d_from_lines",
            "skeleton_2d_from_brush", "stroke_centres", "match_equal_height", "skeleton_pixels",
-           "lift_main_skeleton", "lift_on_side_strokes", "LIFTS", "grow_twigs", "add_leaves", "resample_skeleton", "ink_mask", "crown_outline",
-           "is_brush_drawing", "DEFAULT_HEIGHT", "MESH_PARAMS", "TWIG_DEFAULTS", "LEAF_DEFAULTS",
+           "lift_main_skeleton", "lift_on_side_strokes", "LIFTS", "grow_twigs", "add_leaves", "resample_skeleton",
+           "ink_mask", "crown_outline", "is_brush_drawing", "DEFAULT_HEIGHT", "MESH_PARAMS", "TWIG_DEFAULTS", "LEAF_DEFAULTS",
            "LIFT_DISTANCE_PX", "LINE_RADIUS_PX", "OUTLINE_MARGIN", "NODE_SPACING", "BRUSH_SHARE", "INK_LEVEL"]
 
 LIFTS = ("side-strokes", "equal-height")  # `two_view`'s lifts of the front skeleton to 3D, the default first
