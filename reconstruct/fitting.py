@@ -33,7 +33,7 @@ from species.errors import TreefarmError
 from .fit_budget import FitError
 
 __all__ = ["OUTLINE_HEIGHT", "FitTrace", "outline", "outline_iou", "drawing_outline", "search", "front_outline",
-           "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS"]
+           "renderer_at", "FitRecord", "ParamsFit", "fit_params", "PARAMS_FIT_SLOTS", "trunk_width", "TRUNK_WIDER"]
 
 OUTLINE_HEIGHT = 128  # outlines are compared this many pixels tall
 OUTLINE_CLOSING = 5   # pen gaps up to about twice this (pixels at OUTLINE_HEIGHT) are closed before filling
@@ -194,6 +194,9 @@ SPECIES_TRIED = 3   # the network's most likely species, each grown from its gue
 # network is sure of is kept (a drawing of our own renders), an unsure read is settled by the outline.
 SPECIES_SURE = 0.9
 SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the best species
+TRUNK_ROWS = (0.86, 0.94)  # an outline's trunk: these rows (share of its height from the top), above a flared foot
+TRUNK_WIDER = 1.15         # a drawn trunk this much wider than the best candidate's is tried at its width
+MAX_TRUNK_RATIO = 0.15     # the trunk step's largest trunk radius over the tree's scale (Weber-Penn's `ratio`)
 
 
 @dataclass
@@ -237,6 +240,20 @@ class ParamsFit:
     record: FitRecord
 
 
+def trunk_width(shape: np.ndarray) -> float:
+    """Median width (pixels, at OUTLINE_HEIGHT) of an outline's rows in TRUNK_ROWS, between the outermost filled
+    pixels of each row; 0 for an empty outline."""
+    if shape.size == 0:
+        return 0.0
+    rows = shape[int(TRUNK_ROWS[0] * shape.shape[0]):int(TRUNK_ROWS[1] * shape.shape[0])]
+    filled = rows.any(axis=1)
+    if not filled.any():
+        return 0.0
+    left = np.argmax(rows, axis=1)
+    right = rows.shape[1] - np.argmax(rows[:, ::-1], axis=1)
+    return float(np.median((right - left)[filled]))
+
+
 def _slot_columns(codec) -> list[tuple[str, int]]:
     """(head, column) of each PARAMS_FIT_SLOTS entry in the codec's outputs."""
     from trainers.sketchnet_codec import HEAD_TABLE, SLOTS
@@ -254,8 +271,9 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     """Search TreeSketchNet's output space around its guess for the dictionary whose tree's front outline matches
     `target` (`drawing_outline` of the sketch): the guess first, then the species' own preset, then the presets of
     the network's next species (while it is unsure: SPECIES_SURE), then decode seeds
-    seed + 1, ..., then CMA-ES over PARAMS_FIT_SLOTS (each within the codec's training range), all within
-    `evals` (>= 1) evaluations. `grow(params) -> (skeleton, mesh)` (default `species.rebuild`)."""
+    seed + 1, ..., then the trunk at the drawn width where the drawing's is wider (`trunk_width`, TRUNK_WIDER:
+    the one value allowed past the codec's training range, to MAX_TRUNK_RATIO), then CMA-ES over
+    PARAMS_FIT_SLOTS (each within the codec's training range), all within `evals` (>= 1) evaluations. `grow(params) -> (skeleton, mesh)` (default `species.rebuild`)."""
     import species
 
     grow = grow or species.rebuild
@@ -274,8 +292,13 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
             outlines[trace.evals] = shape
         return trace.add(value)
 
+    trunk_factor = 1.0  # the trunk step's factor on every later candidate's trunk radius (`ratio`)
+
     def decoded(outs: dict, decode_seed: int) -> dict:
-        return codec.decode_arrays(outs, seed=int(decode_seed))[0]
+        params = codec.decode_arrays(outs, seed=int(decode_seed))[0]
+        if trunk_factor != 1.0:
+            params["ratio"] = min(float(params["ratio"]) * trunk_factor, MAX_TRUNK_RATIO)
+        return params
 
     ranking = codec.species_ranking(outputs)
     probabilities = dict(ranking)
@@ -307,6 +330,18 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         value = evaluate(params)
         if value > best:
             best, best_seed, best_params = value, seed + offset, params
+    # The trunk as drawn: people draw trunks wider than trees grow them (and than training drew them); one
+    # evaluation tries the guess's trunk radius scaled to the drawn trunk's width, kept for the search if better.
+    if trace.evals < evals:
+        factor = trunk_width(target) / max(trunk_width(outlines[int(np.argmax(trace.scores))]), 1e-9)
+        if factor > TRUNK_WIDER:
+            trunk_factor = factor
+            params = decoded(best_outputs, best_seed)
+            value = evaluate(params)
+            if value > best:
+                best, best_params = value, params
+            else:
+                trunk_factor = 1.0
     left = evals - trace.evals
     if left > 0:
         columns = _slot_columns(codec)

@@ -11,7 +11,8 @@ Steps (all vectorised, OpenCV for morphology and resizing):
    paper colour replaced by white (colour strokes, whose hues carry branch identity and must not be inverted).
    Levels are stretched so the paper is exactly white and the typical dark stroke exactly ink (scans are grey).
 2. The drawing: ink pixels (at least half way from paper to ink), ignoring specks smaller than SPECK_SHARE of
-   the image (dust on a scan). None at all raises `PreprocessError` (a blank image).
+   the image (dust on a scan). None at all raises `PreprocessError` (a blank image). A sketch's ground line
+   (`ground_line`: a long stroke under the tree reaching out beyond it) is left out: the renders have no ground.
 3. Crop to the drawing's bounding box plus MARGIN of its larger side on each side, as a square centred on the
    box (paper outside the image), so the same drawing small in a corner or filling its page comes out alike.
 4. Strokes that would come out thinner than MIN_STROKE_PX (at 256 px, scaled with `size`) are widened first
@@ -33,7 +34,7 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-__all__ = ["ink_mask", "KINDS", "MARGIN", "MIN_STROKE_PX", "SPECK_SHARE", "Crop", "Prepared", "PreprocessError", "preprocess",
+__all__ = ["ink_mask", "ground_line", "KINDS", "MARGIN", "MIN_STROKE_PX", "SPECK_SHARE", "Crop", "Prepared", "PreprocessError", "preprocess",
            "prepare", "apply_crop", "paper_image"]
 
 KINDS = {"sketch": 1, "strokes": 3, "photo": 3}
@@ -46,6 +47,11 @@ MIN_CONTRAST = 0.08       # ink must differ from the paper by this much (0..1) o
 _BORDER_SHARE = 0.02      # width of the border ring that gives the paper level, share of the smaller side
 _INK_PERCENTILE = 10.0    # the ink level: this percentile of the clearly-inked pixels' values (dark cores)
 _INK_CANDIDATE = 0.25     # share of the paper-to-darkest range a pixel must reach to count when finding ink level
+# A ground line (sketch kind): a near-horizontal stroke at least GROUND_RUN of the drawing's larger side long, in
+# the lowest GROUND_BAND of its height, reaching GROUND_OVERHANG of its width beyond the drawing just above it.
+GROUND_RUN = 0.15
+GROUND_BAND = 0.12
+GROUND_OVERHANG = 0.08
 
 
 class PreprocessError(TreefarmError):
@@ -170,10 +176,62 @@ def _ink_mask(ink: np.ndarray) -> np.ndarray:
     return kept
 
 
+def ground_line(mask: np.ndarray) -> np.ndarray:
+    """(H, W) bool: the ink of a ground line under a drawn tree (empty when there is none): a near-horizontal
+    stroke at the foot of the drawing (GROUND_RUN, GROUND_BAND) that reaches beyond the drawing just above it
+    (GROUND_OVERHANG), with whatever else lies beside the tree at that height (grass, an arrow's head). A tree's
+    own foot (a trunk closed by a short line, roots, a bush's flat base) does not reach out that far. People draw
+    the ground; the renders the networks learnt from have none."""
+    mask = np.asarray(mask, bool)
+    ground = np.zeros_like(mask)
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return ground
+    top, bottom, height, width = rows[0], rows[-1], rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1
+    run = max(5, int(round(GROUND_RUN * max(height, width))))
+    # Smeared up and down by a stroke's width so a wavy or slightly slanted line is one horizontal run.
+    smear = int(np.ceil(_stroke_width(mask))) + 1
+    ink = mask.astype(np.uint8)
+    smeared = cv2.dilate(ink, np.ones((2 * smear + 1, 1), np.uint8))
+    runs = cv2.morphologyEx(smeared, cv2.MORPH_OPEN, np.ones((1, run), np.uint8)) & ink
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(runs, connectivity=8)
+    band_top = bottom - GROUND_BAND * height - 2 * smear
+    lines = [i for i in range(1, count) if stats[i, cv2.CC_STAT_TOP] >= band_top]
+    if not lines:
+        return ground
+    line_top = int(min(stats[i, cv2.CC_STAT_TOP] for i in lines)) - smear
+    # What is drawn just above the line (the trunk's foot for a tree standing on it).
+    band = slice(max(top, int(line_top - 2 * GROUND_BAND * height)), max(top, line_top))
+    above = mask[band] & (labels[band] == 0)
+    above_cols = np.flatnonzero(above.any(axis=0))
+    if above_cols.size == 0:
+        return ground  # nothing drawn above the line: the drawing is the line
+    # The ground passes under the tree; roots spread from it in runs that stop short of its middle.
+    middle = int(np.median(np.nonzero(above)[1]))
+    left, span = stats[:, cv2.CC_STAT_LEFT], stats[:, cv2.CC_STAT_WIDTH]
+    lines = [i for i in lines if left[i] <= middle < left[i] + span[i]]
+    if not lines:
+        return ground
+    line = np.isin(labels, lines)
+    line_cols = np.flatnonzero(line.any(axis=0))
+    overhang = max(above_cols[0] - line_cols[0], line_cols[-1] - above_cols[-1])
+    if overhang < GROUND_OVERHANG * width:
+        return ground
+    # Beside the tree everything at the line's height goes; under it only the line's own flat ink, so the trunk
+    # keeps its strokes down to the ground.
+    flat = cv2.morphologyEx(ink, cv2.MORPH_OPEN, np.ones((1, 2 * smear + 1), np.uint8)) > 0
+    ground[line_top:] = mask[line_top:]
+    under = slice(above_cols[0], above_cols[-1] + 1)
+    ground[line_top:, under] = line[line_top:, under] & flat[line_top:, under]
+    return ground
+
+
 def ink_mask(image, kind: str = "sketch") -> np.ndarray:
     """(H, W) bool: where `image` is inked, as `prepare` finds it (paper level from the border, ink level
-    stretched, dust removed), at the image's own size; PreprocessError for a blank image."""
-    return _ink_mask(paper_image(image, kind))
+    stretched, dust removed, a sketch's ground line left out: `ground_line`), at the image's own size;
+    PreprocessError for a blank image."""
+    mask = _ink_mask(paper_image(image, kind))
+    return mask & ~ground_line(mask) if kind == "sketch" else mask
 
 
 def _crop_of(mask: np.ndarray) -> Crop:
@@ -235,6 +293,11 @@ def prepare(image, kind: str, size: int) -> Prepared:
     _check(image, kind, size)
     ink = paper_image(image, kind)
     mask = _ink_mask(ink)
+    if kind == "sketch":
+        ground = ground_line(mask)
+        mask = mask & ~ground
+        # The line's faint anti-aliased edge goes with it.
+        ink[(cv2.dilate(ground.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & ~mask] = 0.0
     crop = _crop_of(mask)
     scale = size / crop.side
     wanted = MIN_STROKE_PX[kind] * size / 256.0 / scale  # source pixels

@@ -10,9 +10,11 @@ import pytest
 import species
 from reconstruct import from_params
 from reconstruct.fit_budget import FitError, check_fit_evals
-from reconstruct.fitting import OUTLINE_HEIGHT, drawing_outline, outline, outline_iou, search
+from reconstruct.fitting import (OUTLINE_HEIGHT, TRUNK_WIDER, drawing_outline, fit_params, front_outline,
+                                 outline, outline_iou, renderer_at, search, trunk_width)
 from reconstruct.networks import predictor
 from renderers import ViewRenderer
+from trainers.preprocess import ink_mask
 
 
 def _paper(size: int = 200) -> np.ndarray:
@@ -134,3 +136,23 @@ def test_the_fit_beats_the_first_guess_and_the_same_budget_repeats_itself(known_
     assert fitted.maps["species"][0] == fitted.params["species"] and 0.0 <= fitted.maps["species"][1] <= 1.0
     overlay = record.overlay()
     assert overlay.dtype == np.uint8 and overlay.shape[0] == OUTLINE_HEIGHT and overlay[..., 1].any()
+
+
+def test_a_trunk_drawn_wider_than_the_guess_s_is_fitted_wider(known_tree, net):
+    """The known tree's drawing with its trunk drawn much wider (two lines round it, as people draw trunks): the
+    fit tries the guess's trunk at the drawn width and keeps it, a better outline than the trunk it guessed."""
+    sketch = known_tree[0].copy()
+    rows, cols = np.nonzero(ink_mask(sketch))
+    foot, height = rows.max(), rows.max() - rows.min()
+    middle = int(np.median(cols[rows >= foot - 4]))
+    for x in (middle - 30, middle + 30):
+        cv2.line(sketch, (x, int(foot - 0.3 * height)), (x, int(foot)), (0, 0, 0), 2)
+    target = drawing_outline(sketch)
+    outputs, _ = net.outputs_view(sketch)
+    guess = net.codec.decode_arrays(dict(outputs), seed=0)[0]
+    with renderer_at(None, 224) as renderer:
+        guessed = front_outline(renderer, *species.rebuild(guess))
+        fit = fit_params(net.codec, dict(outputs), target, 8, 0, renderer)
+    assert trunk_width(target) > TRUNK_WIDER * trunk_width(guessed)
+    assert fit.params["ratio"] > 1.5 * guess["ratio"]
+    assert fit.record.score > outline_iou(guessed, target)

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from trainers.preprocess import PreprocessError, apply_crop, prepare, preprocess
+from trainers.preprocess import PreprocessError, apply_crop, ground_line, ink_mask, prepare, preprocess
 
 # A small tree drawing in unit coordinates: trunk, three branches, a crown ellipse.
 _SEGMENTS = np.array([[0.5, 1.0, 0.5, 0.45], [0.5, 0.6, 0.25, 0.3], [0.5, 0.55, 0.75, 0.25], [0.5, 0.45, 0.5, 0.05]])
@@ -125,3 +125,39 @@ def test_blank_image_is_refused(image):
 def test_bad_input_is_refused_naming_the_value(args, match):
     with pytest.raises(PreprocessError, match=match):
         preprocess(*args)
+
+
+def _lollipop() -> np.ndarray:
+    """A cloud on a stick as people draw it: a round crown, the trunk two lines open at the foot."""
+    image = np.full((300, 300), 255, np.uint8)
+    cv2.circle(image, (150, 90), 70, 0, 3, cv2.LINE_AA)
+    for x in (138, 162):
+        cv2.line(image, (x, 158), (x, 260), 0, 3, cv2.LINE_AA)
+    return image
+
+
+def test_a_ground_line_under_the_tree_is_left_out_and_the_tree_s_own_foot_is_not():
+    """People draw the ground as a long line under the trunk; the renders have none. The tree's own foot (a short
+    line closing the trunk, roots spreading from it) and a tree without ground keep every stroke."""
+    tree = _lollipop()
+    grounded = tree.copy()
+    cv2.line(grounded, (10, 262), (290, 258), 0, 3, cv2.LINE_AA)  # under the trunk, far beyond it
+    ground = ground_line(grounded < 128)
+    assert ground.any() and not ground[:240].any()
+    kept, drawn = ink_mask(grounded), ink_mask(tree)
+    for axis in (0, 1):  # the drawing's box is the tree's, not the ground's
+        box, tree_box = np.flatnonzero(kept.any(axis=axis)), np.flatnonzero(drawn.any(axis=axis))
+        assert abs(box[0] - tree_box[0]) <= 6 and abs(box[-1] - tree_box[-1]) <= 6  # a stroke
+    ours, theirs = prepare(grounded, "sketch", 128), prepare(tree, "sketch", 128)
+    assert np.allclose([ours.crop.x0, ours.crop.y0, ours.crop.side], [theirs.crop.x0, theirs.crop.y0,
+                                                                      theirs.crop.side], atol=6)
+    assert ours.image[:, -8:, :40].max() < 0.05  # no trace of the line beside the trunk
+    assert not ground_line(tree < 128).any()
+    footed = tree.copy()
+    cv2.line(footed, (130, 261), (170, 261), 0, 3, cv2.LINE_AA)  # the trunk closed at its foot
+    rooted = tree.copy()
+    for x, out in ((138, -1), (162, 1)):  # roots from each side of the trunk, out and down, ending flat
+        cv2.line(rooted, (x, 240), (x + out * 30, 268), 0, 3, cv2.LINE_AA)
+        cv2.line(rooted, (x + out * 30, 268), (x + out * 80, 270), 0, 3, cv2.LINE_AA)
+    for kept in (footed, rooted):
+        assert not ground_line(kept < 128).any()
