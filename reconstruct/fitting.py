@@ -18,6 +18,9 @@ The parts every sketch method shares:
 from __future__ import annotations
 
 import contextlib
+import importlib
+import sys
+import warnings
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -148,12 +151,32 @@ class FitTrace:
         return float(score)
 
 
+def _cma():
+    """The `cma` package, imported without its optional plotting and surrogate-model extras (matplotlib.pyplot,
+    scipy.stats: most of a second of a drawing's time budget, and neither is used here); each import it tries
+    fails as on a machine without them, and either loads normally later."""
+    if "cma" in sys.modules:
+        return sys.modules["cma"]
+    blocked = [name for name in ("matplotlib.pyplot", "scipy.stats") if name not in sys.modules]
+    for name in blocked:
+        sys.modules[name] = None  # an import of a module set to None raises ImportError
+    try:
+        with warnings.catch_warnings():  # its notes on the extras it found missing
+            warnings.simplefilter("ignore")
+            return importlib.import_module("cma")
+    finally:
+        for name in blocked:
+            sys.modules.pop(name, None)
+
+
 def search(score: Callable[[np.ndarray], float], x0: np.ndarray, evals: int, rng: np.random.Generator,
-           x0_score: float | None = None, sigma: float = 0.15, popsize: int = 6) -> tuple[np.ndarray, float]:
+           x0_score: float | None = None, sigma: float = 0.15, popsize: int = 6,
+           stop: Callable[[], bool] | None = None) -> tuple[np.ndarray, float]:
     """(best x, its score) after at most `evals` calls of `score` (higher is better) on [0, 1]^n, starting at x0
-    (scored first, unless its score is given as `x0_score`), so the answer is never worse than x0. CMA-ES draws its
-    samples from `rng` only: the same rng state gives the same calls."""
-    import cma
+    (scored first, unless its score is given as `x0_score`), so the answer is never worse than x0; `stop()`, when
+    given, is asked before each later call and ends the search when true. CMA-ES draws its samples from `rng`
+    only: the same rng state gives the same calls."""
+    cma = _cma()
 
     x0 = np.clip(np.asarray(x0, np.float64), 0.0, 1.0)
     left = evals
@@ -172,6 +195,8 @@ def search(score: Callable[[np.ndarray], float], x0: np.ndarray, evals: int, rng
         candidates = es.ask()
         scores = []
         for x in candidates[:left]:
+            if stop is not None and stop():
+                break
             scores.append(float(score(np.asarray(x, np.float64))))
             if scores[-1] > best:
                 best_x, best = np.asarray(x, np.float64), scores[-1]
@@ -197,6 +222,10 @@ SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the b
 TRUNK_ROWS = (0.86, 0.94)  # an outline's trunk: these rows (share of its height from the top), above a flared foot
 TRUNK_WIDER = 1.15         # a drawn trunk this much wider than the best candidate's is tried at its width
 MAX_TRUNK_RATIO = 0.15     # the trunk step's largest trunk radius over the tree's scale (Weber-Penn's `ratio`)
+# The params fit also stops once its candidates have this many faces together (growing and drawing a candidate
+# takes time in proportion to its faces): a big crown's candidates cost many times a small one's, and the time
+# target is per drawing.
+FIT_FACE_BUDGET = 6_000_000
 
 
 @dataclass
@@ -234,10 +263,12 @@ class FitRecord:
 
 @dataclass
 class ParamsFit:
-    """The params fit's answer: the dictionary and the record."""
+    """The params fit's answer: the dictionary, the record, and the dictionary's tree as the fit grew it
+    (skeleton, mesh), or None when it could not be grown."""
 
     params: dict
     record: FitRecord
+    tree: tuple | None = None
 
 
 def trunk_width(shape: np.ndarray) -> float:
@@ -279,18 +310,26 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     grow = grow or species.rebuild
     trace = FitTrace()
     outlines: dict[int, np.ndarray] = {}  # evaluation index -> outline, kept for the first and the best
+    grown = {"faces": 0, "best": None}    # faces of every candidate so far; the best candidate's tree
 
     def evaluate(candidate: dict) -> float:
+        tree = None
         try:
-            skeleton, mesh = grow(candidate)
+            tree = grow(candidate)
         except TreefarmError:
             shape = np.zeros((0, 0), bool)
         else:
-            shape = front_outline(renderer, skeleton, mesh)
+            shape = front_outline(renderer, *tree)
+            grown["faces"] += tree[1].n_faces
         value = outline_iou(shape, target)
         if not trace.scores or value > max(trace.scores):
-            outlines[trace.evals] = shape
+            outlines[trace.evals], grown["best"] = shape, tree
         return trace.add(value)
+
+    def spent() -> bool:
+        """The budget is spent: `evals` candidates, or FIT_FACE_BUDGET faces grown and drawn (counts, so the same
+        drawing and budget stop at the same candidate on any machine)."""
+        return trace.evals >= evals or grown["faces"] >= FIT_FACE_BUDGET
 
     trunk_factor = 1.0  # the trunk step's factor on every later candidate's trunk radius (`ratio`)
 
@@ -314,7 +353,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         starts.append(codec.as_outputs(codec.encode_arrays([species.sample(name, np.random.default_rng(seed))],
                                                            np.float64)))
         for outs in starts:
-            if trace.evals >= evals:
+            if spent():
                 break
             params = decoded(outs, seed)
             value = evaluate(params)
@@ -324,7 +363,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
     first = trace.scores[0]
     species_scores.setdefault(best_params["species"], (best, probabilities.get(best_params["species"], 0.0)))
     for offset in range(1, SEEDS_TRIED):
-        if trace.evals >= evals:
+        if spent():
             break
         params = decoded(best_outputs, seed + offset)
         value = evaluate(params)
@@ -332,7 +371,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
             best, best_seed, best_params = value, seed + offset, params
     # The trunk as drawn: people draw trunks wider than trees grow them (and than training drew them); one
     # evaluation tries the guess's trunk radius scaled to the drawn trunk's width, kept for the search if better.
-    if trace.evals < evals:
+    if not spent():
         factor = trunk_width(target) / max(trunk_width(outlines[int(np.argmax(trace.scores))]), 1e-9)
         if factor > TRUNK_WIDER:
             trunk_factor = factor
@@ -343,7 +382,7 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
             else:
                 trunk_factor = 1.0
     left = evals - trace.evals
-    if left > 0:
+    if not spent():
         columns = _slot_columns(codec)
         ranges = {head: codec.normalised_range(head) for head, _ in columns}
         low = np.array([ranges[h][0][c] for h, c in columns])
@@ -365,9 +404,9 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
             chosen[x.tobytes()] = params
             return value
 
-        x, value = search(score, x0, left, np.random.default_rng(best_seed), x0_score=best)
+        x, value = search(score, x0, left, np.random.default_rng(best_seed), x0_score=best, stop=spent)
         if value > best:
             best, best_params = value, chosen[x.tobytes()]
     best_index = int(np.argmax(trace.scores))
     return ParamsFit(best_params, FitRecord(target, outlines[0], first, outlines[best_index], best, trace,
-                                            species_scores))
+                                            species_scores), grown["best"])

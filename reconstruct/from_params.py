@@ -65,13 +65,15 @@ def from_params(sketch, *, models=None, net=None, seed: int = 0, height: float |
     params = net.codec.decode_arrays(dict(outputs), seed=int(seed))[0]
     confidence = float(net.codec.species_confidence(dict(outputs))[0])
     timer.lap("network")
-    maps = {"input": prepared.image[0]}
+    maps, grown = {"input": prepared.image[0]}, None
     if fit_evals:
         fit = _fitted(net.codec, dict(outputs), image, fit_evals, int(seed), renderer)
-        params, maps["fit"] = fit.params, fit.record
+        params, maps["fit"], grown = fit.params, fit.record, fit.tree
         confidence = fit.record.species_scores[params["species"]][1]
         timer.lap("fit")
-    if height is None:
+    if height is None and grown is not None:
+        skeleton, mesh = grown  # the fit grew this very dictionary: `species.rebuild` gives the same bytes
+    elif height is None:
         skeleton, mesh = species.rebuild(params)
     else:
         params, skeleton, mesh = scaled_to_height(params, float(height))

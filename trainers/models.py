@@ -30,7 +30,6 @@ import numpy as np
 
 from species.errors import TreefarmError
 
-from .data import Split, TaskDataset
 from .onnx_runtime import OnnxModel
 from .preprocess import KINDS, prepare, preprocess
 from .model_tables import below_baseline
@@ -278,7 +277,8 @@ def retrain(task: str, data: str | Sequence[str], registry: Registry, *, run_dir
             progress: bool = False, report_dir: str | Path | None = None) -> RetrainOutcome:
     """Train a challenger and promote it only if it beats the champion on the champion's held-out split (see the
     module docstring). The report goes to `report_dir` (default: the run folder) as retrain-report.md/.json."""
-    # torch's networks and training loop on Ray Train: the predictor (ONNX Runtime) loads without them
+    # torch's data, networks and training loop on Ray Train: the predictor (ONNX Runtime) loads without them
+    from .data import Split, TaskDataset
     from .networks import TrainSettings
     from .training import evaluation_batches, train
 

@@ -3,6 +3,10 @@ the shapes they enclose, the search never ends worse than its start and keeps to
 method's fit is deterministic, off at budget 0 and better than the first guess on a drawing of a known tree."""
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -133,6 +137,8 @@ def test_the_fit_beats_the_first_guess_and_the_same_budget_repeats_itself(known_
     assert record.score == pytest.approx(max(record.trace.scores)) and record.first_score == record.trace.scores[0]
     assert record.score > 0.6  # the drawing of a preset tree is within reach of the species' own preset
     assert fitted.params == again.params and fitted.mesh.to_glb() == again.mesh.to_glb()
+    # The result is the tree the fit grew for the chosen dictionary, the bytes `species.rebuild` gives it.
+    assert fitted.mesh.to_glb() == species.rebuild(fitted.params)[1].to_glb()
     assert fitted.maps["species"][0] == fitted.params["species"] and 0.0 <= fitted.maps["species"][1] <= 1.0
     overlay = record.overlay()
     assert overlay.dtype == np.uint8 and overlay.shape[0] == OUTLINE_HEIGHT and overlay[..., 1].any()
@@ -156,3 +162,34 @@ def test_a_trunk_drawn_wider_than_the_guess_s_is_fitted_wider(known_tree, net):
     assert trunk_width(target) > TRUNK_WIDER * trunk_width(guessed)
     assert fit.params["ratio"] > 1.5 * guess["ratio"]
     assert fit.record.score > outline_iou(guessed, target)
+
+
+def test_the_fit_stops_at_its_face_budget(known_tree, net, monkeypatch):
+    """A count of faces grown and drawn caps the candidates (big crowns cost many times a small one's): past the
+    budget no candidate is grown, the guess always is, and the tree given back is the best one grown."""
+    import reconstruct.fitting as fitting
+
+    sketch = known_tree[0]
+    monkeypatch.setattr(fitting, "FIT_FACE_BUDGET", 1)
+    alone = from_params(sketch, net=net, fit_evals=12)
+    assert alone.maps["fit"].trace.evals == 1
+    guess = species.rebuild(alone.params)[1]
+    monkeypatch.setattr(fitting, "FIT_FACE_BUDGET", 2 * guess.n_faces + 1)
+    few = from_params(sketch, net=net, fit_evals=12)
+    assert 2 <= few.maps["fit"].trace.evals < 12
+    assert few.mesh.to_glb() == species.rebuild(few.params)[1].to_glb()
+
+
+def test_a_drawing_s_fit_loads_neither_torch_nor_plotting():
+    """The params method in a fresh process: the network through ONNX Runtime, the search through `cma` without
+    its plotting and statistics extras (each a second of a drawing's time budget)."""
+    code = ("import sys, numpy as np, cv2; from reconstruct import from_params; "
+            "image = np.full((200, 200), 255, np.uint8); cv2.circle(image, (100, 70), 50, 0, 2); "
+            "cv2.line(image, (95, 118), (95, 190), 0, 2); cv2.line(image, (105, 118), (105, 190), 0, 2); "
+            "result = from_params(image, fit_evals=12); assert result.maps['fit'].trace.evals == 12; "
+            "loaded = [m for m in ('torch', 'ray', 'matplotlib.pyplot', 'scipy.stats') if m in sys.modules]; "
+            "print(loaded)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          cwd=Path(__file__).resolve().parents[2])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]"
