@@ -109,7 +109,7 @@ def write_figure(path: Path, groups: dict[str, list[Drawing]], points: list[int]
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     fig.subplots_adjust(left=0.11, right=0.97, top=0.9, bottom=0.13)
     for name, group in groups.items():
-        curve = np.array([[d.best[k - 1] for d in group] for k in points])
+        curve = np.array([[d.best[min(k, len(d.best)) - 1] for d in group] for k in points])
         median, q25, q75 = (np.percentile(curve, q, axis=1) for q in (50, 25, 75))
         style = {"linewidth": 2.2, "color": "black"} if name == "all" else {"linewidth": 1.2}
         ax.plot(points, median, marker="o", markersize=3, label=f"{name} ({len(group)})", **style)
@@ -190,7 +190,8 @@ def main(argv=None) -> None:
     for k in points:
         row = [k]
         for group in groups.values():
-            row.append(float(np.median([d.best[k - 1] for d in group])))
+            # A fit that stopped at its face budget keeps its best for the rest of the evaluations.
+            row.append(float(np.median([d.best[min(k, len(d.best)) - 1] for d in group])))
         curve_rows.append(row)
     bench.table(f"score against evaluations: median best outline IoU so far (fits of budget {largest})",
                 ["evals", *groups], curve_rows,

@@ -222,10 +222,10 @@ SEEDS_TRIED = 3     # decode seeds (Weber-Penn's split decisions) tried on the b
 TRUNK_ROWS = (0.86, 0.94)  # an outline's trunk: these rows (share of its height from the top), above a flared foot
 TRUNK_WIDER = 1.15         # a drawn trunk this much wider than the best candidate's is tried at its width
 MAX_TRUNK_RATIO = 0.15     # the trunk step's largest trunk radius over the tree's scale (Weber-Penn's `ratio`)
-# The params fit also stops once its candidates have this many faces together (growing and drawing a candidate
-# takes time in proportion to its faces): a big crown's candidates cost many times a small one's, and the time
-# target is per drawing.
-FIT_FACE_BUDGET = 6_000_000
+# The params fit also stops once its candidates have this many faces together per evaluation of its budget
+# (growing and drawing a candidate takes time in proportion to its faces): a big crown's candidates cost many times
+# a small one's, and the time target is per drawing.
+FIT_FACES_PER_EVAL = 187_500
 
 
 @dataclass
@@ -327,9 +327,10 @@ def fit_params(codec, outputs: dict, target: np.ndarray, evals: int, seed: int, 
         return trace.add(value)
 
     def spent() -> bool:
-        """The budget is spent: `evals` candidates, or FIT_FACE_BUDGET faces grown and drawn (counts, so the same
-        drawing and budget stop at the same candidate on any machine)."""
-        return trace.evals >= evals or grown["faces"] >= FIT_FACE_BUDGET
+        """The budget is spent: `evals` candidates, or FIT_FACES_PER_EVAL faces an evaluation grown and drawn
+        (counts, so the same drawing and budget stop at the same candidate on any machine); the guess is always
+        scored."""
+        return trace.evals >= evals or (trace.evals > 0 and grown["faces"] >= FIT_FACES_PER_EVAL * evals)
 
     trunk_factor = 1.0  # the trunk step's factor on every later candidate's trunk radius (`ratio`)
 

@@ -123,7 +123,10 @@ def test_budget_zero_grows_the_network_s_guess_as_it_is(known_tree, net):
     assert "fit" not in result.maps and "fit" not in result.timings
 
 
-def test_the_fit_beats_the_first_guess_and_the_same_budget_repeats_itself(known_tree, net):
+def test_the_fit_beats_the_first_guess_and_the_same_budget_repeats_itself(known_tree, net, monkeypatch):
+    import reconstruct.fitting as fitting
+
+    monkeypatch.setattr(fitting, "FIT_FACES_PER_EVAL", 10**9)  # every evaluation spent (the cap: test below)
     sketch = known_tree[0]
     renderer = ViewRenderer(256)
     try:
@@ -144,9 +147,12 @@ def test_the_fit_beats_the_first_guess_and_the_same_budget_repeats_itself(known_
     assert overlay.dtype == np.uint8 and overlay.shape[0] == OUTLINE_HEIGHT and overlay[..., 1].any()
 
 
-def test_a_trunk_drawn_wider_than_the_guess_s_is_fitted_wider(known_tree, net):
+def test_a_trunk_drawn_wider_than_the_guess_s_is_fitted_wider(known_tree, net, monkeypatch):
     """The known tree's drawing with its trunk drawn much wider (two lines round it, as people draw trunks): the
     fit tries the guess's trunk at the drawn width and keeps it, a better outline than the trunk it guessed."""
+    import reconstruct.fitting as fitting
+
+    monkeypatch.setattr(fitting, "FIT_FACES_PER_EVAL", 10**9)  # the trunk step comes after the species and seeds
     sketch = known_tree[0].copy()
     rows, cols = np.nonzero(ink_mask(sketch))
     foot, height = rows.max(), rows.max() - rows.min()
@@ -170,11 +176,11 @@ def test_the_fit_stops_at_its_face_budget(known_tree, net, monkeypatch):
     import reconstruct.fitting as fitting
 
     sketch = known_tree[0]
-    monkeypatch.setattr(fitting, "FIT_FACE_BUDGET", 1)
+    monkeypatch.setattr(fitting, "FIT_FACES_PER_EVAL", 0)
     alone = from_params(sketch, net=net, fit_evals=12)
     assert alone.maps["fit"].trace.evals == 1
     guess = species.rebuild(alone.params)[1]
-    monkeypatch.setattr(fitting, "FIT_FACE_BUDGET", 2 * guess.n_faces + 1)
+    monkeypatch.setattr(fitting, "FIT_FACES_PER_EVAL", (2 * guess.n_faces + 1) / 12)
     few = from_params(sketch, net=net, fit_evals=12)
     assert 2 <= few.maps["fit"].trace.evals < 12
     assert few.mesh.to_glb() == species.rebuild(few.params)[1].to_glb()
