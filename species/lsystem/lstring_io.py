@@ -197,11 +197,21 @@ def lstring_round_trip(skeleton: Skeleton, rng: np.random.Generator, degree_diff
 
 
 def _as_written(values: np.ndarray) -> np.ndarray:
-    """Values as `tree_to_lstring` writes them (3 decimals, the sign in the symbol) and `_parse` reads them back."""
+    """Values as `tree_to_lstring` writes them (3 decimals, the sign in the symbol) and `_parse` reads them back:
+    thousandths rounded to the nearest integer and divided by 1000 is the float of the decimal text, except
+    within rounding error of a half, where the text itself is written and read."""
     if not np.isfinite(values).all():
         raise LStringError(f"a non-finite value {values[~np.isfinite(values)][0]} in the tree's edges")
-    magnitude = np.array([float(f"{v:.3f}") for v in np.abs(values).tolist()], np.float64)
+    thousandths = np.abs(values) * 1000.0
+    magnitude = np.rint(thousandths) / 1000.0
+    near_half = np.flatnonzero(np.abs(thousandths - np.floor(thousandths) - 0.5) < _NEAR_HALF)
+    magnitude[near_half] = [float(f"{v:.3f}") for v in np.abs(values[near_half]).tolist()]
     return np.where(values >= 0, magnitude, -magnitude)
+
+
+# Thousandths this close to a half may round either way in float arithmetic (the product's own error is orders
+# of magnitude smaller for any length or angle of a tree); the exact decimal rounding decides them.
+_NEAR_HALF = 1e-6
 
 
 def _check_noise(degree_diff: float, dist_diff_percent: float) -> None:
