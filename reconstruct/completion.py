@@ -82,8 +82,9 @@ def keep_within_reach(skeleton: Skeleton, reach: ScanReach, first_added: int) ->
     """The skeleton less the added nodes (index `first_added` on) outside `reach` (their tube's bottom below the
     ground, or beyond the hull's margin), each with everything under it, and less every leaf card with a corner
     outside. Nodes before `first_added` are never removed."""
-    node = np.arange(len(skeleton))
-    drop = (node >= first_added) & reach.outside(skeleton.positions, skeleton.radius.astype(np.float64))
+    drop = np.zeros(len(skeleton), bool)
+    added = slice(first_added, None)
+    drop[added] = reach.outside(skeleton.positions[added], skeleton.radius[added].astype(np.float64))
     for level in depth_levels(skeleton.depth):
         drop[level] |= drop[skeleton.parent[level]]
     trimmed = skeleton.subset(~drop) if drop.any() else skeleton
