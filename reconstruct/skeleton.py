@@ -56,8 +56,8 @@ from species.timing import StageTimer
 from .clouds import CloudError, PointCloud, read_cloud
 from .robust_fit import soft_l1_fit
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "GRAPHS", "PRUNE_RATIO",
-           "RADIUS_EXPONENT", "MAX_BAND_M"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "subset_neighbours", "GRAPHS",
+           "PRUNE_RATIO", "RADIUS_EXPONENT", "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
 # Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
@@ -166,9 +166,15 @@ class CloudSkeleton:
 def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
     """(M, 3) float64: the points with duplicates (closer than DUPLICATE_M, on a 1 mm grid) merged, thinned on
     a voxel grid (one point per voxel, the first in file order) when more than `max_points` remain."""
-    points = points[_first_per_cell(points, DUPLICATE_M)]
-    if len(points) <= max_points:
-        return points
+    return points[unique_point_indices(points, max_points)]
+
+
+def unique_point_indices(points: np.ndarray, max_points: int) -> np.ndarray:
+    """(M,) ascending indices of the points `unique_points` keeps."""
+    kept = _first_per_cell(points, DUPLICATE_M)
+    if len(kept) <= max_points:
+        return kept
+    points = points[kept]
     extent = np.ptp(points, axis=0)
     # A scan samples surfaces, so the count falls with the voxel's area: start from the box's volume (a bound)
     # shrunk, then step by the square root of the excess until the cap is met (two or three passes).
@@ -176,7 +182,7 @@ def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
     while True:
         first = _first_per_cell(points, voxel)
         if len(first) <= max_points:
-            return points[first]
+            return kept[first]
         voxel *= max(np.sqrt(len(first) / max_points), 1.05)
 
 
@@ -211,11 +217,32 @@ def statistical_inliers(points: np.ndarray, k: int = OUTLIER_NEIGHBOURS, sigma: 
 
 
 def cloud_neighbours(cloud) -> tuple[np.ndarray, np.ndarray]:
-    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 1 nearest points of each point of a PointCloud
+    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 2 nearest points of each point of a PointCloud
     or an (N, 3) array (itself first, float64 distances), the query the outlier filter and `reconstruct.wood`'s
-    scattering share."""
+    scattering share: one column more than either reads, so that their own rows, and those of a subset of the
+    points, are read off it where no distance ties at the edge (`subset_neighbours`)."""
     points = np.asarray(cloud.points if isinstance(cloud, PointCloud) else cloud, np.float64)
-    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 1, len(points)))
+    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 2, len(points)))
+
+
+def subset_neighbours(points: np.ndarray, kept: np.ndarray, distance: np.ndarray, index: np.ndarray,
+                      k: int) -> tuple[np.ndarray, np.ndarray]:
+    """(distances, indices), (M, k) each: cKDTree's k-nearest query of points[kept] among themselves (indices
+    into them), read from a query of all `points` with more than k columns. A row whose first k + 1 distances all
+    differ and whose first k neighbours are all kept holds the subset's k nearest, in their order (every other
+    kept point is farther than the (k + 1)-th); the other rows are queried again."""
+    subset = points[kept]
+    k = min(k, len(subset))
+    renumber = np.full(len(points), -1, np.int64)
+    renumber[kept] = np.arange(len(kept))
+    if distance.shape[1] <= k:
+        return cKDTree(subset).query(subset, k=k)
+    first = renumber[index[kept, :k]]
+    near = distance[kept, :k].copy()
+    again = np.flatnonzero(~(np.diff(distance[kept, :k + 1], axis=1) > 0).all(axis=1) | (first < 0).any(axis=1))
+    if len(again):
+        near[again], first[again] = cKDTree(subset).query(subset[again], k=k)
+    return near, first
 
 
 def nearest_kept(distance: np.ndarray, index: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
@@ -684,8 +711,8 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
 
     cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
     settings : the constants (SkeletonSettings()).
-    neighbours : `cloud_neighbours(cloud)` where the caller has it already; used when no point is a duplicate and
-               the cloud needs no thinning (it is then the outlier filter's own query).
+    neighbours : `cloud_neighbours(cloud)` where the caller has it already (the outlier filter's own query is read
+               off it, `subset_neighbours`).
     Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
     """
     settings = SkeletonSettings() if settings is None else settings
@@ -696,11 +723,15 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
 
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)
-    points = unique_points(cloud.points.astype(np.float64), settings.max_points)
-    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`); unique_points keeps
-    # every point in its order when it merges and thins none.
-    if neighbours is None or len(points) != len(cloud.points):
+    every = cloud.points.astype(np.float64)
+    chosen = unique_point_indices(every, settings.max_points)
+    points = every[chosen]
+    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`), read off the caller's
+    # query of the whole cloud where it has one.
+    if neighbours is None:
+        every, chosen = points, np.arange(len(points))
         neighbours = cloud_neighbours(points)
+    neighbours = subset_neighbours(every, chosen, *neighbours, OUTLIER_NEIGHBOURS + 1)
     kept = np.ones(len(points), bool)
     if settings.outlier_sigma > 0 and len(points) > 20:
         kept = statistical_inliers(points, OUTLIER_NEIGHBOURS, settings.outlier_sigma, neighbours=neighbours)

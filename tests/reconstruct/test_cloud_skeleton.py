@@ -10,7 +10,8 @@ from scipy.spatial import cKDTree
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
 from reconstruct.skeleton import (SkeletonSettings, cloud_neighbours, cloud_skeleton, fit_circle, graph_edges,
-                                  nearest_kept, path_sums, statistical_inliers, unique_points)
+                                  nearest_kept, path_sums, statistical_inliers, subset_neighbours,
+                                  unique_point_indices, unique_points)
 from reconstruct.wood import scattering
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
@@ -161,6 +162,25 @@ def test_the_leaf_test_and_the_skeleton_read_one_shared_query_as_their_own():
         shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
         assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes()
         assert shared.spacing == own.spacing and shared.n_used == own.n_used
+
+
+def test_a_subsets_neighbours_read_off_the_whole_query_are_its_own():
+    # duplicates merged (rows holding a dropped point), a 1 cm grid (rows of equal distances) and thinning: the
+    # rows read off the whole cloud's query and those queried again make the subset's own query
+    rng = np.random.default_rng(8)
+    clumps = _clumps(rng)
+    grid = np.round(clumps * 100) / 100
+    doubled = np.concatenate([clumps, clumps[::5] + 2e-4])[rng.permutation(len(clumps) + len(clumps[::5]))]
+    for points, cap in ((doubled, 10**6), (grid, 10**6), (clumps, 300)):
+        kept = unique_point_indices(points, cap)
+        assert len(kept) < len(points)
+        subset = points[kept]
+        near, index = subset_neighbours(points, kept, *cloud_neighbours(points), 17)
+        own_near, own_index = cKDTree(subset).query(subset, k=17)
+        assert near.tobytes() == own_near.tobytes() and np.array_equal(index, own_index)
+    cloud = read_cloud(doubled)
+    shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
+    assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes() and shared.spacing == own.spacing
 
 
 def test_the_knn_graph_of_several_pieces_is_one_piece_of_unique_sorted_edges():
