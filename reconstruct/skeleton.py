@@ -56,8 +56,8 @@ from species.timing import StageTimer
 from .clouds import CloudError, PointCloud, read_cloud
 from .robust_fit import soft_l1_fit
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "subset_neighbours", "GRAPHS",
-           "PRUNE_RATIO", "RADIUS_EXPONENT", "MAX_BAND_M"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "subset_neighbours",
+           "moved_neighbours", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT", "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
 # Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
@@ -317,9 +317,11 @@ def centralise_trunk(points: np.ndarray, base_share: float, spacing: float,
 
 
 # ------------------------------------------------------------------------------------------------ stage 4
-def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
+def graph_edges(points: np.ndarray, graph: str, knn: int, nearest: np.ndarray | None = None) -> np.ndarray:
     """(E, 2) int64 unique undirected edges (i < j): the 3D Delaunay triangulation's, or the k-NN graph's with
-    its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way."""
+    its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way.
+    nearest : (N, knn + 1) each point's knn + 1 nearest (itself among them), where the caller has them
+    (`moved_neighbours`)."""
     n = len(points)
     if graph == "delaunay":
         try:
@@ -329,7 +331,7 @@ def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
                              ) from None
         return _unique_edges(simplices[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]].reshape(-1, 2), n)
     tree = cKDTree(points)
-    _, index = tree.query(points, k=min(knn + 1, n))
+    index = tree.query(points, k=min(knn + 1, n))[1] if nearest is None else nearest
     edges = _unique_edges(np.column_stack([np.repeat(np.arange(n), index.shape[1] - 1), index[:, 1:].ravel()]), n)
     count, label = connected_components(_adjacency(edges, n), directed=False)
     while count > 1:
@@ -343,6 +345,30 @@ def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
 
 
 _BRIDGE_NEIGHBOURS = 32  # neighbours searched for a link out of a piece of the k-NN graph
+
+
+def moved_neighbours(points: np.ndarray, subset: np.ndarray, distance: np.ndarray, index: np.ndarray,
+                     moved: np.ndarray, trunk: np.ndarray, k: int) -> np.ndarray | None:
+    """(M, k) the k nearest of each of `moved` among them, as a set per row (the k-NN graph's edges), where
+    `moved` is points[subset] with the `trunk` rows moved (`centralise_trunk`), read from a query of all `points`
+    with more than k columns (None without one). A row is read off when its point and its k nearest are not trunk
+    points, are all in the subset, are nearer than its (k + 1)-th, and every moved trunk point is farther: no other
+    point can then be among its k nearest. The other rows are queried again."""
+    if distance.shape[1] <= k or len(subset) <= k:
+        return None
+    renumber = np.full(len(points), -1, np.int64)
+    renumber[subset] = np.arange(len(subset))
+    nearest = renumber[index[subset, :k]]
+    edge = distance[subset, k - 1]
+    read = ~trunk & (nearest >= 0).all(axis=1) & (edge < distance[subset, k])
+    read[read] = ~trunk[nearest[read]].any(axis=1)
+    if trunk.any() and read.any():
+        rows = np.flatnonzero(read)
+        read[rows] = cKDTree(moved[trunk]).query(moved[rows], k=1)[0] > edge[rows]
+    again = np.flatnonzero(~read)
+    if len(again):
+        nearest[again] = cKDTree(moved).query(moved[again], k=k)[1]
+    return nearest
 
 
 def _unique_edges(pairs: np.ndarray, n: int) -> np.ndarray:
@@ -731,6 +757,7 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     if neighbours is None:
         every, chosen = points, np.arange(len(points))
         neighbours = cloud_neighbours(points)
+    whole = neighbours
     neighbours = subset_neighbours(every, chosen, *neighbours, OUTLIER_NEIGHBOURS + 1)
     kept = np.ones(len(points), bool)
     if settings.outlier_sigma > 0 and len(points) > 20:
@@ -743,7 +770,9 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     lap("duplicates")
     moved, trunk, axis_centres, radius0 = centralise_trunk(points, settings.trunk_base_share, spacing)
     lap("trunk")
-    edges = graph_edges(moved, settings.graph, settings.knn)
+    nearest = moved_neighbours(every, chosen[kept], *whole, moved, trunk, min(settings.knn + 1, len(moved))) \
+        if settings.graph == "knn" else None
+    edges = graph_edges(moved, settings.graph, settings.knn, nearest)
     lap("graph")
     root = int(np.argmin(np.where(trunk, moved[:, 2], np.inf))) if trunk.any() else int(np.argmin(moved[:, 2]))
     predecessor, along = shortest_path_tree(moved, edges, root)
