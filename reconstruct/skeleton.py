@@ -54,10 +54,11 @@ from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_
 from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
+from .knn_subsets import moved_neighbours, subset_neighbours
 from .robust_fit import soft_l1_fit
 
-__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "subset_neighbours",
-           "moved_neighbours", "GRAPHS", "PRUNE_RATIO", "RADIUS_EXPONENT", "MAX_BAND_M"]
+__all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "GRAPHS", "PRUNE_RATIO",
+           "RADIUS_EXPONENT", "MAX_BAND_M"]
 
 GRAPHS = ("delaunay", "knn")
 # Side subtrees reaching less than this share of the tree's reach are removed. AdTree's paper prunes at 0.019;
@@ -225,26 +226,6 @@ def cloud_neighbours(cloud) -> tuple[np.ndarray, np.ndarray]:
     return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 2, len(points)))
 
 
-def subset_neighbours(points: np.ndarray, kept: np.ndarray, distance: np.ndarray, index: np.ndarray,
-                      k: int) -> tuple[np.ndarray, np.ndarray]:
-    """(distances, indices), (M, k) each: cKDTree's k-nearest query of points[kept] among themselves (indices
-    into them), read from a query of all `points` with more than k columns. A row whose first k + 1 distances all
-    differ and whose first k neighbours are all kept holds the subset's k nearest, in their order (every other
-    kept point is farther than the (k + 1)-th); the other rows are queried again."""
-    subset = points[kept]
-    k = min(k, len(subset))
-    renumber = np.full(len(points), -1, np.int64)
-    renumber[kept] = np.arange(len(kept))
-    if distance.shape[1] <= k:
-        return cKDTree(subset).query(subset, k=k)
-    first = renumber[index[kept, :k]]
-    near = distance[kept, :k].copy()
-    again = np.flatnonzero(~(np.diff(distance[kept, :k + 1], axis=1) > 0).all(axis=1) | (first < 0).any(axis=1))
-    if len(again):
-        near[again], first[again] = cKDTree(subset).query(subset[again], k=k)
-    return near, first
-
-
 def nearest_kept(distance: np.ndarray, index: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
     """(M,) each kept point's distance to the nearest other kept point, read from the k-NN query of all the
     points ((N, k) sorted rows, each point itself first): the first kept neighbour in its row is the nearest;
@@ -321,7 +302,7 @@ def graph_edges(points: np.ndarray, graph: str, knn: int, nearest: np.ndarray | 
     """(E, 2) int64 unique undirected edges (i < j): the 3D Delaunay triangulation's, or the k-NN graph's with
     its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way.
     nearest : (N, knn + 1) each point's knn + 1 nearest (itself among them), where the caller has them
-    (`moved_neighbours`)."""
+    (`knn_subsets.moved_neighbours`)."""
     n = len(points)
     if graph == "delaunay":
         try:
@@ -345,30 +326,6 @@ def graph_edges(points: np.ndarray, graph: str, knn: int, nearest: np.ndarray | 
 
 
 _BRIDGE_NEIGHBOURS = 32  # neighbours searched for a link out of a piece of the k-NN graph
-
-
-def moved_neighbours(points: np.ndarray, subset: np.ndarray, distance: np.ndarray, index: np.ndarray,
-                     moved: np.ndarray, trunk: np.ndarray, k: int) -> np.ndarray | None:
-    """(M, k) the k nearest of each of `moved` among them, as a set per row (the k-NN graph's edges), where
-    `moved` is points[subset] with the `trunk` rows moved (`centralise_trunk`), read from a query of all `points`
-    with more than k columns (None without one). A row is read off when its point and its k nearest are not trunk
-    points, are all in the subset, are nearer than its (k + 1)-th, and every moved trunk point is farther: no other
-    point can then be among its k nearest. The other rows are queried again."""
-    if distance.shape[1] <= k or len(subset) <= k:
-        return None
-    renumber = np.full(len(points), -1, np.int64)
-    renumber[subset] = np.arange(len(subset))
-    nearest = renumber[index[subset, :k]]
-    edge = distance[subset, k - 1]
-    read = ~trunk & (nearest >= 0).all(axis=1) & (edge < distance[subset, k])
-    read[read] = ~trunk[nearest[read]].any(axis=1)
-    if trunk.any() and read.any():
-        rows = np.flatnonzero(read)
-        read[rows] = cKDTree(moved[trunk]).query(moved[rows], k=1)[0] > edge[rows]
-    again = np.flatnonzero(~read)
-    if len(again):
-        nearest[again] = cKDTree(moved).query(moved[again], k=k)[1]
-    return nearest
 
 
 def _unique_edges(pairs: np.ndarray, n: int) -> np.ndarray:
@@ -738,7 +695,7 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
     settings : the constants (SkeletonSettings()).
     neighbours : `cloud_neighbours(cloud)` where the caller has it already (the outlier filter's own query is read
-               off it, `subset_neighbours`).
+               off it, `knn_subsets.subset_neighbours`).
     Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
     """
     settings = SkeletonSettings() if settings is None else settings

@@ -9,9 +9,9 @@ from scipy.spatial import cKDTree
 
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
+from reconstruct.knn_subsets import moved_neighbours, subset_neighbours
 from reconstruct.skeleton import (SkeletonSettings, cloud_neighbours, cloud_skeleton, fit_circle, graph_edges,
-                                  moved_neighbours, nearest_kept, path_sums, statistical_inliers,
-                                  subset_neighbours, unique_point_indices, unique_points)
+                                  nearest_kept, path_sums, statistical_inliers, unique_point_indices, unique_points)
 from reconstruct.wood import scattering
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
