@@ -19,7 +19,7 @@ from species.errors import ParameterError
 from species.geometry.topology import depth_levels
 from species.geometry.vectors import unit_vectors
 from species.lsystem.graft import extract_subtree, graft, side_anchor
-from species.lsystem.lstring_io import lstring_to_tree, tree_to_lstring
+from species.lsystem.lstring_io import lstring_round_trip
 from species.lsystem.phyllotaxis import PATTERNS, add_twigs
 from species.skeleton import LEAF_CARD_CORNERS, Skeleton
 
@@ -82,8 +82,9 @@ def keep_within_reach(skeleton: Skeleton, reach: ScanReach, first_added: int) ->
     """The skeleton less the added nodes (index `first_added` on) outside `reach` (their tube's bottom below the
     ground, or beyond the hull's margin), each with everything under it, and less every leaf card with a corner
     outside. Nodes before `first_added` are never removed."""
-    node = np.arange(len(skeleton))
-    drop = (node >= first_added) & reach.outside(skeleton.positions, skeleton.radius.astype(np.float64))
+    drop = np.zeros(len(skeleton), bool)
+    added = slice(first_added, None)
+    drop[added] = reach.outside(skeleton.positions[added], skeleton.radius[added].astype(np.float64))
     for level in depth_levels(skeleton.depth):
         drop[level] |= drop[skeleton.parent[level]]
     trimmed = skeleton.subset(~drop) if drop.any() else skeleton
@@ -254,8 +255,9 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
     branch length; none is filled when the median is 0 (a crown on one side is not a crown with holes). Per gap,
     ceil(missing length / mean donor length) grafts, at most `max_grafts_per_gap`, each:
     1. a donor: a branch growing out of the trunk, drawn by its length (`extract_subtree` of its first node);
-    2. its noisy copy: `tree_to_lstring` -> `lstring_to_tree` with U(+-degree_diff) degrees on every angle and
-       U(1 -+ dist_diff_percent) on every length, tips as thick as the donor's median tip;
+    2. its noisy copy: `tree_to_lstring` -> `lstring_to_tree` (`lstring_round_trip`, the same tree without the
+       text) with U(+-degree_diff) degrees on every angle and U(1 -+ dist_diff_percent) on every length, tips as
+       thick as the donor's median tip;
     3. a side anchor (Algorithm 5) on a trunk node in the crown's height span whose first child is trunk, at an
        azimuth drawn inside the gap: the camera sits at up x gap direction, so the anchor's side, toCam x trunkDir,
        faces the gap (the digest's "toCam toward the gap" read so that the new branch grows into it);
@@ -303,8 +305,8 @@ def fill_gaps(skeleton: Skeleton, rng: np.random.Generator, *, trunk_mask=None, 
         for _ in range(n_grafts):
             donor = extract_subtree(skeleton, int(rng.choice(donors, p=weights)))
             tip_radius = float(np.median(donor.radius[donor.tips]))
-            copy = lstring_to_tree(tree_to_lstring(donor), rng, degree_diff, dist_diff_percent,
-                                   tip_radius=tip_radius, pipe_exponent=pipe_exponent)
+            copy = lstring_round_trip(donor, rng, degree_diff, dist_diff_percent, tip_radius=tip_radius,
+                                      pipe_exponent=pipe_exponent)
             azimuth = (start + rng.uniform(0.15, 0.85) * count) * width
             toward_gap = np.array([np.cos(azimuth), np.sin(azimuth), 0.0])
             at = int(rng.choice(anchors))

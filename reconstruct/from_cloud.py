@@ -24,7 +24,7 @@ from .result import Reconstruction, ScanRecord
 from .skeleton import SkeletonSettings, _adjacency, cloud_neighbours, cloud_skeleton
 from .wood import LEAF_ON_SHARE, leaf_on_share, wood_points
 
-__all__ = ["from_cloud", "FRAMES", "check_single_tree", "stem_groups"]
+__all__ = ["from_cloud", "FRAMES", "check_single_tree", "stem_groups", "linked_groups"]
 
 FRAMES = ("base", "scan")
 # Several trees: the lowest STEM_BAND_M of the cloud splits into stems more than STEM_GAP_M apart, each holding
@@ -32,6 +32,7 @@ FRAMES = ("base", "scan")
 STEM_BAND_M = 0.5
 STEM_GAP_M = 0.5
 STEM_SHARE = 0.15
+_CELL_DIAGONALS = 1.75  # a grid cell's side is the gap over this (more than sqrt(3), so its diagonal is shorter)
 
 
 def stem_groups(points: np.ndarray, ground: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -40,8 +41,29 @@ def stem_groups(points: np.ndarray, ground: float = 0.0) -> tuple[np.ndarray, np
     low = points[:, 2] - ground <= STEM_BAND_M
     if low.sum() < 2:
         return low, np.zeros(int(low.sum()), np.int64)
-    pairs = cKDTree(points[low]).query_pairs(STEM_GAP_M, output_type="ndarray")
-    return low, connected_components(_adjacency(pairs, int(low.sum())), directed=False)[1]
+    return low, linked_groups(points[low], STEM_GAP_M)
+
+
+def linked_groups(points: np.ndarray, gap: float) -> np.ndarray:
+    """(N,) int64 group labels of (N, 3) points, points within `gap` of each other sharing one; groups numbered
+    in the order of their first points (as `connected_components` numbers them). The links are counted between
+    grid cells too small to hold two points farther apart than `gap`, whose points are therefore one group: a
+    dense band's hundreds of thousands of links become a few between cells."""
+    if not len(points):
+        return np.zeros(0, np.int64)
+    pairs = cKDTree(points).query_pairs(gap, output_type="ndarray")
+    cell = np.floor((points - points.min(axis=0)) / (gap / _CELL_DIAGONALS)).astype(np.int64)
+    _, cell_of = np.unique(cell, axis=0, return_inverse=True)
+    cell_of = cell_of.ravel()
+    cells = int(cell_of.max()) + 1
+    keys = np.unique(cell_of[pairs[:, 0]] * cells + cell_of[pairs[:, 1]])
+    _, cell_group = connected_components(_adjacency(np.column_stack([keys // cells, keys % cells]), cells),
+                                         directed=False)
+    group = cell_group[cell_of]
+    _, first = np.unique(group, return_index=True)
+    rank = np.empty(len(first), np.int64)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return rank[group]
 
 
 def check_single_tree(cloud: PointCloud) -> None:

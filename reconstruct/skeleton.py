@@ -54,6 +54,7 @@ from species.studio.lod import branch_node_keys, nearest_kept_ancestor, subtree_
 from species.timing import StageTimer
 
 from .clouds import CloudError, PointCloud, read_cloud
+from .knn_subsets import moved_neighbours, subset_neighbours
 from .robust_fit import soft_l1_fit
 
 __all__ = ["SkeletonSettings", "CloudSkeleton", "cloud_skeleton", "cloud_neighbours", "GRAPHS", "PRUNE_RATIO",
@@ -166,9 +167,15 @@ class CloudSkeleton:
 def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
     """(M, 3) float64: the points with duplicates (closer than DUPLICATE_M, on a 1 mm grid) merged, thinned on
     a voxel grid (one point per voxel, the first in file order) when more than `max_points` remain."""
-    points = points[_first_per_cell(points, DUPLICATE_M)]
-    if len(points) <= max_points:
-        return points
+    return points[unique_point_indices(points, max_points)]
+
+
+def unique_point_indices(points: np.ndarray, max_points: int) -> np.ndarray:
+    """(M,) ascending indices of the points `unique_points` keeps."""
+    kept = _first_per_cell(points, DUPLICATE_M)
+    if len(kept) <= max_points:
+        return kept
+    points = points[kept]
     extent = np.ptp(points, axis=0)
     # A scan samples surfaces, so the count falls with the voxel's area: start from the box's volume (a bound)
     # shrunk, then step by the square root of the excess until the cap is met (two or three passes).
@@ -176,7 +183,7 @@ def unique_points(points: np.ndarray, max_points: int) -> np.ndarray:
     while True:
         first = _first_per_cell(points, voxel)
         if len(first) <= max_points:
-            return points[first]
+            return kept[first]
         voxel *= max(np.sqrt(len(first) / max_points), 1.05)
 
 
@@ -211,11 +218,12 @@ def statistical_inliers(points: np.ndarray, k: int = OUTLIER_NEIGHBOURS, sigma: 
 
 
 def cloud_neighbours(cloud) -> tuple[np.ndarray, np.ndarray]:
-    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 1 nearest points of each point of a PointCloud
+    """(distances, indices), (N, k) each: the OUTLIER_NEIGHBOURS + 2 nearest points of each point of a PointCloud
     or an (N, 3) array (itself first, float64 distances), the query the outlier filter and `reconstruct.wood`'s
-    scattering share."""
+    scattering share: one column more than either reads, so that their own rows, and those of a subset of the
+    points, are read off it where no distance ties at the edge (`subset_neighbours`)."""
     points = np.asarray(cloud.points if isinstance(cloud, PointCloud) else cloud, np.float64)
-    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 1, len(points)))
+    return cKDTree(points).query(points, k=min(OUTLIER_NEIGHBOURS + 2, len(points)))
 
 
 def nearest_kept(distance: np.ndarray, index: np.ndarray, kept: np.ndarray) -> np.ndarray | None:
@@ -290,9 +298,11 @@ def centralise_trunk(points: np.ndarray, base_share: float, spacing: float,
 
 
 # ------------------------------------------------------------------------------------------------ stage 4
-def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
+def graph_edges(points: np.ndarray, graph: str, knn: int, nearest: np.ndarray | None = None) -> np.ndarray:
     """(E, 2) int64 unique undirected edges (i < j): the 3D Delaunay triangulation's, or the k-NN graph's with
-    its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way."""
+    its pieces joined by their shortest links (Boruvka steps), so that every point can be reached either way.
+    nearest : (N, knn + 1) each point's knn + 1 nearest (itself among them), where the caller has them
+    (`knn_subsets.moved_neighbours`)."""
     n = len(points)
     if graph == "delaunay":
         try:
@@ -302,7 +312,7 @@ def graph_edges(points: np.ndarray, graph: str, knn: int) -> np.ndarray:
                              ) from None
         return _unique_edges(simplices[:, [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]]].reshape(-1, 2), n)
     tree = cKDTree(points)
-    _, index = tree.query(points, k=min(knn + 1, n))
+    index = tree.query(points, k=min(knn + 1, n))[1] if nearest is None else nearest
     edges = _unique_edges(np.column_stack([np.repeat(np.arange(n), index.shape[1] - 1), index[:, 1:].ravel()]), n)
     count, label = connected_components(_adjacency(edges, n), directed=False)
     while count > 1:
@@ -684,8 +694,8 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
 
     cloud    : a PointCloud, a path `read_cloud` opens, or an (N, 3) array (read with `up`).
     settings : the constants (SkeletonSettings()).
-    neighbours : `cloud_neighbours(cloud)` where the caller has it already; used when no point is a duplicate and
-               the cloud needs no thinning (it is then the outlier filter's own query).
+    neighbours : `cloud_neighbours(cloud)` where the caller has it already (the outlier filter's own query is read
+               off it, `knn_subsets.subset_neighbours`).
     Raises CloudError for a cloud that cannot be a tree (too few points, degenerate, unreadable).
     """
     settings = SkeletonSettings() if settings is None else settings
@@ -696,11 +706,16 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
 
     if not isinstance(cloud, PointCloud):
         cloud = read_cloud(cloud, up=up)
-    points = unique_points(cloud.points.astype(np.float64), settings.max_points)
-    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`); unique_points keeps
-    # every point in its order when it merges and thins none.
-    if neighbours is None or len(points) != len(cloud.points):
+    every = cloud.points.astype(np.float64)
+    chosen = unique_point_indices(every, settings.max_points)
+    points = every[chosen]
+    # One k-NN query serves the outlier filter and the points' spacing (see `nearest_kept`), read off the caller's
+    # query of the whole cloud where it has one.
+    if neighbours is None:
+        every, chosen = points, np.arange(len(points))
         neighbours = cloud_neighbours(points)
+    whole = neighbours
+    neighbours = subset_neighbours(every, chosen, *neighbours, OUTLIER_NEIGHBOURS + 1)
     kept = np.ones(len(points), bool)
     if settings.outlier_sigma > 0 and len(points) > 20:
         kept = statistical_inliers(points, OUTLIER_NEIGHBOURS, settings.outlier_sigma, neighbours=neighbours)
@@ -712,7 +727,9 @@ def cloud_skeleton(cloud, settings: SkeletonSettings | None = None, *, up: str =
     lap("duplicates")
     moved, trunk, axis_centres, radius0 = centralise_trunk(points, settings.trunk_base_share, spacing)
     lap("trunk")
-    edges = graph_edges(moved, settings.graph, settings.knn)
+    nearest = moved_neighbours(every, chosen[kept], *whole, moved, trunk, min(settings.knn + 1, len(moved))) \
+        if settings.graph == "knn" else None
+    edges = graph_edges(moved, settings.graph, settings.knn, nearest)
     lap("graph")
     root = int(np.argmin(np.where(trunk, moved[:, 2], np.inf))) if trunk.any() else int(np.argmin(moved[:, 2]))
     predecessor, along = shortest_path_tree(moved, edges, root)

@@ -24,7 +24,7 @@ from ..geometry.radii import pipe_model_radii
 from ..geometry.topology import depth_levels, node_depths
 from ..skeleton import Skeleton
 
-__all__ = ["LStringError", "tree_to_lstring", "lstring_to_tree", "edge_angles", "branch_orders"]
+__all__ = ["LStringError", "tree_to_lstring", "lstring_to_tree", "lstring_round_trip", "edge_angles", "branch_orders"]
 
 
 class LStringError(TreefarmError):
@@ -162,13 +162,69 @@ def lstring_to_tree(lstring: str, rng: np.random.Generator, degree_diff: float =
     the tree exactly (to the string's 3 decimals). A bare F reuses the last distance (default_length metres
     before any). Radii follow the pipe model from `tip_radius`; orders come from `branch_orders`.
     """
+    _check_noise(degree_diff, dist_diff_percent)
+    move_parent, yaw, pitch, dist = _parse(lstring, default_length)
+    if len(move_parent) == 0:
+        raise LStringError(f"the L-string {lstring[:40]!r} has no F: nothing to build")
+    return _noisy_tree(move_parent, yaw, pitch, dist, rng, degree_diff, dist_diff_percent, tip_radius, pipe_exponent)
+
+
+def lstring_round_trip(skeleton: Skeleton, rng: np.random.Generator, degree_diff: float = 10.0,
+                       dist_diff_percent: float = 0.15, tip_radius: float = 0.004, pipe_exponent: float = 2.5,
+                       node: int = 0) -> Skeleton:
+    """`lstring_to_tree(tree_to_lstring(skeleton, node), rng, ...)` without writing and parsing the text: the
+    same moves (each number rounded as the string writes it), the same draws from `rng`, the same Skeleton."""
+    _check_noise(degree_diff, dist_diff_percent)
+    if not 0 <= node < len(skeleton):
+        raise LStringError(f"node {node} is not in the skeleton (nodes 0..{len(skeleton) - 1})")
+    parent = skeleton.parent
+    move_of = {node: -1}
+    visited: list[int] = []
+    stack = skeleton.children(node)[::-1].tolist()
+    while stack:  # the string's order: depth first, children in index order
+        child = stack.pop()
+        move_of[child] = len(visited)
+        visited.append(child)
+        stack.extend(skeleton.children(child)[::-1].tolist())
+    if not visited:
+        raise LStringError(f"node {node} has no child: its L-string has no F, nothing to build")
+    visited = np.array(visited, np.int64)
+    yaw, pitch, length = edge_angles(skeleton.positions[visited].astype(np.float64)
+                                     - skeleton.positions[parent[visited]].astype(np.float64))
+    move_parent = np.array([move_of[int(p)] for p in parent[visited]], np.int64)
+    return _noisy_tree(move_parent, _as_written(yaw), _as_written(pitch), _as_written(length), rng, degree_diff,
+                       dist_diff_percent, tip_radius, pipe_exponent)
+
+
+def _as_written(values: np.ndarray) -> np.ndarray:
+    """Values as `tree_to_lstring` writes them (3 decimals, the sign in the symbol) and `_parse` reads them back:
+    thousandths rounded to the nearest integer and divided by 1000 is the float of the decimal text, except
+    within rounding error of a half, where the text itself is written and read."""
+    if not np.isfinite(values).all():
+        raise LStringError(f"a non-finite value {values[~np.isfinite(values)][0]} in the tree's edges")
+    thousandths = np.abs(values) * 1000.0
+    magnitude = np.rint(thousandths) / 1000.0
+    near_half = np.flatnonzero(np.abs(thousandths - np.floor(thousandths) - 0.5) < _NEAR_HALF)
+    magnitude[near_half] = [float(f"{v:.3f}") for v in np.abs(values[near_half]).tolist()]
+    return np.where(values >= 0, magnitude, -magnitude)
+
+
+# Thousandths this close to a half may round either way in float arithmetic (the product's own error is orders
+# of magnitude smaller for any length or angle of a tree); the exact decimal rounding decides them.
+_NEAR_HALF = 1e-6
+
+
+def _check_noise(degree_diff: float, dist_diff_percent: float) -> None:
     if not 0 <= degree_diff <= 180:
         raise LStringError(f"degree_diff = {degree_diff}: allowed degrees in [0, 180]")
     if not 0 <= dist_diff_percent < 1:
         raise LStringError(f"dist_diff_percent = {dist_diff_percent}: allowed a fraction in [0, 1)")
-    move_parent, yaw, pitch, dist = _parse(lstring, default_length)
-    if len(move_parent) == 0:
-        raise LStringError(f"the L-string {lstring[:40]!r} has no F: nothing to build")
+
+
+def _noisy_tree(move_parent: np.ndarray, yaw: np.ndarray, pitch: np.ndarray, dist: np.ndarray,
+                rng: np.random.Generator, degree_diff: float, dist_diff_percent: float, tip_radius: float,
+                pipe_exponent: float) -> Skeleton:
+    """Algorithm 6's build from the moves (per F its parent F, -1 the root, absolute yaw and pitch, distance)."""
     count = len(move_parent)
     dist = dist * rng.uniform(1 - dist_diff_percent, 1 + dist_diff_percent, count)
     yaw_rad = np.radians(yaw + rng.uniform(-degree_diff, degree_diff, count))

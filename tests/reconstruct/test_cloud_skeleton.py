@@ -9,8 +9,9 @@ from scipy.spatial import cKDTree
 
 from reconstruct.clouds import CloudError, read_cloud
 from reconstruct.metrics import bark_distances
+from reconstruct.knn_subsets import moved_neighbours, subset_neighbours
 from reconstruct.skeleton import (SkeletonSettings, cloud_neighbours, cloud_skeleton, fit_circle, graph_edges,
-                                  nearest_kept, path_sums, statistical_inliers, unique_points)
+                                  nearest_kept, path_sums, statistical_inliers, unique_point_indices, unique_points)
 from reconstruct.wood import scattering
 
 TREE1 = Path(__file__).resolve().parents[3] / "shared" / "data" / "pointclouds" / "tree1.xyz"
@@ -161,6 +162,43 @@ def test_the_leaf_test_and_the_skeleton_read_one_shared_query_as_their_own():
         shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
         assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes()
         assert shared.spacing == own.spacing and shared.n_used == own.n_used
+
+
+def test_a_subsets_neighbours_read_off_the_whole_query_are_its_own():
+    # duplicates merged (rows holding a dropped point), a 1 cm grid (rows of equal distances) and thinning: the
+    # rows read off the whole cloud's query and those queried again make the subset's own query
+    rng = np.random.default_rng(8)
+    clumps = _clumps(rng)
+    grid = np.round(clumps * 100) / 100
+    doubled = np.concatenate([clumps, clumps[::5] + 2e-4])[rng.permutation(len(clumps) + len(clumps[::5]))]
+    for points, cap in ((doubled, 10**6), (grid, 10**6), (clumps, 300)):
+        kept = unique_point_indices(points, cap)
+        assert len(kept) < len(points)
+        subset = points[kept]
+        near, index = subset_neighbours(points, kept, *cloud_neighbours(points), 17)
+        own_near, own_index = cKDTree(subset).query(subset, k=17)
+        assert near.tobytes() == own_near.tobytes() and np.array_equal(index, own_index)
+    cloud = read_cloud(doubled)
+    shared, own = cloud_skeleton(cloud, neighbours=cloud_neighbours(cloud)), cloud_skeleton(cloud)
+    assert shared.skeleton.positions.tobytes() == own.skeleton.positions.tobytes() and shared.spacing == own.spacing
+
+
+@pytest.mark.parametrize("grid", [None, 0.01])
+def test_the_knn_graph_read_off_the_whole_query_is_the_moved_points_own(grid):
+    # a y-tree (its trunk moved towards its axis, as centralise_trunk does) with strays, a subset of its points
+    # kept, on a 1 cm grid or not: the graph built from rows read off the whole cloud's query is the direct one
+    rng = np.random.default_rng(9)
+    # points inside the trunk that are not trunk points (the moved trunk comes nearer to them than their own)
+    inner = np.column_stack([rng.uniform(-0.01, 0.01, (400, 2)), rng.uniform(0.5, 1.5, 400)])
+    points = np.concatenate([inner, y_tree(rng, 0.03), rng.uniform(-2, 2, (40, 3)) + [0, 0, 2]])
+    points = points if grid is None else np.round(points / grid) * grid
+    subset = np.flatnonzero(rng.random(len(points)) > 0.1)
+    moved = points[subset].copy()
+    trunk = (moved[:, 2] < 1.9) & (subset >= len(inner))
+    moved[trunk, :2] *= 0.1
+    nearest = moved_neighbours(points, subset, *cloud_neighbours(points), moved, trunk, 17)
+    assert np.array_equal(graph_edges(moved, "knn", 16, nearest), graph_edges(moved, "knn", 16))
+    assert moved_neighbours(points, subset, *cKDTree(points).query(points, k=17), moved, trunk, 17) is None
 
 
 def test_the_knn_graph_of_several_pieces_is_one_piece_of_unique_sorted_edges():

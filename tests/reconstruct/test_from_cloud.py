@@ -8,12 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.spatial import ConvexHull
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import ConvexHull, cKDTree
 
 from reconstruct import CloudError, from_cloud, read_cloud
 from reconstruct.metrics import cloud_fit
 from reconstruct.qsm import read_skeleton_ply
 from reconstruct.completion import HULL_MARGIN_M, ScanReach
+from reconstruct.from_cloud import linked_groups
 from reconstruct.skeleton import SkeletonSettings, statistical_inliers
 from reconstruct.wood import leaf_on_share
 from species.meshing.gltf import read_glb_json
@@ -238,3 +241,17 @@ def test_a_shared_scan_keeps_its_height_stays_on_the_ground_and_completion_only_
     assert abs((result.scan.measured.positions[:, 2].max() + root[2]) / top - 1) <= 0.02
     assert_completion_kept_what_was_measured(result)
     assert_on_the_ground_and_near_the_hull(result)
+
+
+@pytest.mark.parametrize("spread, gap, several", [(3.0, 0.2, True), (1.0, 0.5, False), (20.0, 0.3, True)])
+def test_linked_groups_are_the_components_of_the_links(spread, gap, several):
+    # clusters, strays and duplicates: the groups and their numbering of the graph of every link within the gap
+    rng = np.random.default_rng(4)
+    points = np.concatenate([rng.normal(rng.uniform(0, spread, 3), 0.1, (60, 3)) for _ in range(12)]
+                            + [rng.uniform(0, spread, (80, 3))])
+    points = np.concatenate([points, points[::7]])
+    pairs = cKDTree(points).query_pairs(gap, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
+    count, expected = connected_components(graph, directed=False)
+    assert (count > 1) == several and np.array_equal(linked_groups(points, gap), expected)
+    assert len(linked_groups(points[:0], gap)) == 0

@@ -6,7 +6,8 @@ import pytest
 
 from species.lsystem.graft import subtree_mask
 from species.lsystem.generator import grow
-from species.lsystem.lstring_io import LStringError, branch_orders, edge_angles, lstring_to_tree, tree_to_lstring
+from species.lsystem.lstring_io import (LStringError, branch_orders, edge_angles, lstring_round_trip, lstring_to_tree,
+                                       tree_to_lstring)
 from species.skeleton import Skeleton
 
 TREE = {"generator": "lsystem", "axiom": "X", "rules": ["X -> F[&X]/(137.5)[&X]", "F -> FF"], "iterations": 4,
@@ -59,6 +60,33 @@ def test_round_trip_of_a_subtree_is_relative_to_its_root():
     rebuilt = lstring_to_tree(tree_to_lstring(skeleton, node), np.random.default_rng(1), 0, 0)
     assert len(rebuilt) == len(nodes)
     assert np.allclose(rebuilt.positions, skeleton.positions[nodes] - skeleton.positions[node], atol=5e-3)
+
+
+def breadth_first(skeleton: Skeleton) -> Skeleton:
+    """The same tree with its nodes renumbered level by level (as reconstructions number them), so the string's
+    depth-first order is not the index order."""
+    order = np.argsort(skeleton.depth, kind="stable")
+    new_index = np.empty_like(order)
+    new_index[order] = np.arange(len(order))
+    parent = np.where(skeleton.parent[order] < 0, -1, new_index[np.maximum(skeleton.parent[order], 0)])
+    return Skeleton(skeleton.positions[order], parent, skeleton.radius[order], skeleton.order[order])
+
+
+@pytest.mark.parametrize("node", [0, 3])
+def test_round_trip_without_the_text_is_the_same_tree_and_draws(node):
+    skeleton = breadth_first(grow(TREE, np.random.default_rng(0)))
+    # edges whose angles round to zero from below ('-(0.000)') and lengths on a rounding boundary
+    positions = skeleton.positions.copy()
+    positions[5] = positions[skeleton.parent[5]] + [1.0, -1e-9, 2.0005]
+    skeleton = Skeleton(positions, skeleton.parent, skeleton.radius, skeleton.order)
+    rng_text, rng_direct = np.random.default_rng(7), np.random.default_rng(7)
+    via_text = lstring_to_tree(tree_to_lstring(skeleton, node), rng_text, 10, 0.15, tip_radius=0.01)
+    direct = lstring_round_trip(skeleton, rng_direct, 10, 0.15, tip_radius=0.01, node=node)
+    for key in ("positions", "parent", "radius", "order"):
+        assert np.array_equal(getattr(direct, key), getattr(via_text, key)), key
+    assert rng_text.random() == rng_direct.random()
+    with pytest.raises(LStringError, match="no child"):
+        lstring_round_trip(skeleton, rng_direct, node=int(skeleton.tips[0]))
 
 
 def test_noise_changes_lengths_within_the_percent_and_is_seeded():

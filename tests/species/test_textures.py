@@ -97,3 +97,16 @@ def test_bark_colour_is_darkest_in_the_fissures_and_the_base_colour_on_flat_bark
     assert plain.shape == (4, 4, 3) and plain.dtype == np.uint8
     assert (cracked < plain).all()
 
+
+
+@pytest.mark.parametrize("shape, level", [((256, 128, 3), 9), ((128, 128, 4), 9), ((300, 400, 3), 6),
+                                          ((1, 20000, 4), 1), ((97, 33, 3), 9), ((5, 7, 3), 0)])
+def test_truecolour_pngs_are_pillows_bytes(shape, level):
+    # noise (several IDAT chunks at the larger sizes, one row wider than Pillow's block) and flat runs (the
+    # filters tie), against Pillow's own encoding of the same pixels
+    rng = np.random.default_rng(3)
+    image = rng.integers(0, 256, shape, dtype=np.uint8)
+    image[: shape[0] // 2] = rng.integers(0, 4, shape[1:], dtype=np.uint8) * 60
+    buffer = io.BytesIO()
+    Image.fromarray(image, mode="RGBA" if shape[2] == 4 else "RGB").save(buffer, format="PNG", compress_level=level)
+    assert png_bytes(image, level) == buffer.getvalue()
