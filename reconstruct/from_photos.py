@@ -257,7 +257,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
                 progress: Progress | None = None, shape: str = "hull", species: str | None = None,
-                masks: str = "network", models=None, mask_net=None) -> Reconstruction:
+                masks: str = "network", models=None, mask_net=None, sfm: SfmPoints | None = None) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
@@ -271,6 +271,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                tree masks (`reconstruct.hull_growth`; timings "hull.STAGE", maps "hull", "masks", "main_skeleton").
     masks    : how the hull's tree masks are drawn (`reconstruct.photo_masks.MASKS`): "network" (the tree mask
                network: `mask_net` if given, else `models`' (None: the shipped default)) or "classical".
+    sfm      : `sfm_points` already run on this folder with `settings` (a benchmark comparing shapes and masks on
+               one registration); None runs it. Its timings stand in the result's "sfm.STAGE".
     The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
     Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
     """
@@ -290,7 +292,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         raise PhotoError(f"{folder} has no cameras.json listing every photo, so the photos' scale is unknown: "
                          "allowed a tree height in metres (--height M, or height= in Python) to scale the tree by")
     timer = StageTimer()
-    sfm = sfm_points(folder, settings, workdir=workdir, log=log, progress=progress)
+    if sfm is None:
+        sfm = sfm_points(folder, settings, workdir=workdir, log=log, progress=progress)
     timer.lap("sfm")
     progress = progress or no_progress
     progress("tree", 0, 2)

@@ -4,7 +4,8 @@ colour, the sky and where the tree stands.
 `MASKS` names the two ways: "network" (the default) runs the tree mask network (`trainers` task "tree-mask", the
 shipped default in models/ or a registry's champion) with ONNX Runtime on the photo shrunk to NETWORK_SIDE px on
 its longer side, its probabilities brought back to the photo's size; the tree is its pixels at 0.5 or above inside
-the tree's box (other trees behind are not this one). "classical" needs no network (what follows).
+the tree's box (other trees behind are not this one) and above the ground below its base row (the network takes
+the tree's cast shadow on the ground for the tree). "classical" needs no network (what follows).
 
 In: a photo (H, W, 3) uint8 and what the cameras already say about the tree in it (`TreeWindow`): the box the
 tree's volume projects to, the image row of its base on the ground, and pixels SfM placed on the tree. Out: an
@@ -167,13 +168,17 @@ class MaskNetwork:
         return cv2.resize(np.ascontiguousarray(out), (width, height), interpolation=cv2.INTER_LINEAR)
 
     def mask(self, image: np.ndarray, window: TreeWindow | None = None) -> np.ndarray:
-        """(H, W) bool: the tree's pixels (probability 0.5 or above), inside `window`'s box when one is given."""
+        """(H, W) bool: the tree's pixels (probability 0.5 or above), inside `window`'s box and above the ground
+        below its base row (as the classical masks' sure background) when one is given."""
         found = self.probabilities(image) >= 0.5
         if window is not None:
             u0, v0, u1, v1 = (int(v) for v in window.box)
             inside = np.zeros_like(found)
             inside[max(v0, 0):max(v1, 0), max(u0, 0):max(u1, 0)] = True
             found &= inside
+            if window.base_row is not None:
+                height = found.shape[0]
+                found[int(np.clip(np.ceil(window.base_row + BASE_MARGIN * height), 0, height)):] = False
         return found
 
 

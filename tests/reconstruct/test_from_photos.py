@@ -199,6 +199,15 @@ def test_same_photos_and_seed_give_the_same_tree_on_every_thread_count(photos, g
     assert again.glb() == grown.glb()
 
 
+def test_sfm_run_once_gives_the_same_tree_as_from_photos_running_it(photos, grown):
+    # the bench runs SfM once per registration and passes it to every shape and kind of mask
+    folder = photos.cameras_json.parent
+    sfm = sfm_points(folder, SfmSettings(threads=1))
+    again = from_photos(folder, settings=SfmSettings(threads=1), shape="hull", sfm=sfm)
+    assert again.glb() == grown.glb()
+    assert {k.removeprefix("sfm."): v for k, v in again.timings.items() if k.startswith("sfm.")} == sfm.timings
+
+
 def test_a_bad_shape_or_species_is_one_line(photos):
     folder = photos.cameras_json.parent
     with pytest.raises(PhotoError, match="shape 'dense' is not known: allowed sparse, hull"):

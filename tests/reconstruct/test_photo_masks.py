@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from reconstruct.metrics import silhouette_iou
-from reconstruct.photo_masks import TreeWindow, mask_network, photo_mask, tree_mask, tree_window
+from reconstruct.photo_masks import BASE_MARGIN, TreeWindow, mask_network, photo_mask, tree_mask, tree_window
 from reconstruct.scoring import crowns
 from reconstruct.visual_hull import PinholeView
 
@@ -63,6 +63,20 @@ def test_the_network_masks_find_the_tree_in_the_renders(masked):
     _, truth, _, network = masked
     assert silhouette_iou(network, truth) >= NETWORK_PIXEL_IOU
     assert silhouette_iou(crowns(network), crowns(truth)) >= NETWORK_CROWN_IOU
+
+
+def test_the_network_leaves_the_ground_below_the_base_to_the_background(masked):
+    # the network takes the tree's cast shadow on the ground for the tree; the ground below the base row is not it
+    _, truth, image, _ = masked
+    net = mask_network()
+    height, width = image.shape[:2]
+    box = (0, 0, width, height)
+    base = float(np.flatnonzero(truth[-1].any(axis=1)).max())       # the trunk's foot in the last photo
+    free = net.mask(image, TreeWindow(box, None, np.zeros((0, 2), int)))
+    cut = net.mask(image, TreeWindow(box, base, np.zeros((0, 2), int)))
+    below = int(np.ceil(base + BASE_MARGIN * height))
+    assert free[below:].any() and not cut[below:].any()
+    assert np.array_equal(cut[:below], free[:below])
 
 
 def test_an_unknown_mask_model_is_one_line_before_sfm(tmp_path):
