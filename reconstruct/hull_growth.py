@@ -5,7 +5,9 @@ it from the trunk and main branches the cloud method measured in the SfM points.
 In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree (`IsolatedTree`: its points and
 the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
 `Reconstruction` of those points. Out: that reconstruction with the grown skeleton and mesh in place of the
-completed one; its scan (the measured skeleton, the QSM measures) is kept.
+completed one; its scan keeps the measured skeleton, and its QSM measures are the grown tree's (the sparse
+points' skeleton follows leaves and clutter in leaf: its heights and volumes are not the tree's), the stem's
+circle fit and the scan's height still from the points.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from species.timing import StageTimer
 from .from_sketch import DEFAULT_SPECIES
 from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
+from .qsm import qsm_measures
 from .result import Reconstruction
 from .visual_hull import PinholeView, carve
 
@@ -115,7 +118,11 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     timer.lap("growth")
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
+    scan = result.scan
+    base_points = scan.cloud.points.astype(np.float64) - (scan.transform[:3, 3] - scan.cloud.offset)
+    measures = {**qsm_measures(skeleton, base_points), "trunk_radius_fit_m": scan.measures["trunk_radius_fit_m"]}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
+                               scan=dataclasses.replace(scan, measures=measures),
                                timings={**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}},
                                maps={**result.maps, "hull": hull, "masks": tuple(masks),
                                      "main_skeleton": guide.positions.astype(np.float32)})

@@ -190,6 +190,11 @@ def test_the_hull_crown_holds_the_tree_and_the_growth_stays_in_it(photos, photo_
     assert abs(grown.skeleton.height - true.height) <= 0.2 * true.height
     assert len(grown.maps["masks"]) == len(photos.images) and all(m.any() for m in grown.maps["masks"])
     assert {"hull.masks", "hull.hull", "hull.growth"} <= set(grown.timings)
+    # The QSM measures (the command's summary, --qsm-csv) are the grown tree's, not the sparse points' skeleton's.
+    measures = grown.scan.measures
+    assert measures["height_m"] == pytest.approx(float(nodes[:, 2].max() - nodes[0, 2]))
+    assert measures["branch_count"] == grown.skeleton.n_branches - 1  # the trunk not counted
+    assert measures["scan_height_m"] is not None and measures["trunk_radius_fit_m"] > 0
 
 
 def test_same_photos_and_seed_give_the_same_tree_on_every_thread_count(photos, grown):
