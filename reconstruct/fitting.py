@@ -225,7 +225,7 @@ MAX_TRUNK_RATIO = 0.15     # the trunk step's largest trunk radius over the tree
 # The params fit also stops once its candidates have this many faces together per evaluation of its budget
 # (growing and drawing a candidate takes time in proportion to its faces): a big crown's candidates cost many times
 # a small one's, and the time target is per drawing.
-FIT_FACES_PER_EVAL = 187_500
+FIT_FACES_PER_EVAL = 150_000
 
 
 @dataclass
