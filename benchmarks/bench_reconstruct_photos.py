@@ -238,8 +238,7 @@ def foliage_run(bench: Benchmark, foliage: str, args) -> None:
                 if cloud is None:
                     ways_rows.append(ways_row(label, result, sfm_seconds))
                     # both trees in the base frame: ours has its root at the origin; the cloud is shifted the same
-                    scan = result.scan
-                    cloud = scan.cloud.points - (scan.transform[:3, 3] - scan.cloud.offset).astype(np.float32)
+                    cloud = result.scan.base_points.astype(np.float32)
                 variant_rows.append(variant_row(f"{label}, {name}", result, timing.median, scorer, true,
                                                 sfm.registered, folder))
                 print(variant_rows[-1], flush=True)

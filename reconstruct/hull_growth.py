@@ -119,8 +119,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
     scan = result.scan
-    base_points = scan.cloud.points.astype(np.float64) - (scan.transform[:3, 3] - scan.cloud.offset)
-    measures = {**qsm_measures(skeleton, base_points), "trunk_radius_fit_m": scan.measures["trunk_radius_fit_m"]}
+    measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": scan.measures["trunk_radius_fit_m"]}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
                                scan=dataclasses.replace(scan, measures=measures),
                                timings={**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}},

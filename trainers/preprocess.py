@@ -226,12 +226,19 @@ def ground_line(mask: np.ndarray) -> np.ndarray:
     return ground
 
 
+def _drawing_ink(ink: np.ndarray, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """(H, W) bool each: the drawing's ink pixels (`_ink_mask`) less a sketch's ground line, and that line (empty
+    for the other kinds, whose strokes are drawn on the tree only)."""
+    mask = _ink_mask(ink)
+    ground = ground_line(mask) if kind == "sketch" else np.zeros_like(mask)
+    return mask & ~ground, ground
+
+
 def ink_mask(image, kind: str = "sketch") -> np.ndarray:
     """(H, W) bool: where `image` is inked, as `prepare` finds it (paper level from the border, ink level
     stretched, dust removed, a sketch's ground line left out: `ground_line`), at the image's own size;
     PreprocessError for a blank image."""
-    mask = _ink_mask(paper_image(image, kind))
-    return mask & ~ground_line(mask) if kind == "sketch" else mask
+    return _drawing_ink(paper_image(image, kind), kind)[0]
 
 
 def _crop_of(mask: np.ndarray) -> Crop:
@@ -292,10 +299,8 @@ def prepare(image, kind: str, size: int) -> Prepared:
         return _prepare_photo(image, size)
     _check(image, kind, size)
     ink = paper_image(image, kind)
-    mask = _ink_mask(ink)
-    if kind == "sketch":
-        ground = ground_line(mask)
-        mask = mask & ~ground
+    mask, ground = _drawing_ink(ink, kind)
+    if ground.any():
         # The line's faint anti-aliased edge goes with it.
         ink[(cv2.dilate(ground.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0) & ~mask] = 0.0
     crop = _crop_of(mask)
