@@ -351,10 +351,13 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
     timer.lap("matching")
     options = pycolmap.IncrementalPipelineOptions()
     options.num_threads = threads
-    options.random_seed = int(settings.seed)
+    _seed_mapping(options, int(settings.seed))
     model_dir = work / "model"
     model_dir.mkdir(exist_ok=True)
     if cameras is not None:
+        # one thread: the triangulator and its bundle adjustment are a small share of SfM's seconds here (0.1 of
+        # 3 s on ten 320 px photos), and on one thread no RANSAC draws from a pooled thread's random state
+        options.num_threads = 1
         progress("triangulation", 0, 1)
         model = pycolmap.triangulate_points(_posed_reconstruction(database, cameras), database, folder,
                                             model_dir, options=options)
@@ -374,7 +377,7 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
             progress("mapping", registered[0], attempts * len(names))
             seed = int(settings.seed) + attempt
             pycolmap.set_random_seed(seed)
-            options.random_seed = seed
+            _seed_mapping(options, seed)
             attempt_dir = model_dir / f"attempt_{attempt}"
             attempt_dir.mkdir(exist_ok=True)
             candidates += pycolmap.incremental_mapping(database, folder, attempt_dir, options=options,
@@ -406,6 +409,15 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                                          np.float64).reshape(-1, 3, 3),
                      sizes=np.array([(model.camera(image.camera_id).width, model.camera(image.camera_id).height)
                                      for image in images], np.int64).reshape(-1, 2))
+
+
+def _seed_mapping(options: pycolmap.IncrementalPipelineOptions, seed: int) -> None:
+    """The mapping's seed in the pipeline and in its mapper's and triangulator's own options: left at -1 there,
+    their RANSACs draw from the random state of the thread they run on, which a pooled thread carries over from
+    earlier work."""
+    options.random_seed = seed
+    options.mapper.random_seed = seed
+    options.triangulation.random_seed = seed
 
 
 def _set_known_intrinsics(database: Path, cameras: dict[str, Camera]) -> None:
