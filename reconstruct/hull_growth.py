@@ -6,8 +6,8 @@ In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree
 the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
 `Reconstruction` of those points. Out: that reconstruction with the grown skeleton and mesh in place of the
 completed one; its scan keeps the measured skeleton, and its QSM measures are the grown tree's (the sparse
-points' skeleton follows leaves and clutter in leaf: its heights and volumes are not the tree's), the stem's
-circle fit and the scan's height still from the points.
+points' skeleton follows leaves and clutter in leaf: its heights and volumes are not the tree's) and the trunk's
+radius the masks' (`trunk_radius_from_masks`); the scan's height is still the points'.
 """
 from __future__ import annotations
 
@@ -26,15 +26,21 @@ from species.timing import StageTimer
 from .from_sketch import DEFAULT_SPECIES
 from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
-from .qsm import qsm_measures
+from .qsm import BREAST_HEIGHT_M, qsm_measures
 from .result import Reconstruction
 from .visual_hull import PinholeView, carve
 
-__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "main_branches", "DEFAULT_SPECIES", "HULL_VOXELS"]
+__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "main_branches",
+           "trunk_foot", "trunk_radius_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
 MAIN_ORDER = 1            # the measured skeleton's nodes up to this branching order guide the growth
+TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this near its lowest tree pixel
+# A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
+# at breast height (the presets' trunks are under 4 % of their heights)
+MAX_TRUNK_SHARE = 0.075
+TRUNK_SEARCH = 0.02       # of a photo's width: how far from the trunk's projected axis its run of mask pixels may start
 
 
 def photo_views(sfm, model_to_upright: np.ndarray) -> list[PinholeView]:
@@ -49,6 +55,80 @@ def photo_views(sfm, model_to_upright: np.ndarray) -> list[PinholeView]:
         views.append(PinholeView(R @ rotation.T, linear @ centre + shift, (float(K[0, 0]), float(K[1, 1])),
                                  (float(K[0, 2]), float(K[1, 2])), (int(size[0]), int(size[1]))))
     return views
+
+
+def _trunk_pixel(mask: np.ndarray) -> tuple[float, float] | None:
+    """(u, v) the bottom of the trunk in one tree mask: the foot of the longest vertical run of tree pixels among
+    the runs that reach the mask's lowest TRUNK_LOW share of rows (the trunk stands on the ground and runs up
+    into the crown; the ground's false spots are short)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    if len(rows) == 0:
+        return None
+    height, width = mask.shape
+    columns = np.ascontiguousarray(mask.T).ravel()            # column after column, top to bottom
+    first = np.zeros_like(columns)
+    first[::height] = True
+    starts = columns & (first | ~np.roll(columns, 1))
+    run = np.cumsum(starts) * columns                          # 0 off the tree, else the pixel's run number
+    lengths = np.bincount(run)
+    bottoms = np.zeros(len(lengths), np.int64)
+    np.maximum.at(bottoms, run, np.arange(len(columns)))
+    low = rows[-1] - TRUNK_LOW * (rows[-1] - rows[0])
+    reach = bottoms % height >= low
+    reach[0] = False
+    if not reach.any():
+        return None
+    best = int(np.flatnonzero(reach)[np.argmax(lengths[reach])])
+    return bottoms[best] // height + 0.5, bottoms[best] % height + 0.5
+
+
+def trunk_foot(masks: list[np.ndarray], views: list[PinholeView], ground_z: float) -> np.ndarray | None:
+    """(3,) the trunk's foot on the ground plane z = `ground_z`: in each photo the bottom of the trunk in its mask
+    (`_trunk_pixel`) cast onto that plane along its ray; the median over the photos. None when no photo gives
+    one. The cloud's own root can lie metres off in sparse SfM points."""
+    feet = []
+    for mask, view in zip(masks, views):
+        pixel = _trunk_pixel(mask)
+        if pixel is None:
+            continue
+        ray = view.rotation.T @ np.array([(pixel[0] - view.principal[0]) / view.focal[0],
+                                          (pixel[1] - view.principal[1]) / view.focal[1], 1.0])
+        if ray[2] >= -1e-9:
+            continue                                   # at or above the horizon: the ray misses the ground
+        feet.append(view.centre + (ground_z - view.centre[2]) / ray[2] * ray)
+    if not feet:
+        return None
+    foot = np.median(np.asarray(feet), axis=0)
+    return np.array([foot[0], foot[1], ground_z])
+
+
+def trunk_radius_from_masks(masks: list[np.ndarray], views: list[PinholeView], root: np.ndarray,
+                            breast_height: float = BREAST_HEIGHT_M) -> float | None:
+    """The trunk's radius (m) at `breast_height` above `root` (3,), the trunk's foot in the views' frame, from the
+    photos' tree masks: in each photo the row through the trunk's axis there, the run of tree pixels at (or within
+    TRUNK_SEARCH of) the axis, its width in metres at the axis's depth; the median over the photos whose run is
+    whole (clear of the photo's sides). None when no photo has one. The sparse points cannot give it in leaf:
+    their stem fit takes the crown's leaves for the trunk."""
+    point = np.asarray(root, np.float64) + np.array([0.0, 0.0, breast_height])
+    widths = []
+    for mask, view in zip(masks, views):
+        (u, v), depth = (a[0] for a in view.project(point[None]))
+        height, width = mask.shape
+        row = int(np.floor(v))
+        if depth <= 0 or not (0 <= row < height and 0 <= u < width):
+            continue
+        line = mask[row]
+        # the runs of tree pixels on the row: [start, stop) pairs
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], line.astype(np.int8), [0]])))
+        starts, stops = edges[0::2], edges[1::2]
+        if len(starts) == 0:
+            continue
+        gap = np.maximum(np.maximum(starts - u, u - stops), 0.0)   # 0 where the run holds the axis
+        nearest = int(np.argmin(gap))
+        if gap[nearest] > TRUNK_SEARCH * width or starts[nearest] == 0 or stops[nearest] == width:
+            continue
+        widths.append((stops[nearest] - starts[nearest]) * depth / view.focal[0])
+    return 0.5 * float(np.median(widths)) if widths else None
 
 
 def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
@@ -119,7 +199,11 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
     scan = result.scan
-    measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": scan.measures["trunk_radius_fit_m"]}
+    foot = trunk_foot(masks, views, tree.ground_z)
+    trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
+    if trunk_radius is None or trunk_radius > MAX_TRUNK_SHARE * height:
+        trunk_radius = scan.measures["trunk_radius_fit_m"]      # the sparse points' stem fit, as the cloud method's
+    measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": trunk_radius}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
                                scan=dataclasses.replace(scan, measures=measures),
                                timings={**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}},
