@@ -1,6 +1,8 @@
 """A photo tree's crown grown inside its visual hull (issue 51): masks of every registered photo
-(`photo_masks`), the hull they carve from the SfM cameras (`visual_hull`), and self-organizing growth that fills
-it from the trunk and main branches the cloud method measured in the SfM points.
+(`photo_masks`), the hull they carve from the SfM cameras (`visual_hull`), cleared under the crown's base where
+the masks show the trunk (`trunk_foot`, `trunk_radius_from_masks`, `crown_base_from_masks`: no photo from above
+the ground carves the space under a wide crown), and self-organizing growth that fills it from the trunk and main
+branches the cloud method measured in the SfM points.
 
 In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree (`IsolatedTree`: its points and
 the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
@@ -28,10 +30,10 @@ from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
 from .qsm import BREAST_HEIGHT_M, qsm_measures
 from .result import Reconstruction
-from .visual_hull import PinholeView, carve
+from .visual_hull import PinholeView, VisualHull, carve
 
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "main_branches",
-           "trunk_foot", "trunk_radius_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
+           "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
@@ -40,6 +42,9 @@ TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this 
 # A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
 # at breast height (the presets' trunks are under 4 % of their heights)
 MAX_TRUNK_SHARE = 0.075
+CROWN_STEP = 0.1         # m: the heights at which the photos' masks are read up the trunk
+CROWN_WIDENS = 3.0        # trunk diameters: the tree across the trunk's axis wider than this is the crown
+CROWN_BASE_QUANTILE = 0.75
 TRUNK_SEARCH = 0.02       # of a photo's width: how far from the trunk's projected axis its run of mask pixels may start
 
 
@@ -102,33 +107,68 @@ def trunk_foot(masks: list[np.ndarray], views: list[PinholeView], ground_z: floa
     return np.array([foot[0], foot[1], ground_z])
 
 
+def trunk_widths(mask: np.ndarray, view: PinholeView, foot: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """(K,) metres: the width of the tree in one photo's mask across the trunk's axis at each of `heights` (K,)
+    above `foot` (3,): the run of tree pixels on the axis's row at (or within TRUNK_SEARCH of) the axis, in
+    metres at the axis's depth. 0 where the row has no such run, NaN where the axis is out of the photo or the
+    run reaches the photo's side (not whole)."""
+    points = np.asarray(foot, np.float64) + np.outer(heights, [0.0, 0.0, 1.0])
+    uv, depth = view.project(points)
+    height, width = mask.shape
+    out = np.full(len(heights), np.nan)
+    for k, ((u, v), d) in enumerate(zip(uv, depth)):
+        row = int(np.floor(v))
+        if d <= 0 or not (0 <= row < height and 0 <= u < width):
+            continue
+        # the runs of tree pixels on the row: [start, stop) pairs
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], mask[row].astype(np.int8), [0]])))
+        starts, stops = edges[0::2], edges[1::2]
+        gap = np.maximum(np.maximum(starts - u, u - stops), 0.0)   # 0 where the run holds the axis
+        if len(starts) == 0 or gap.min() > TRUNK_SEARCH * width:
+            out[k] = 0.0
+            continue
+        nearest = int(np.argmin(gap))
+        if starts[nearest] > 0 and stops[nearest] < width:
+            out[k] = (stops[nearest] - starts[nearest]) * d / view.focal[0]
+    return out
+
+
 def trunk_radius_from_masks(masks: list[np.ndarray], views: list[PinholeView], root: np.ndarray,
                             breast_height: float = BREAST_HEIGHT_M) -> float | None:
     """The trunk's radius (m) at `breast_height` above `root` (3,), the trunk's foot in the views' frame, from the
-    photos' tree masks: in each photo the row through the trunk's axis there, the run of tree pixels at (or within
-    TRUNK_SEARCH of) the axis, its width in metres at the axis's depth; the median over the photos whose run is
-    whole (clear of the photo's sides). None when no photo has one. The sparse points cannot give it in leaf:
-    their stem fit takes the crown's leaves for the trunk."""
-    point = np.asarray(root, np.float64) + np.array([0.0, 0.0, breast_height])
-    widths = []
+    photos' tree masks: half the median over the photos of `trunk_widths` there (where a whole run was found).
+    None when no photo has one. The sparse points cannot give it in leaf: their stem fit takes the crown's leaves
+    for the trunk."""
+    widths = np.array([trunk_widths(mask, view, root, np.array([breast_height]))[0]
+                       for mask, view in zip(masks, views)])
+    widths = widths[widths > 0]
+    return 0.5 * float(np.median(widths)) if len(widths) else None
+
+
+def crown_base_from_masks(masks: list[np.ndarray], views: list[PinholeView], foot: np.ndarray,
+                          trunk_radius: float, top: float) -> float | None:
+    """The height above `foot` where the crown begins: in each photo, the lowest of heights every CROWN_STEP up to
+    `top` where the tree across the trunk's axis is wider than CROWN_WIDENS trunk diameters; the
+    CROWN_BASE_QUANTILE of those over the photos (raised cameras see the crown's near underside hide the trunk
+    below the crown's base; the lowest cameras see it highest). None when no photo shows it."""
+    heights = np.arange(CROWN_STEP, top, CROWN_STEP)
+    bases = []
     for mask, view in zip(masks, views):
-        (u, v), depth = (a[0] for a in view.project(point[None]))
-        height, width = mask.shape
-        row = int(np.floor(v))
-        if depth <= 0 or not (0 <= row < height and 0 <= u < width):
-            continue
-        line = mask[row]
-        # the runs of tree pixels on the row: [start, stop) pairs
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], line.astype(np.int8), [0]])))
-        starts, stops = edges[0::2], edges[1::2]
-        if len(starts) == 0:
-            continue
-        gap = np.maximum(np.maximum(starts - u, u - stops), 0.0)   # 0 where the run holds the axis
-        nearest = int(np.argmin(gap))
-        if gap[nearest] > TRUNK_SEARCH * width or starts[nearest] == 0 or stops[nearest] == width:
-            continue
-        widths.append((stops[nearest] - starts[nearest]) * depth / view.focal[0])
-    return 0.5 * float(np.median(widths)) if widths else None
+        widths = trunk_widths(mask, view, foot, heights)
+        wide = np.flatnonzero(~(widths <= CROWN_WIDENS * 2.0 * trunk_radius))   # NaN (not whole) counts as wide
+        if len(wide):
+            bases.append(heights[wide[0]])
+    return float(np.quantile(bases, CROWN_BASE_QUANTILE)) if bases else None
+
+
+def _under_crown_cleared(hull: VisualHull, foot: np.ndarray, crown_base: float, trunk_radius: float) -> VisualHull:
+    """The hull without its voxels under the crown's base but the trunk's: raised cameras all look at the space
+    under a wide crown across the crown itself, so no mask carves it (the hull's skirt)."""
+    centres = hull.origin + (np.indices(hull.occupancy.shape).reshape(3, -1).T + 0.5) * hull.voxel_size
+    under = centres[:, 2] < foot[2] + crown_base - hull.voxel_size
+    off_trunk = np.linalg.norm(centres[:, :2] - foot[:2], axis=1) > max(2.0 * trunk_radius, 1.5 * hull.voxel_size)
+    occupancy = hull.occupancy & ~(under & off_trunk).reshape(hull.occupancy.shape)
+    return dataclasses.replace(hull, occupancy=occupancy)
 
 
 def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
@@ -185,12 +225,20 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
         masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points)
+    shift = -result.scan.transform[:3, 3]                  # upright frame to the base frame (Z up already)
+    height = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size + shift[2])
+    foot = trunk_foot(masks, views, tree.ground_z)
+    trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
+    if trunk_radius is not None and trunk_radius <= MAX_TRUNK_SHARE * height:
+        crown_base = crown_base_from_masks(masks, views, foot, trunk_radius, height)
+        if crown_base is not None:
+            hull = _under_crown_cleared(hull, foot, crown_base, trunk_radius)
+    else:
+        trunk_radius = result.scan.measures["trunk_radius_fit_m"]   # the sparse points' stem fit, as the cloud's
     timer.lap("hull")
     rng = np.random.default_rng(seed)
     params = validate(preset.sample(rng))
     guide = main_branches(result.scan.measured)
-    shift = -result.scan.transform[:3, 3]                  # upright frame to the base frame (Z up already)
-    height = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size + shift[2])
     params["height"] = height
     internode = height / (params["crown_base"] + params["crown_height"])
     skeleton = grow_in_space(params, rng, space=hull.space(shift), internode_length=internode, guide=guide,
@@ -199,10 +247,6 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
     scan = result.scan
-    foot = trunk_foot(masks, views, tree.ground_z)
-    trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
-    if trunk_radius is None or trunk_radius > MAX_TRUNK_SHARE * height:
-        trunk_radius = scan.measures["trunk_radius_fit_m"]      # the sparse points' stem fit, as the cloud method's
     measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": trunk_radius}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
                                scan=dataclasses.replace(scan, measures=measures),

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
-from reconstruct.hull_growth import trunk_foot, trunk_radius_from_masks
+from reconstruct.hull_growth import crown_base_from_masks, trunk_foot, trunk_radius_from_masks
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
@@ -220,6 +220,23 @@ def test_the_trunk_stands_where_the_masks_put_it_and_is_as_thick_at_breast_heigh
     assert trunk_foot(empty, views, 0.0) is None and trunk_radius_from_masks(empty, views, foot) is None
     # a foot the photos do not see (behind every camera) gives no radius
     assert trunk_radius_from_masks(exact, views, np.array([0.0, 0.0, 1e4])) is None
+
+
+def test_the_crown_base_from_the_masks_clears_the_hull_under_the_crown(photos, photo_tree, grown):
+    true, _ = photo_tree
+    views = [PinholeView.from_camera(camera) for camera in photos.cameras]
+    exact = [np.asarray(Image.open(mask)) > 0 for mask in photos.masks]
+    foot = trunk_foot(exact, views, 0.0)
+    base = crown_base_from_masks(exact, views, foot, trunk_radius_from_masks(exact, views, foot), true.height)
+    branches = true.positions[true.order >= 1, 2]
+    # under most of the crown: above its lowest branch (1.04 m), below the lowest quarter of its branch nodes
+    assert branches.min() - 0.2 <= base <= np.percentile(branches, 25)
+    assert crown_base_from_masks([np.zeros_like(m) for m in exact], views, foot, 0.1, true.height) is None
+    # the grown tree's hull (from the photos' own masks) holds nothing under its crown base but the trunk
+    hull = grown.maps["hull"]
+    centres = hull.centres()
+    low = centres[centres[:, 2] < 0.5]
+    assert len(low) and np.linalg.norm(low[:, :2], axis=1).max() <= 0.5
 
 
 def test_same_photos_and_seed_give_the_same_tree_on_every_thread_count(photos, grown):
