@@ -1,5 +1,5 @@
 """Checks and conversions the sketch-reconstruction modules share: the error type, image and camera checks,
-depth01 to metres, a pixel disc."""
+depth01 to metres, a pixel disc, a mask's runs of pixels (the photos' masks read them too)."""
 from __future__ import annotations
 
 import numpy as np
@@ -50,3 +50,18 @@ def disc(radius: float) -> np.ndarray:
     r = int(np.ceil(radius))
     y, x = np.mgrid[-r:r + 1, -r:r + 1]
     return x * x + y * y <= radius * radius
+
+
+def mask_runs(mask: np.ndarray):
+    """Horizontal runs of a bool mask: row (R,), first column (R,), length (R,), all int64, in row-major order,
+    and the (H, W) int64 map of each stroke pixel's run length (0 off the strokes)."""
+    h, w = mask.shape
+    padded = np.zeros((h, w + 2), np.int8)
+    padded[:, 1:-1] = mask
+    step = np.diff(padded, axis=1)
+    rows, first = np.nonzero(step == 1)
+    _, end = np.nonzero(step == -1)
+    length = end - first
+    extent = np.zeros((h, w), np.int64)
+    extent[mask] = np.repeat(length, length)  # runs cover the stroke pixels in row-major order
+    return rows, first, length, extent

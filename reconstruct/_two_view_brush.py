@@ -11,6 +11,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ._sketch_arrays import mask_runs
 from ._two_view_lines import Skeleton2D, check_mask
 
 __all__ = ["skeleton_2d_from_brush", "stroke_centres"]
@@ -25,21 +26,6 @@ _SPUR_FACTOR = 4.0
 _FORK_WINDOW = 4.0  # pixels around a fork where its stroke's half width is read
 _EIGHT = np.array([(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)])
 _SIXTEEN = np.array([(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if max(abs(dy), abs(dx)) == 2])
-
-
-def _runs(mask: np.ndarray):
-    """Horizontal runs of a bool mask: row (R,), first column (R,), length (R,), all int64, in row-major order,
-    and the (H, W) int64 map of each stroke pixel's run length (0 off the strokes)."""
-    h, w = mask.shape
-    padded = np.zeros((h, w + 2), np.int8)
-    padded[:, 1:-1] = mask
-    step = np.diff(padded, axis=1)
-    rows, first = np.nonzero(step == 1)
-    _, end = np.nonzero(step == -1)
-    length = end - first
-    extent = np.zeros((h, w), np.int64)
-    extent[mask] = np.repeat(length, length)  # runs cover the stroke pixels in row-major order
-    return rows, first, length, extent
 
 
 def _width(across: np.ndarray, along: np.ndarray) -> np.ndarray:
@@ -57,8 +43,8 @@ def stroke_centres(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     width, corrected for slope (see `_width`), the largest where two centres share a pixel.
     """
     h, w = mask.shape
-    rows, first, length, horizontal = _runs(mask)
-    cols, top, height, vertical_t = _runs(mask.T)
+    rows, first, length, horizontal = mask_runs(mask)
+    cols, top, height, vertical_t = mask_runs(mask.T)
     vertical = vertical_t.T
     centres = np.zeros((h, w), bool)
     radius = np.zeros((h, w))

@@ -26,6 +26,7 @@ from species.skeleton import Skeleton
 from species.timing import StageTimer
 
 from .from_sketch import DEFAULT_SPECIES
+from ._sketch_arrays import mask_runs
 from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
 from .qsm import BREAST_HEIGHT_M, qsm_measures
@@ -69,22 +70,11 @@ def _trunk_pixel(mask: np.ndarray) -> tuple[float, float] | None:
     rows = np.flatnonzero(mask.any(axis=1))
     if len(rows) == 0:
         return None
-    height, width = mask.shape
-    columns = np.ascontiguousarray(mask.T).ravel()            # column after column, top to bottom
-    first = np.zeros_like(columns)
-    first[::height] = True
-    starts = columns & (first | ~np.roll(columns, 1))
-    run = np.cumsum(starts) * columns                          # 0 off the tree, else the pixel's run number
-    lengths = np.bincount(run)
-    bottoms = np.zeros(len(lengths), np.int64)
-    np.maximum.at(bottoms, run, np.arange(len(columns)))
-    low = rows[-1] - TRUNK_LOW * (rows[-1] - rows[0])
-    reach = bottoms % height >= low
-    reach[0] = False
-    if not reach.any():
-        return None
-    best = int(np.flatnonzero(reach)[np.argmax(lengths[reach])])
-    return bottoms[best] // height + 0.5, bottoms[best] % height + 0.5
+    columns, top, length, _ = mask_runs(mask.T)
+    bottom = top + length - 1
+    reach = np.flatnonzero(bottom >= rows[-1] - TRUNK_LOW * (rows[-1] - rows[0]))
+    best = reach[np.argmax(length[reach])]
+    return columns[best] + 0.5, bottom[best] + 0.5
 
 
 def trunk_foot(masks: list[np.ndarray], views: list[PinholeView], ground_z: float) -> np.ndarray | None:
@@ -115,21 +105,21 @@ def trunk_widths(mask: np.ndarray, view: PinholeView, foot: np.ndarray, heights:
     points = np.asarray(foot, np.float64) + np.outer(heights, [0.0, 0.0, 1.0])
     uv, depth = view.project(points)
     height, width = mask.shape
+    rows = np.floor(uv[:, 1]).astype(np.int64)
+    seen = np.flatnonzero((depth > 0) & (rows >= 0) & (rows < height) & (uv[:, 0] >= 0) & (uv[:, 0] < width))
     out = np.full(len(heights), np.nan)
-    for k, ((u, v), d) in enumerate(zip(uv, depth)):
-        row = int(np.floor(v))
-        if d <= 0 or not (0 <= row < height and 0 <= u < width):
-            continue
-        # the runs of tree pixels on the row: [start, stop) pairs
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], mask[row].astype(np.int8), [0]])))
-        starts, stops = edges[0::2], edges[1::2]
-        gap = np.maximum(np.maximum(starts - u, u - stops), 0.0)   # 0 where the run holds the axis
-        if len(starts) == 0 or gap.min() > TRUNK_SEARCH * width:
-            out[k] = 0.0
-            continue
-        nearest = int(np.argmin(gap))
-        if starts[nearest] > 0 and stops[nearest] < width:
-            out[k] = (stops[nearest] - starts[nearest]) * d / view.focal[0]
+    out[seen] = 0.0
+    line, first, length, _ = mask_runs(mask[rows[seen]])     # line k: the row of heights[seen[k]]
+    stop = first + length
+    u = uv[seen[line], 0]
+    gap = np.maximum(np.maximum(first - u, u - stop), 0.0)    # 0 where the run holds the axis
+    order = np.lexsort((gap, line))                           # each line's nearest run first
+    lines, at = np.unique(line[order], return_index=True)
+    nearest = order[at]
+    close = gap[nearest] <= TRUNK_SEARCH * width
+    whole = (first[nearest] > 0) & (stop[nearest] < width)
+    k = seen[lines]
+    out[k[close]] = np.where(whole[close], length[nearest[close]] * depth[k[close]] / view.focal[0], np.nan)
     return out
 
 
@@ -164,10 +154,11 @@ def crown_base_from_masks(masks: list[np.ndarray], views: list[PinholeView], foo
 def _under_crown_cleared(hull: VisualHull, foot: np.ndarray, crown_base: float, trunk_radius: float) -> VisualHull:
     """The hull without its voxels under the crown's base but the trunk's: raised cameras all look at the space
     under a wide crown across the crown itself, so no mask carves it (the hull's skirt)."""
-    centres = hull.origin + (np.indices(hull.occupancy.shape).reshape(3, -1).T + 0.5) * hull.voxel_size
+    centres = hull.centres()                                  # in np.argwhere(occupancy) order
     under = centres[:, 2] < foot[2] + crown_base - hull.voxel_size
     off_trunk = np.linalg.norm(centres[:, :2] - foot[:2], axis=1) > max(2.0 * trunk_radius, 1.5 * hull.voxel_size)
-    occupancy = hull.occupancy & ~(under & off_trunk).reshape(hull.occupancy.shape)
+    occupancy = hull.occupancy.copy()
+    occupancy[tuple(np.argwhere(occupancy)[under & off_trunk].T)] = False
     return dataclasses.replace(hull, occupancy=occupancy)
 
 
