@@ -1,8 +1,9 @@
 """A photo tree's crown grown inside its visual hull (issue 51): masks of every registered photo
 (`photo_masks`), the hull they carve from the SfM cameras (`visual_hull`), cleared under the crown's base where
 the masks show the trunk (`trunk_foot`, `trunk_radius_from_masks`, `crown_base_from_masks`: no photo from above
-the ground carves the space under a wide crown), and self-organizing growth that fills it from the trunk and main
-branches the cloud method measured in the SfM points.
+the ground carves the space under a wide crown), and self-organizing growth that fills it from a bole: where the
+masks show the trunk, straight up from their foot to the crown's base (the tree's base moves to that foot); else
+the species preset's, from the cloud method's root.
 
 In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree (`IsolatedTree`: its points and
 the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
@@ -19,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from species.colonization import grow_in_space, validate
+from species.colonization import bole_guide, grow_in_space, validate
 from species.meshing import build_mesh
 from species.presets import Preset, PresetError, get_preset
 from species.skeleton import Skeleton
@@ -30,15 +31,14 @@ from ._sketch_arrays import mask_runs
 from .photo_masks import MaskNetwork, photo_mask, tree_window
 from .photo_folder import PhotoError
 from .qsm import BREAST_HEIGHT_M, qsm_measures
-from .result import Reconstruction
+from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
-__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "main_branches",
-           "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
+__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "trunk_foot",
+           "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
-MAIN_ORDER = 1            # the measured skeleton's nodes up to this branching order guide the growth
 TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this near its lowest tree pixel
 # A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
 # at breast height (the presets' trunks are under 4 % of their heights)
@@ -169,17 +169,16 @@ def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
     return np.array([[lo[0] - pad, lo[1] - pad, ground_z], [hi[0] + pad, hi[1] + pad, hi[2] + pad]])
 
 
-def main_branches(skeleton: Skeleton, max_order: int = MAIN_ORDER) -> Skeleton:
-    """The nodes of `skeleton` up to branching order `max_order` (the trunk and main branches), reindexed."""
-    keep = skeleton.order <= max_order
-    keep[0] = True
-    parent = skeleton.parent
-    # a kept node's parent is kept: the order never falls towards the root
-    ids = np.flatnonzero(keep)
-    new = np.full(len(skeleton.positions), -1, np.int64)
-    new[ids] = np.arange(len(ids))
-    return Skeleton(skeleton.positions[ids], np.where(parent[ids] >= 0, new[np.maximum(parent[ids], 0)], -1),
-                    skeleton.radius[ids], skeleton.order[ids])
+def rerooted(scan: ScanRecord, root: np.ndarray) -> ScanRecord:
+    """`scan` with its base frame's origin moved to `root` (3,), a point of the upright frame (the photos' scan
+    frame): the transform's shift, and the measured skeleton moved the other way."""
+    transform = scan.transform.copy()
+    transform[:3, 3] = np.asarray(root, np.float64)
+    measured = scan.measured
+    step = scan.transform[:3, :3].T @ (scan.transform[:3, 3] - root)    # in the base frame's axes
+    moved = (measured.positions + step).astype(measured.positions.dtype)
+    return dataclasses.replace(scan, transform=transform,
+                               measured=Skeleton(moved, measured.parent, measured.radius, measured.order))
 
 
 def colonization_preset(species: str | None) -> Preset:
@@ -200,7 +199,8 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
                  seed: int = 0, mask_net: MaskNetwork | None = None) -> Reconstruction:
     """`result` (the cloud method's, from `tree`'s points) regrown inside the photos' visual hull (module
     docstring); timings add "hull.masks", "hull.hull", "hull.growth" and "hull.mesh"; maps add "hull" (the
-    `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton"; params are the species preset's draw it grew with.
+    `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton" (the bole it grew
+    from); params are the species preset's draw it grew with.
     species : a colonization preset (sc_*), default DEFAULT_SPECIES. Raises PhotoError for a preset that is not
     a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree.
     mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical."""
@@ -216,28 +216,36 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
         masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points)
-    shift = -result.scan.transform[:3, 3]                  # upright frame to the base frame (Z up already)
-    height = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size + shift[2])
+    top = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size)
     foot = trunk_foot(masks, views, tree.ground_z)
     trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
-    if trunk_radius is not None and trunk_radius <= MAX_TRUNK_SHARE * height:
-        crown_base = crown_base_from_masks(masks, views, foot, trunk_radius, height)
+    crown_base = None
+    scan = result.scan
+    if trunk_radius is not None and trunk_radius <= MAX_TRUNK_SHARE * (top - foot[2]):
+        # the masks show the trunk: the tree stands where they put its foot (the sparse points' root can lie
+        # metres off, on the ground's points), and the crown begins where they widen
+        scan = rerooted(scan, foot)
+        crown_base = crown_base_from_masks(masks, views, foot, trunk_radius, top - foot[2])
         if crown_base is not None:
             hull = _under_crown_cleared(hull, foot, crown_base, trunk_radius)
     else:
-        trunk_radius = result.scan.measures["trunk_radius_fit_m"]   # the sparse points' stem fit, as the cloud's
+        trunk_radius = scan.measures["trunk_radius_fit_m"]   # the sparse points' stem fit, as the cloud's
+    shift = -scan.transform[:3, 3]                  # upright frame to the base frame (Z up already)
+    height = top + float(shift[2])
     timer.lap("hull")
     rng = np.random.default_rng(seed)
     params = validate(preset.sample(rng))
-    guide = main_branches(result.scan.measured)
+    space = hull.space(shift)
     params["height"] = height
     internode = height / (params["crown_base"] + params["crown_height"])
-    skeleton = grow_in_space(params, rng, space=hull.space(shift), internode_length=internode, guide=guide,
-                             guide_buds="all")
+    # The growth starts from a bole: the sparse points' trunk and main branches wander off the hull (ground
+    # points leafless, stray points over the crown in leaf) and starved or misled it on every orbit measured.
+    bole = params if crown_base is None else {**params, "stems": 1, "crown_base": crown_base / internode - 1.0}
+    guide = bole_guide(bole, rng, internode)
+    skeleton = grow_in_space(params, rng, space=space, internode_length=internode, guide=guide, guide_buds="all")
     timer.lap("growth")
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
-    scan = result.scan
     measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": trunk_radius}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
                                scan=dataclasses.replace(scan, measures=measures),

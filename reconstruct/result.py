@@ -49,7 +49,8 @@ class ScanRecord:
     def base_points(self) -> np.ndarray:
         """(N, 3) float64: the cloud's points in the base frame, the skeleton's and the mesh's (its working frame
         less the measured root)."""
-        return self.cloud.points.astype(np.float64) - self.fit.skeleton.positions[0].astype(np.float64)
+        root = self.cloud.up_rotation @ self.transform[:3, 3] - self.cloud.offset   # the transform's inverse
+        return self.cloud.points.astype(np.float64) - root
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,7 +8,7 @@ Carving is conservative: a voxel stays in a view when its projected ball (half i
 so a hull carved from exact masks holds the whole shape and is at most about a voxel larger than the cameras'
 outlines allow. Wrong masks (a branch lost to the sky filter, a photo where a person walks past) carve too much;
 a voxel therefore stays when at least `agree` of the cameras that see it keep it, not all of them. Points known
-to lie on the tree (SfM's) keep the voxels they fall in.
+to lie on the tree (SfM's) keep the voxels they fall in where at least half of the cameras seeing them agree.
 
 Every voxel centre is projected into one camera at a time, all at once (numpy); nothing loops over voxels.
 """
@@ -28,6 +28,7 @@ from .photo_folder import PhotoError
 __all__ = ["PinholeView", "VisualHull", "HullError", "carve", "DEFAULT_AGREE", "MAX_VOXELS"]
 
 DEFAULT_AGREE = 0.8       # the share of the cameras seeing a voxel that must keep it
+POINT_AGREE = 0.5         # the share of the cameras seeing a voxel that must keep it for a point in it to count
 MAX_VOXELS = 4_000_000    # a grid larger than this is refused (memory: a few float arrays of this length)
 
 
@@ -104,7 +105,8 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[PinholeView], bounds: np.
 
     agree     : a voxel stays when at least this share of the views that see its centre keep it (1.0: all).
     min_views : a voxel seen by fewer views is dropped (too little to carve it).
-    points    : (P, 3) points on the tree; the voxels they fall in stay whatever the masks say.
+    points    : (P, 3) points on the tree; the voxels they fall in stay when at least POINT_AGREE of the views that
+                see them keep them (a point restores what a few wrong masks carved, not what none of them holds).
     Raises HullError when there is no view, the masks are all empty, or nothing is left.
     """
     if not views or len(masks) != len(views):
@@ -138,8 +140,11 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[PinholeView], bounds: np.
     occupancy = (seen >= min_views) & (kept >= agree * seen)
     if points is not None and len(points):
         ijk = np.floor((np.asarray(points, np.float64) - origin) / voxel_size).astype(np.int64)
-        inside = np.all((ijk >= 0) & (ijk < np.array(shape)), axis=1)
-        occupancy.reshape(shape)[tuple(ijk[inside].T)] = True
+        ijk = ijk[np.all((ijk >= 0) & (ijk < np.array(shape)), axis=1)]
+        at = np.ravel_multi_index(tuple(ijk.T), shape)
+        # a stray point (sky, a leaf's reflection mismatched) over the crown would keep a voxel no mask holds
+        backed = (seen[at] > 0) & (kept[at] >= POINT_AGREE * seen[at])
+        occupancy[at[backed]] = True
     if not occupancy.any():
         raise HullError(f"no voxel of {len(centres)} is inside the tree's outline in enough photos: the masks "
                         "and cameras do not agree on a tree")

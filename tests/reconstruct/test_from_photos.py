@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
-from reconstruct.hull_growth import crown_base_from_masks, trunk_foot, trunk_radius_from_masks
+from reconstruct.hull_growth import crown_base_from_masks, rerooted, trunk_foot, trunk_radius_from_masks
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
@@ -214,8 +214,11 @@ def test_the_trunk_stands_where_the_masks_put_it_and_is_as_thick_at_breast_heigh
     foot = trunk_foot(exact, views, 0.0)
     assert np.linalg.norm(foot[:2] - true.positions[0, :2]) <= 0.15 and foot[2] == 0.0
     assert trunk_radius_from_masks(exact, views, foot) == pytest.approx(truth, rel=0.1)
-    # from the photos alone (network masks): the sparse points' stem fit says 0.47 m, their cloud root lies 2 m off
+    # from the photos alone (network masks): the sparse points' stem fit says 0.47 m, their cloud root lies 2 m off;
+    # the grown tree stands on the masks' foot, its base frame's origin (0.33 m off: ten photos over 90 degrees)
     assert grown.scan.measures["trunk_radius_fit_m"] == pytest.approx(truth, rel=0.2)
+    assert np.linalg.norm(grown.scan.transform[:2, 3] - true.positions[0, :2]) <= 0.1 * true.height
+    assert abs(grown.scan.transform[2, 3] - true.positions[0, 2]) <= 0.05
     empty = [np.zeros_like(mask) for mask in exact]
     assert trunk_foot(empty, views, 0.0) is None and trunk_radius_from_masks(empty, views, foot) is None
     # a foot the photos do not see (behind every camera) gives no radius
@@ -237,6 +240,15 @@ def test_the_crown_base_from_the_masks_clears_the_hull_under_the_crown(photos, p
     centres = hull.centres()
     low = centres[centres[:, 2] < 0.5]
     assert len(low) and np.linalg.norm(low[:, :2], axis=1).max() <= 0.5
+
+
+def test_moving_the_base_keeps_the_points_and_the_measured_skeleton_in_place(grown):
+    # moving the base frame's origin keeps every point and the measured skeleton where they are in the scan
+    scan = grown.scan
+    moved = rerooted(scan, scan.transform[:3, 3] + [0.4, -0.2, 0.1])
+    assert np.allclose(moved.base_points + moved.transform[:3, 3], scan.base_points + scan.transform[:3, 3])
+    assert np.allclose(moved.measured.positions + moved.transform[:3, 3],
+                       scan.measured.positions + scan.transform[:3, 3], atol=1e-5)
 
 
 def test_same_photos_and_seed_give_the_same_tree_on_every_thread_count(photos, grown):
