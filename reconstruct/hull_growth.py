@@ -1,9 +1,10 @@
 """A photo tree's crown grown inside its visual hull (issue 51): masks of every registered photo
 (`photo_masks`), the hull they carve from the SfM cameras (`visual_hull`), cleared under the crown's base where
 the masks show the trunk (`trunk_foot`, `trunk_radius_from_masks`, `crown_base_from_masks`: no photo from above
-the ground carves the space under a wide crown), and self-organizing growth that fills it from a bole: where the
-masks show the trunk, straight up from their foot to the crown's base (the tree's base moves to that foot); else
-the species preset's, from the cloud method's root.
+the ground carves the space under a wide crown) and along the sightlines to the ground SfM saw under the crown
+(`ground_sightlines`: they carve what the masks' shadows keep), and self-organizing growth that fills it from a
+bole: where the masks show the trunk, straight up from their foot to the crown's base (the tree's base moves to
+that foot); else the species preset's, from the cloud method's root.
 
 In: the SfM model (`SfmPoints`, with each photo's intrinsics), the isolated tree (`IsolatedTree`: its points and
 the map from the model's frame to the upright metric one), the photos' folder and the cloud method's
@@ -34,10 +35,13 @@ from .qsm import BREAST_HEIGHT_M, qsm_measures
 from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
-__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "trunk_foot",
-           "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
+__all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
+           "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES",
+           "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
+GROUND_SIGHT_BAND = 0.05  # of the tree's height: SfM points this near the ground plane are the ground's
+GROUND_SIGHT_REACH = 0.4  # of the tree's height: ground points this near the trunk's base carve the hull
 HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
 TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this near its lowest tree pixel
 # A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
@@ -169,6 +173,25 @@ def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
     return np.array([[lo[0] - pad, lo[1] - pad, ground_z], [hi[0] + pad, hi[1] + pad, hi[2] + pad]])
 
 
+def ground_sightlines(sfm, tree, views: list[PinholeView], base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(starts, ends), each (S, 3) in the upright frame: the sightlines from every camera that saw an SfM point on
+    the ground (within GROUND_SIGHT_BAND of the tree's height above the ground plane) no farther than
+    GROUND_SIGHT_REACH of its height from `base`, the tree's base, to that point. Ground seen near the trunk was
+    seen under the crown, so its sightlines cross the space a shadow taken for the tree keeps in the masks;
+    ground seen farther out was often seen through the crown's gaps, and would carve the crown. Empty when SfM
+    kept no tracks."""
+    if sfm.observations is None or not len(sfm.observations):
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    to_upright = tree.model_to_upright
+    seen = sfm.points @ to_upright[:3, :3].T + to_upright[:3, 3]
+    height = float(tree.points[:, 2].max() - tree.ground_z)
+    ground = (seen[:, 2] < tree.ground_z + GROUND_SIGHT_BAND * height) \
+        & (np.linalg.norm(seen[:, :2] - base[:2], axis=1) < GROUND_SIGHT_REACH * height)
+    pairs = sfm.observations[ground[sfm.observations[:, 0]]]
+    centres = np.array([view.centre for view in views])
+    return centres[pairs[:, 1]], seen[pairs[:, 0]]
+
+
 def rerooted(scan: ScanRecord, root: np.ndarray) -> ScanRecord:
     """`scan` with its base frame's origin moved to `root` (3,), a point of the upright frame (the photos' scan
     frame): the transform's shift, and the measured skeleton moved the other way."""
@@ -215,7 +238,8 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
             image = np.asarray(photo.convert("RGB"))
         masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
     timer.lap("masks")
-    hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points)
+    hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points,
+                 sightlines=ground_sightlines(sfm, tree, views, base))
     top = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size)
     foot = trunk_foot(masks, views, tree.ground_z)
     trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)

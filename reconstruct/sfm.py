@@ -120,6 +120,8 @@ class SfmPoints:
     half_widths : (R,) float64, each photo's half width over its focal length (tan of half the horizontal view).
     intrinsics : (R, 3, 3) float64, each photo's pinhole matrix (COLMAP's pixel centres: pixel (0, 0) spans
     [0, 1)); sizes : (R, 2) int, (width, height) pixels. Lens distortion is left out.
+    observations : (T, 2) int, (point, photo) index pairs: which registered photos saw each point (its track), in
+    point order; the sightlines from those cameras to the point cross free space.
     """
 
     points: np.ndarray
@@ -135,6 +137,7 @@ class SfmPoints:
     timings: dict[str, float]
     intrinsics: np.ndarray | None = None
     sizes: np.ndarray | None = None
+    observations: np.ndarray | None = None
 
 
 def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoints, float]:
@@ -162,7 +165,7 @@ def align_to_cameras(sfm: SfmPoints, cameras: dict[str, Camera]) -> tuple[SfmPoi
     rotations = sfm.camera_rotations @ rotation.T
     return (SfmPoints(move(sfm.points), sfm.colours, sfm.track_length, sfm.registered, sfm.n_photos, "aligned",
                       sfm.reprojection_px, centres, rotations, sfm.half_widths, sfm.timings, sfm.intrinsics,
-                      sfm.sizes), residual)
+                      sfm.sizes, sfm.observations), residual)
 
 
 def known_cameras(folder: str | Path, names: list[str]) -> dict[str, Camera] | None:
@@ -393,6 +396,9 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                          f"{needed} ({settings.min_registered:.0%}); {advice}")
     points = list(model.points3D.values())
     images = sorted((model.image(i) for i in model.reg_image_ids()), key=lambda image: image.name)
+    photo_index = {image.image_id: k for k, image in enumerate(images)}
+    observations = np.array([(k, photo_index[element.image_id]) for k, p in enumerate(points)
+                             for element in p.track.elements], np.int64).reshape(-1, 2)
     return SfmPoints(points=np.array([p.xyz for p in points], np.float64).reshape(-1, 3),
                      colours=np.array([p.color for p in points], np.uint8).reshape(-1, 3),
                      track_length=np.array([p.track.length() for p in points], np.int64),
@@ -408,7 +414,8 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
                      intrinsics=np.array([model.camera(image.camera_id).calibration_matrix() for image in images],
                                          np.float64).reshape(-1, 3, 3),
                      sizes=np.array([(model.camera(image.camera_id).width, model.camera(image.camera_id).height)
-                                     for image in images], np.int64).reshape(-1, 2))
+                                     for image in images], np.int64).reshape(-1, 2),
+                     observations=observations)
 
 
 def _seed_mapping(options: pycolmap.IncrementalPipelineOptions, seed: int) -> None:

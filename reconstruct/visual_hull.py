@@ -25,10 +25,13 @@ from species.colonization import VoxelSpace
 
 from .photo_folder import PhotoError
 
-__all__ = ["PinholeView", "VisualHull", "HullError", "carve", "DEFAULT_AGREE", "MAX_VOXELS"]
+__all__ = ["PinholeView", "VisualHull", "HullError", "carve", "free_votes", "DEFAULT_AGREE", "MAX_VOXELS"]
 
 DEFAULT_AGREE = 0.8       # the share of the cameras seeing a voxel that must keep it
 POINT_AGREE = 0.5         # the share of the cameras seeing a voxel that must keep it for a point in it to count
+FREE_VOTES = 3            # sightlines crossing a voxel that carve it
+FREE_STOP = 1.5           # voxels: a sightline frees the space up to this far short of the point it saw
+SIGHTLINE_CHUNK = 4096    # sightlines traced at once (memory: about 200 samples each)
 MAX_VOXELS = 4_000_000    # a grid larger than this is refused (memory: a few float arrays of this length)
 
 
@@ -99,14 +102,49 @@ def _grid(bounds: np.ndarray, voxel_size: float) -> tuple[np.ndarray, tuple[int,
     return lo, shape  # type: ignore[return-value]
 
 
+def free_votes(shape: tuple[int, int, int], origin: np.ndarray, voxel_size: float, starts: np.ndarray,
+               ends: np.ndarray) -> np.ndarray:
+    """(X, Y, Z) int32: how many sightlines cross each voxel of the grid (`shape`, `origin`, `voxel_size` as a
+    `VisualHull`'s), a sightline running from a camera's centre `starts` (S, 3) to a point that camera saw `ends`
+    (S, 3), up to FREE_STOP voxels short of it. Each line is sampled every half voxel and counts once a voxel."""
+    size = int(np.prod(shape))
+    votes = np.zeros(size, np.int64)
+    lo = np.asarray(origin, np.float64)
+    hi = lo + np.array(shape) * voxel_size
+    step = 0.5 * voxel_size
+    for first in range(0, len(starts), SIGHTLINE_CHUNK):
+        start = np.asarray(starts[first:first + SIGHTLINE_CHUNK], np.float64)
+        line = np.asarray(ends[first:first + SIGHTLINE_CHUNK], np.float64) - start
+        length = np.linalg.norm(line, axis=1)
+        safe = np.where(np.abs(line) < 1e-12, 1e-12, line)
+        near, far = (lo - start) / safe, (hi - start) / safe      # where each line meets the box's slabs
+        enter = np.maximum(np.minimum(near, far).max(axis=1), 0.0)
+        leave = np.minimum(np.maximum(near, far).min(axis=1), 1.0 - FREE_STOP * voxel_size / np.maximum(length, 1e-9))
+        samples = np.where(leave > enter, np.ceil((leave - enter) * length / step), 0).astype(np.int64)
+        if not samples.any():
+            continue
+        which = np.repeat(np.arange(len(start)), samples)
+        along = np.arange(int(samples.sum())) - np.repeat(np.cumsum(samples) - samples, samples)
+        t = enter[which] + (along + 0.5) * step / length[which]
+        ijk = np.floor((start[which] + t[:, None] * line[which] - lo) / voxel_size).astype(np.int64)
+        ijk = np.clip(ijk, 0, np.array(shape) - 1)
+        crossed = np.unique(which * size + np.ravel_multi_index(tuple(ijk.T), shape))
+        votes += np.bincount(crossed % size, minlength=size)
+    return votes.reshape(shape).astype(np.int32)
+
+
 def carve(masks: Sequence[np.ndarray], views: Sequence[PinholeView], bounds: np.ndarray, voxel_size: float, *,
-          agree: float = DEFAULT_AGREE, min_views: int = 2, points: np.ndarray | None = None) -> VisualHull:
+          agree: float = DEFAULT_AGREE, min_views: int = 2, points: np.ndarray | None = None,
+          sightlines: tuple[np.ndarray, np.ndarray] | None = None) -> VisualHull:
     """The visual hull of `masks` seen by `views` inside `bounds` ((2, 3) metres, lo and hi), `voxel_size` metres.
 
     agree     : a voxel stays when at least this share of the views that see its centre keep it (1.0: all).
     min_views : a voxel seen by fewer views is dropped (too little to carve it).
     points    : (P, 3) points on the tree; the voxels they fall in stay when at least POINT_AGREE of the views that
                 see them keep them (a point restores what a few wrong masks carved, not what none of them holds).
+    sightlines: (starts, ends), each (S, 3): camera centres and points those cameras saw (SfM's tracks); a voxel
+                that FREE_VOTES of them cross is empty whatever the masks say (`free_votes`): the ground seen
+                under a crown carves the space a wrong mask's shadow, or every raised camera, leaves there.
     Raises HullError when there is no view, the masks are all empty, or nothing is left.
     """
     if not views or len(masks) != len(views):
@@ -138,6 +176,8 @@ def carve(masks: Sequence[np.ndarray], views: Sequence[PinholeView], bounds: np.
         seen[index] += 1
         kept[index] += outside[row[index], column[index]] <= reach
     occupancy = (seen >= min_views) & (kept >= agree * seen)
+    if sightlines is not None and len(sightlines[0]):
+        occupancy &= free_votes(shape, origin, voxel_size, *sightlines).ravel() < FREE_VOTES
     if points is not None and len(points):
         ijk = np.floor((np.asarray(points, np.float64) - origin) / voxel_size).astype(np.int64)
         ijk = ijk[np.all((ijk >= 0) & (ijk < np.array(shape)), axis=1)]

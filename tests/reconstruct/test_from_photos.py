@@ -12,7 +12,8 @@ import pytest
 from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
-from reconstruct.hull_growth import crown_base_from_masks, rerooted, trunk_foot, trunk_radius_from_masks
+from reconstruct.hull_growth import (crown_base_from_masks, ground_sightlines, photo_views, rerooted, trunk_foot,
+                                     trunk_radius_from_masks)
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
@@ -265,6 +266,19 @@ def test_sfm_run_once_gives_the_same_tree_as_from_photos_running_it(photos, grow
     again = from_photos(folder, settings=SfmSettings(threads=1), shape="hull", sfm=sfm)
     assert again.glb() == grown.glb()
     assert {k.removeprefix("sfm."): v for k, v in again.timings.items() if k.startswith("sfm.")} == sfm.timings
+    # every point's track: the photos that saw it, as many as its track length
+    point, photo = sfm.observations.T
+    assert np.bincount(point, minlength=len(sfm.points)).tolist() == sfm.track_length.tolist()
+    assert photo.min() >= 0 and photo.max() < len(sfm.registered)
+    # the sightlines that carve the hull run from those photos' cameras to the ground near the trunk
+    tree = level_and_isolate(sfm, None, np.random.default_rng(0), metric=True)
+    views = photo_views(sfm, tree.model_to_upright)
+    base = np.array([*np.median(tree.points[:, :2], axis=0), tree.ground_z])
+    starts, ends = ground_sightlines(sfm, tree, views, base)
+    height = tree.points[:, 2].max() - tree.ground_z
+    assert len(ends) >= 100 and np.all(ends[:, 2] < tree.ground_z + 0.05 * height)
+    assert np.all(np.linalg.norm(ends[:, :2] - base[:2], axis=1) < 0.4 * height)
+    assert {tuple(c) for c in starts} <= {tuple(v.centre) for v in views}
 
 
 def test_a_bad_shape_or_species_is_one_line(photos):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from reconstruct.visual_hull import HullError, PinholeView, carve
+from reconstruct.visual_hull import HullError, PinholeView, carve, free_votes
 
 SIZE = 96
 FOCAL = 110.0
@@ -90,3 +90,38 @@ def test_empty_masks_or_no_views_are_refused(views):
         carve([np.zeros((SIZE, SIZE), bool)] * len(views), views, BOUNDS, VOXEL)
     with pytest.raises(HullError, match="at least one registered photo"):
         carve([], [], BOUNDS, VOXEL)
+
+
+def test_sightlines_free_the_voxels_they_cross_short_of_the_point_seen():
+    start, end = np.array([[-5.0, 0.5, 0.5]]), np.array([[8.5, 0.5, 0.5]])   # along the first row of voxels
+    votes = free_votes((10, 10, 10), np.zeros(3), 1.0, start, end)
+    assert votes[:7, 0, 0].tolist() == [1] * 7 and votes.sum() == 7            # stops 1.5 voxels short of it
+    twice = free_votes((10, 10, 10), np.zeros(3), 1.0, np.repeat(start, 2, 0), np.repeat(end, 2, 0))
+    assert (twice == 2 * votes).all()
+    above = free_votes((10, 10, 10), np.zeros(3), 1.0, start + [0, 0, 20], end + [0, 0, 20])
+    assert not above.any()                                                      # outside the grid
+
+
+def test_ground_seen_under_the_crown_carves_what_every_mask_keeps(views):
+    # every mask also covers a skirt under the crown (a shadow taken for the tree); cameras that saw the ground
+    # there through it carve it, and the crown stays
+    skirt = np.array([CENTRE[0], CENTRE[1], 0.8])
+    masks = []
+    for view in views:
+        mask = _exact_mask(view)
+        (u, v), = view.project(skirt[None, :])[0]
+        rows, columns = np.mgrid[0:SIZE, 0:SIZE] + 0.5
+        mask[(columns - u) ** 2 + (rows - v) ** 2 < 8.0 ** 2] = True
+        masks.append(mask)
+    side = [v for v in views if abs(v.centre[2] - CENTRE[2]) < 1.0]           # the level cameras
+    away = np.array([np.append(CENTRE[:2] - v.centre[:2], 0.0) for v in side])
+    ends = np.array([0.0, 0.0, 0.5]) + 1.4 * away / np.linalg.norm(away, axis=1, keepdims=True)
+    starts = np.array([v.centre for v in side])                                # each saw the ground beyond the axis
+    low = np.array([0.0, 0.0, 0.5 + 1.5 * 1.4 / 7.4])                           # where they all pass over it
+    assert carve(masks, views, BOUNDS, VOXEL).space().contains(low[None, :]).all()
+    hull = carve(masks, views, BOUNDS, VOXEL, sightlines=(starts, ends))
+    assert not hull.space().contains(low[None, :]).any()
+    rng = np.random.default_rng(2)
+    crown = CENTRE + RADII * rng.uniform(-1, 1, (4000, 3))
+    crown = crown[_inside_ellipsoid(crown)]
+    assert hull.space().contains(crown).mean() >= 0.9
