@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from species.colonization import bole_guide, grow_in_space, validate
+from scipy import ndimage
+
+from species.colonization import VoxelSpace, bole_guide, grow_in_space, validate
 from species.meshing import build_mesh
 from species.presets import Preset, PresetError, get_preset
 from species.skeleton import Skeleton
@@ -36,8 +38,8 @@ from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
-           "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks", "DEFAULT_SPECIES",
-           "HULL_VOXELS"]
+           "grow_in_hull_space", "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks",
+           "DEFAULT_SPECIES", "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 GROUND_SIGHT_BAND = 0.05  # of the tree's height: SfM points this near the ground plane are the ground's
@@ -192,6 +194,21 @@ def ground_sightlines(sfm, tree, views: list[PinholeView], base: np.ndarray) -> 
     return centres[pairs[:, 1]], seen[pairs[:, 0]]
 
 
+def grow_in_hull_space(params: dict, rng: np.random.Generator, occupancy: np.ndarray, space: VoxelSpace,
+                       guide: Skeleton, internode: float) -> Skeleton:
+    """`grow_in_space` from `guide` (its buds on every node) in `space`, the hull's voxels `occupancy` placed in
+    the base frame. A hull too porous round the bole for a new internode to land in it (classical masks in leaf)
+    leaves the growth no more than the guide: then it runs again on the same markers, its internodes allowed a
+    voxel outside the hull."""
+    skeleton = grow_in_space(params, rng, space=space, internode_length=internode, guide=guide, guide_buds="all")
+    if len(skeleton) >= 2 * len(guide):
+        return skeleton
+    markers = space.sample_markers(params["marker_density"] / internode ** 3, params["max_markers"], rng)
+    wider = VoxelSpace(ndimage.binary_dilation(occupancy, iterations=1), space.origin, space.voxel_size)
+    return grow_in_space(params, rng, space=wider, internode_length=internode, guide=guide, guide_buds="all",
+                         markers=markers)
+
+
 def rerooted(scan: ScanRecord, root: np.ndarray) -> ScanRecord:
     """`scan` with its base frame's origin moved to `root` (3,), a point of the upright frame (the photos' scan
     frame): the transform's shift, and the measured skeleton moved the other way."""
@@ -266,7 +283,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     # points leafless, stray points over the crown in leaf) and starved or misled it on every orbit measured.
     bole = params if crown_base is None else {**params, "stems": 1, "crown_base": crown_base / internode - 1.0}
     guide = bole_guide(bole, rng, internode)
-    skeleton = grow_in_space(params, rng, space=space, internode_length=internode, guide=guide, guide_buds="all")
+    skeleton = grow_in_hull_space(params, rng, hull.occupancy, space, guide, internode)
     timer.lap("growth")
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")

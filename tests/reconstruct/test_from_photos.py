@@ -12,12 +12,16 @@ import pytest
 from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
-from reconstruct.hull_growth import (crown_base_from_masks, ground_sightlines, photo_views, rerooted, trunk_foot,
-                                     trunk_radius_from_masks)
+from reconstruct.hull_growth import (DEFAULT_SPECIES, crown_base_from_masks, ground_sightlines, grow_in_hull_space,
+                                     photo_views, rerooted, trunk_foot, trunk_radius_from_masks)
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
 from renderers.blender import load_view
+from scipy import ndimage
+from species.colonization import VoxelSpace, grow_in_space, validate
+from species.presets import get_preset
+from species.skeleton import Skeleton
 from species.meshing.gltf import read_glb_json
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -287,3 +291,24 @@ def test_a_bad_shape_or_species_is_one_line(photos):
         from_photos(folder, shape="dense")
     with pytest.raises(PhotoError, match="species 'sp_oak' is unknown"):
         from_photos(folder, shape="hull", species="sp_oak")
+
+
+def test_a_hull_too_porous_round_the_bole_still_grows_a_crown_next_to_it():
+    # a crown of isolated voxels (every other one along each axis) over a bole: few internodes land in the hull
+    voxel = 0.5
+    ijk = np.indices((24, 24, 24)).reshape(3, -1).T
+    centre = np.array([12, 12, 14])
+    lattice = ijk[(np.linalg.norm(ijk - centre, axis=1) < 8) & np.all(ijk % 2 == 0, axis=1)]
+    occupancy = np.zeros((24, 24, 24), bool)
+    occupancy[tuple(lattice.T)] = True
+    space = VoxelSpace(occupancy, [-6.0, -6.0, 0.0], voxel)
+    params = validate(get_preset(DEFAULT_SPECIES).sample(np.random.default_rng(0)))
+    bole = Skeleton(np.array([[0, 0, z] for z in np.arange(0.0, 5.5, 0.5)], np.float32), np.arange(-1, 10),
+                    np.full(11, 0.05, np.float32), np.zeros(11, np.uint8))      # up into the crown
+    alone = grow_in_space(params, np.random.default_rng(1), space=space, internode_length=voxel, guide=bole,
+                          guide_buds="all")
+    assert len(alone) < 2 * len(bole)                                   # starved in the hull alone
+    grown = grow_in_hull_space(params, np.random.default_rng(1), occupancy, space, bole, voxel)
+    assert len(grown) >= 5 * len(bole)
+    near = VoxelSpace(ndimage.binary_dilation(occupancy, iterations=1), space.origin, voxel)
+    assert near.contains(grown.positions[len(bole):].astype(np.float64)).all()   # within a voxel of the hull
