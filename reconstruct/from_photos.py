@@ -51,6 +51,7 @@ FOOTPRINT_MARGIN = 1.2    # groups whose centre lies within this times the main 
 FOOTPRINT_SHARE = 1.0     # of the photos' footprint radius (`in_footprint`)
 SHAPES = ("sparse", "hull")  # the crown from the SfM points alone, or grown in the photos' visual hull
 HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale is warned about
+HULL_RESCALE = 0.02       # a hull this far from the given height scales the tree again, to the hull's height
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -253,6 +254,19 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts, model_to_upright)
 
 
+def hull_height(hull, tree: IsolatedTree) -> float:
+    """Metres from the ground plane under the tree to the top of its visual hull's highest voxel."""
+    return float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size - tree.ground_z)
+
+
+def rescaled(tree: IsolatedTree, factor: float) -> IsolatedTree:
+    """`tree` scaled by `factor` about the origin (a tree scaled by its height has its ground at z = 0 there)."""
+    to_upright = tree.model_to_upright.copy()
+    to_upright[:3] *= factor
+    return dataclasses.replace(tree, points=tree.points * factor, ground_z=tree.ground_z * factor,
+                               scale=tree.scale * factor, model_to_upright=to_upright)
+
+
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
@@ -318,6 +332,14 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
     if shape == "hull":
         result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network)
+        factor = 1.0 if tree.scale_source != "height" else float(height) / hull_height(result.maps["hull"], tree)
+        if abs(factor - 1.0) > HULL_RESCALE:
+            # the given height is the tree's, and the hull is the tree's outline: the points' top it was first
+            # scaled by can be a stray point over the crown (in leaf 30 % too tall)
+            tree = rescaled(tree, factor)
+            cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
+            result = grow_in_hull(from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name),
+                                  sfm, tree, folder, species=species, seed=seed, mask_net=network)
     progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,

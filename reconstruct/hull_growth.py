@@ -44,6 +44,7 @@ __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 GROUND_SIGHT_BAND = 0.05  # of the tree's height: SfM points this near the ground plane are the ground's
 GROUND_SIGHT_REACH = 0.4  # of the tree's height: ground points this near the trunk's base carve the hull
+GROWTH_REACH = 3          # voxels: how far outside a porous hull the growth may be let to place its internodes
 HULL_MARGIN = 0.15        # the box round the tree's points grows by this share of its extent on every side
 TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this near its lowest tree pixel
 # A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
@@ -198,15 +199,19 @@ def grow_in_hull_space(params: dict, rng: np.random.Generator, occupancy: np.nda
                        guide: Skeleton, internode: float) -> Skeleton:
     """`grow_in_space` from `guide` (its buds on every node) in `space`, the hull's voxels `occupancy` placed in
     the base frame. A hull too porous round the bole for a new internode to land in it (classical masks in leaf)
-    leaves the growth no more than the guide: then it runs again on the same markers, its internodes allowed a
-    voxel outside the hull."""
+    leaves the growth no more than the guide: then it runs again on the same markers, its internodes allowed one
+    voxel outside the hull, then two, up to GROWTH_REACH."""
     skeleton = grow_in_space(params, rng, space=space, internode_length=internode, guide=guide, guide_buds="all")
-    if len(skeleton) >= 2 * len(guide):
-        return skeleton
-    markers = space.sample_markers(params["marker_density"] / internode ** 3, params["max_markers"], rng)
-    wider = VoxelSpace(ndimage.binary_dilation(occupancy, iterations=1), space.origin, space.voxel_size)
-    return grow_in_space(params, rng, space=wider, internode_length=internode, guide=guide, guide_buds="all",
-                         markers=markers)
+    markers = None
+    for reach in range(1, GROWTH_REACH + 1):
+        if len(skeleton) >= 2 * len(guide):
+            break
+        if markers is None:
+            markers = space.sample_markers(params["marker_density"] / internode ** 3, params["max_markers"], rng)
+        wider = VoxelSpace(ndimage.binary_dilation(occupancy, iterations=reach), space.origin, space.voxel_size)
+        skeleton = grow_in_space(params, rng, space=wider, internode_length=internode, guide=guide,
+                                 guide_buds="all", markers=markers)
+    return skeleton
 
 
 def rerooted(scan: ScanRecord, root: np.ndarray) -> ScanRecord:
@@ -243,7 +248,9 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     from); params are the species preset's draw it grew with.
     species : a colonization preset (sc_*), default DEFAULT_SPECIES. Raises PhotoError for a preset that is not
     a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree.
-    mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical."""
+    mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical.
+    A hull no crown grows in (`grow_in_hull_space` gave no more than the bole) leaves the cloud method's tree, with
+    the hull and masks in its maps and a warning that says so."""
     preset = colonization_preset(species)
     timer = StageTimer()
     views = photo_views(sfm, tree.model_to_upright)
@@ -285,11 +292,17 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     guide = bole_guide(bole, rng, internode)
     skeleton = grow_in_hull_space(params, rng, hull.occupancy, space, guide, internode)
     timer.lap("growth")
+    maps = {**result.maps, "hull": hull, "masks": tuple(masks)}
+    timings = {**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}}
+    if len(skeleton) < 2 * len(guide):
+        # the masks carved a hull the growth cannot take hold in (masks that lost the tree in many photos)
+        return dataclasses.replace(result, maps=maps, timings=timings, warnings=(*result.warnings, (
+            f"the photos' tree masks carved a hull of {int(hull.occupancy.sum())} voxels that no crown grew in: "
+            "this is the sparse points' tree; try --masks network or more photos")))
     mesh = build_mesh(skeleton, params)
     timer.lap("mesh")
     measures = {**qsm_measures(skeleton, scan.base_points), "trunk_radius_fit_m": trunk_radius}
     return dataclasses.replace(result, skeleton=skeleton, mesh=mesh, params=params,
                                scan=dataclasses.replace(scan, measures=measures),
-                               timings={**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}},
-                               maps={**result.maps, "hull": hull, "masks": tuple(masks),
-                                     "main_skeleton": guide.positions.astype(np.float32)})
+                               timings={**timings, "hull.mesh": timer.seconds["mesh"]},
+                               maps={**maps, "main_skeleton": guide.positions.astype(np.float32)})

@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
+from reconstruct import hull_growth
 from reconstruct.hull_growth import (DEFAULT_SPECIES, crown_base_from_masks, ground_sightlines, grow_in_hull_space,
                                      photo_views, rerooted, trunk_foot, trunk_radius_from_masks)
 from reconstruct.qsm import BREAST_HEIGHT_M
@@ -88,6 +89,22 @@ def test_photos_alone_need_a_height_and_come_out_that_tall_and_upright(photos, b
     aligned, _ = align_to_cameras(sfm, known_cameras(photos.cameras_json.parent, sfm.registered))
     rotation = aligned.camera_rotations[0].T @ sfm.camera_rotations[0]
     assert (rotation @ tree.up)[2] > np.cos(np.radians(5.0))
+    # the hull's tree is scaled so the hull, the tree's outline, is the given height (the points' top may be stray)
+    grown = from_photos(bare_photos, height=true.height, settings=SfmSettings(threads=1), sfm=sfm)
+    hull = grown.maps["hull"]
+    assert hull.centres()[:, 2].max() + 0.5 * hull.voxel_size == pytest.approx(true.height, abs=hull.voxel_size)
+    assert grown.skeleton.height == pytest.approx(true.height, rel=0.1)
+
+
+def test_a_hull_no_crown_grows_in_leaves_the_sparse_tree_with_a_warning(photos, monkeypatch):
+    folder = photos.cameras_json.parent
+    sfm = sfm_points(folder, SfmSettings(threads=1))
+    sparse = from_photos(folder, settings=SfmSettings(threads=1), shape="sparse", sfm=sfm)
+    monkeypatch.setattr(hull_growth, "grow_in_hull_space", lambda params, rng, occupancy, space, guide, il: guide)
+    starved = from_photos(folder, settings=SfmSettings(threads=1), shape="hull", sfm=sfm)
+    assert any("no crown grew in: this is the sparse points' tree" in w for w in starved.warnings)
+    assert starved.skeleton.positions.tobytes() == sparse.skeleton.positions.tobytes()
+    assert "hull" in starved.maps and "main_skeleton" not in starved.maps
 
 
 def test_ground_plane_and_camera_up_on_known_geometry():
