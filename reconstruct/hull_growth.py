@@ -50,6 +50,7 @@ TRUNK_LOW = 0.1          # of a mask's rows: the trunk's vertical run ends this 
 # A trunk radius from the masks above this share of the tree's height is the crown's low leaves hiding the trunk
 # at breast height (the presets' trunks are under 4 % of their heights)
 MAX_TRUNK_SHARE = 0.075
+ROOT_AGREE = 0.1          # of the tree's height: the sparse points' root this near the masks' foot stands
 CROWN_STEP = 0.1         # m: the heights at which the photos' masks are read up the trunk
 CROWN_WIDENS = 3.0        # trunk diameters: the tree across the trunk's axis wider than this is the crown
 CROWN_BASE_QUANTILE = 0.75
@@ -269,10 +270,15 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
     crown_base = None
     scan = result.scan
-    if trunk_radius is not None and trunk_radius <= MAX_TRUNK_SHARE * (top - foot[2]):
-        # the masks show the trunk: the tree stands where they put its foot (the sparse points' root can lie
-        # metres off, on the ground's points), and the crown begins where they widen
+    shows_trunk = trunk_radius is not None and trunk_radius <= MAX_TRUNK_SHARE * (top - foot[2])
+    if foot is not None and (shows_trunk or np.linalg.norm(scan.transform[:2, 3] - foot[:2])
+                             > ROOT_AGREE * (top - foot[2])):
+        # the tree stands on the masks' foot where they show the trunk, or where the sparse points' root lies far
+        # from it (on the ground's points: 2 m off leafless, 10 m in leaf with estimated poses); in leaf, where
+        # the masks join the trunk to its shadow, a root that agrees with their foot is the finer of the two
         scan = rerooted(scan, foot)
+    if shows_trunk:
+        # the crown begins where the masks widen
         crown_base = crown_base_from_masks(masks, views, foot, trunk_radius, top - foot[2])
         if crown_base is not None:
             hull = _under_crown_cleared(hull, foot, crown_base, trunk_radius)
