@@ -254,11 +254,6 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts, model_to_upright)
 
 
-def hull_height(hull, tree: IsolatedTree) -> float:
-    """Metres from the ground plane under the tree to the top of its visual hull's highest voxel."""
-    return float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size - tree.ground_z)
-
-
 def rescaled(tree: IsolatedTree, factor: float) -> IsolatedTree:
     """`tree` scaled by `factor` about the origin (a tree scaled by its height has its ground at z = 0 there)."""
     to_upright = tree.model_to_upright.copy()
@@ -332,7 +327,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
     if shape == "hull":
         result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network)
-        factor = 1.0 if tree.scale_source != "height" else float(height) / hull_height(result.maps["hull"], tree)
+        hull_height = result.maps["hull"].top() - tree.ground_z
+        factor = float(height) / hull_height if tree.scale_source == "height" else 1.0
         if abs(factor - 1.0) > HULL_RESCALE:
             # the given height is the tree's, and the hull is the tree's outline: the points' top it was first
             # scaled by can be a stray point over the crown (in leaf 30 % too tall)

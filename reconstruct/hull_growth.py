@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-
 from scipy import ndimage
 
 from species.colonization import VoxelSpace, bole_guide, grow_in_space, validate
@@ -265,7 +264,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points,
                  sightlines=ground_sightlines(sfm, tree, views, base))
-    top = float(hull.centres()[:, 2].max() + 0.5 * hull.voxel_size)
+    top = hull.top()
     foot = trunk_foot(masks, views, tree.ground_z)
     trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
     crown_base = None

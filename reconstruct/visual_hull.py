@@ -84,6 +84,10 @@ class VisualHull:
         """(K, 3) float64: the centres of the occupied voxels."""
         return self.origin + (np.argwhere(self.occupancy) + 0.5) * self.voxel_size
 
+    def top(self) -> float:
+        """The height (z, metres) of the top of the highest occupied voxel."""
+        return float(self.centres()[:, 2].max() + 0.5 * self.voxel_size)
+
     def space(self, shift: np.ndarray | None = None) -> VoxelSpace:
         """The hull as a growth space, moved by `shift` (3,) metres (e.g. into a tree's base frame)."""
         origin = self.origin if shift is None else self.origin + np.asarray(shift, np.float64)

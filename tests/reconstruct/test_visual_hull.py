@@ -54,6 +54,7 @@ def test_hull_of_exact_masks_holds_the_shape_within_a_voxel(views):
     samples = CENTRE + RADII * rng.uniform(-1, 1, (20000, 3))
     samples = samples[_inside_ellipsoid(samples)]
     assert hull.space().contains(samples).all()                           # holds the shape
+    assert CENTRE[2] + RADII[2] <= hull.top() <= CENTRE[2] + RADII[2] + 2 * VOXEL
     centres = hull.centres()
     assert _inside_ellipsoid(centres, grow=VOXEL * np.sqrt(3)).all()      # within a voxel (its diagonal) of it
     volume = hull.occupancy.sum() * VOXEL ** 3
