@@ -332,10 +332,15 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         if abs(factor - 1.0) > HULL_RESCALE:
             # the given height is the tree's, and the hull is the tree's outline: the points' top it was first
             # scaled by can be a stray point over the crown (in leaf 30 % too tall)
+            # the masks do not change with the scale: drawn once, their seconds kept
             tree = rescaled(tree, factor)
             cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
+            drawn = result
             result = grow_in_hull(from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name),
-                                  sfm, tree, folder, species=species, seed=seed, mask_net=network)
+                                  sfm, tree, folder, species=species, seed=seed, mask_net=network,
+                                  masks=drawn.maps["masks"])
+            result = dataclasses.replace(result, timings={**result.timings,
+                                                          "hull.masks": drawn.timings["hull.masks"]})
     progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,

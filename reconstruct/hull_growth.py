@@ -37,8 +37,8 @@ from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
-           "grow_in_hull_space", "trunk_foot", "trunk_widths", "trunk_radius_from_masks", "crown_base_from_masks",
-           "DEFAULT_SPECIES", "HULL_VOXELS"]
+           "grow_in_hull_space", "took_hold", "trunk_foot", "trunk_widths", "trunk_radius_from_masks",
+           "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 GROUND_SIGHT_BAND = 0.05  # of the tree's height: SfM points this near the ground plane are the ground's
@@ -165,7 +165,7 @@ def _under_crown_cleared(hull: VisualHull, foot: np.ndarray, crown_base: float, 
     under = centres[:, 2] < foot[2] + crown_base - hull.voxel_size
     off_trunk = np.linalg.norm(centres[:, :2] - foot[:2], axis=1) > max(2.0 * trunk_radius, 1.5 * hull.voxel_size)
     occupancy = hull.occupancy.copy()
-    occupancy[tuple(np.argwhere(occupancy)[under & off_trunk].T)] = False
+    occupancy[hull.occupancy] = ~(under & off_trunk)            # boolean indexing walks the same order
     return dataclasses.replace(hull, occupancy=occupancy)
 
 
@@ -195,6 +195,11 @@ def ground_sightlines(sfm, tree, views: list[PinholeView], base: np.ndarray) -> 
     return centres[pairs[:, 1]], seen[pairs[:, 0]]
 
 
+def took_hold(skeleton: Skeleton, guide: Skeleton) -> bool:
+    """Whether the growth from `guide` added at least as many nodes as the guide has (else it starved)."""
+    return len(skeleton) >= 2 * len(guide)
+
+
 def grow_in_hull_space(params: dict, rng: np.random.Generator, occupancy: np.ndarray, space: VoxelSpace,
                        guide: Skeleton, internode: float) -> Skeleton:
     """`grow_in_space` from `guide` (its buds on every node) in `space`, the hull's voxels `occupancy` placed in
@@ -204,7 +209,7 @@ def grow_in_hull_space(params: dict, rng: np.random.Generator, occupancy: np.nda
     skeleton = grow_in_space(params, rng, space=space, internode_length=internode, guide=guide, guide_buds="all")
     markers = None
     for reach in range(1, GROWTH_REACH + 1):
-        if len(skeleton) >= 2 * len(guide):
+        if took_hold(skeleton, guide):
             break
         if markers is None:
             markers = space.sample_markers(params["marker_density"] / internode ** 3, params["max_markers"], rng)
@@ -241,7 +246,8 @@ def colonization_preset(species: str | None) -> Preset:
 
 
 def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, species: str | None = None,
-                 seed: int = 0, mask_net: MaskNetwork | None = None) -> Reconstruction:
+                 seed: int = 0, mask_net: MaskNetwork | None = None,
+                 masks: tuple[np.ndarray, ...] | None = None) -> Reconstruction:
     """`result` (the cloud method's, from `tree`'s points) regrown inside the photos' visual hull (module
     docstring); timings add "hull.masks", "hull.hull", "hull.growth" and "hull.mesh"; maps add "hull" (the
     `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton" (the bole it grew
@@ -249,6 +255,8 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     species : a colonization preset (sc_*), default DEFAULT_SPECIES. Raises PhotoError for a preset that is not
     a colonization one, and HullError (a PhotoError) when no photo's mask holds the tree.
     mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical.
+    masks    : the registered photos' masks already drawn (an earlier call's maps["masks"] on the same photos: they
+               do not change with the tree's scale); None draws them.
     A hull no crown grows in (`grow_in_hull_space` gave no more than the bole) leaves the cloud method's tree, with
     the hull and masks in its maps and a warning that says so."""
     preset = colonization_preset(species)
@@ -256,11 +264,12 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     views = photo_views(sfm, tree.model_to_upright)
     bounds = hull_bounds(tree.points, tree.ground_z)
     base = np.array([*np.median(tree.points[:, :2], axis=0), tree.ground_z])
-    masks = []
-    for name, view in zip(sfm.registered, views):
-        with Image.open(Path(folder) / name) as photo:
-            image = np.asarray(photo.convert("RGB"))
-        masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
+    if masks is None:
+        masks = []
+        for name, view in zip(sfm.registered, views):
+            with Image.open(Path(folder) / name) as photo:
+                image = np.asarray(photo.convert("RGB"))
+            masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points,
                  sightlines=ground_sightlines(sfm, tree, views, base))
@@ -299,7 +308,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     timer.lap("growth")
     maps = {**result.maps, "hull": hull, "masks": tuple(masks)}
     timings = {**result.timings, **{f"hull.{k}": v for k, v in timer.seconds.items()}}
-    if len(skeleton) < 2 * len(guide):
+    if not took_hold(skeleton, guide):
         # the masks carved a hull the growth cannot take hold in (masks that lost the tree in many photos)
         return dataclasses.replace(result, maps=maps, timings=timings, warnings=(*result.warnings, (
             f"the photos' tree masks carved a hull of {int(hull.occupancy.sum())} voxels that no crown grew in: "
