@@ -4,8 +4,10 @@ the ground and the clutter, then `from_cloud`.
 Upright: known poses (cameras.json) are already Z up in metres. Estimated poses are levelled by the ground plane
 (RANSAC over the points, its normal within GROUND_MAX_TILT_DEG of the cameras' mean image-up direction, which
 people and our renders keep upright) or, where no plane holds GROUND_MIN_SHARE of the points, by that camera up.
-Metric: known poses give metres; estimated ones are scaled so the isolated tree is `height` tall, and without a
-height or cameras.json the scale is unknown and `from_photos` says so.
+Metric: known poses give metres; estimated ones are scaled so the isolated tree is `height` tall, or, without a
+height, so that the cameras stand `camera_height` (CAMERA_HEIGHT_M, a phone held at chest height) above the ground
+plane, with a warning; without a height, cameras.json or a ground plane the scale is unknown and `from_photos`
+says so.
 
 Isolation, in order: near-black and near-white points (sky, shadow, overexposed bark: colours SfM places badly)
 are dropped; the ground plane's band is removed; so is what lies outside the photos' footprint round the point
@@ -24,6 +26,7 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -31,7 +34,8 @@ from species.timing import StageTimer
 
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
-from .hull_growth import colonization_preset, grow_in_hull
+from .hull_growth import aimed_hull, colonization_preset, grow_in_hull, photo_views
+from .photo_folder import CAMERA_HEIGHT_M
 from .photo_masks import mask_network
 from .result import Reconstruction
 from .sfm import PhotoError, Progress, SfmPoints, no_progress, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points
@@ -52,6 +56,7 @@ FOOTPRINT_SHARE = 1.0     # of the photos' footprint radius (`in_footprint`)
 SHAPES = ("sparse", "hull")  # the crown from the SfM points alone, or grown in the photos' visual hull
 HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale is warned about
 HULL_RESCALE = 0.02       # a hull this far from the given height scales the tree again, to the hull's height
+CAMERA_HEIGHT_M = 1.5     # a handheld phone's height above the ground: the scale when no other is given
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -73,11 +78,11 @@ class IsolatedTree:
     model_to_upright: np.ndarray = dataclasses.field(default_factory=lambda: np.eye(4))
 
 
-def check_height(height) -> None:
-    """PhotoError unless `height` is None or a finite number of metres > 0."""
+def check_height(height, what: str = "height") -> None:
+    """PhotoError unless `height` is None or a finite number of metres > 0 (`what` names it in the error)."""
     if height is not None and not (isinstance(height, (int, float, np.number)) and not isinstance(height, bool)
                                    and np.isfinite(height) and height > 0):
-        raise PhotoError(f"height {height!r} is invalid: allowed a number of metres > 0")
+        raise PhotoError(f"{what} {height!r} is invalid: allowed a number of metres > 0")
 
 
 def camera_up(sfm: SfmPoints) -> np.ndarray:
@@ -173,11 +178,17 @@ def _tree_group(points: np.ndarray) -> np.ndarray:
 
 
 def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Generator,
-                      metric: bool) -> IsolatedTree:
+                      metric: bool, camera_height: float = CAMERA_HEIGHT_M, few: bool = False) -> IsolatedTree:
     """The tree's points from SfM's (see the module docstring). metric : the model is already upright in metres
     (known or aligned poses). height : metres, scales the tree to it (over the known scale too, with a warning
-    left to the caller). PhotoError when the scale is unknown or too little of the tree is left."""
+    left to the caller). camera_height : metres, the cameras' median height above the ground plane, which scales
+    an estimated model given no height (scale_source "camera height"). PhotoError when the scale is unknown or too
+    little of the tree is left, unless `few`: then the points left on the tree are kept however few (the photos'
+    visual hull can still carve it, `from_photos`), the ground is read under where the photos aim, and a given
+    height scales the model as the cameras' height would (scale_source "height": the caller scales the tree to
+    its hull's height)."""
     check_height(height)
+    check_height(camera_height, "camera height")
     counts = {"sfm": len(sfm.points)}
     dark = (sfm.colours <= DARK).all(axis=1)
     light = (sfm.colours >= LIGHT).all(axis=1)
@@ -211,38 +222,57 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     near = in_footprint(sfm, points, up)
     points, colours, upright = points[near], colours[near], upright[near]
     counts["footprint"] = len(points)
-    if len(points) < MIN_POINTS:
+    if len(points) < MIN_POINTS and few:
+        upright, colours = upright[:0], colours[:0]     # a few points on the ground's edge are not a tree
+        counts["cluster"] = counts["outliers"] = 0
+    elif len(points) < MIN_POINTS:
         raise PhotoError(f"{counts['colour'] - len(points)} of {counts['colour']} SfM points lie on the ground or "
                          f"outside the photos' footprint: allowed at least {MIN_POINTS} on the tree; take photos "
                          f"that frame the tree larger")
-    group = _tree_group(upright)
-    upright, colours = upright[group], colours[group]
-    counts["cluster"] = len(upright)
-    inliers = statistical_inliers(upright)
-    upright, colours = upright[inliers], colours[inliers]
-    counts["outliers"] = len(upright)
-    if len(upright) < MIN_POINTS:
+    else:
+        group = _tree_group(upright)
+        upright, colours = upright[group], colours[group]
+        counts["cluster"] = len(upright)
+        inliers = statistical_inliers(upright)
+        upright, colours = upright[inliers], colours[inliers]
+        counts["outliers"] = len(upright)
+    if len(upright) < MIN_POINTS and not few:
         raise PhotoError(f"SfM left {len(upright)} points on the tree (of {counts['sfm']}): allowed at least "
                          f"{MIN_POINTS}; take more photos, larger, closer to the tree")
+    sparse = len(upright) < MIN_POINTS
+    centre = (rotation @ look_at(sfm)) if sparse else upright.mean(axis=0)
     if plane is not None:
         # the plane in the upright frame, at the tree's centre (R n is +Z when levelled by it)
         turned = rotation @ normal
-        ground_z = float((offset - turned[:2] @ upright[:, :2].mean(axis=0)) / turned[2])
-    else:
+        ground_z = float((offset - turned[:2] @ centre[:2]) / turned[2])
+    elif not sparse:
         ground_z = float(upright[:, 2].min())
+    else:
+        raise PhotoError(f"SfM left {len(upright)} points on the tree (of {counts['sfm']}) and found no ground plane "
+                         f"to stand it on: allowed at least {MIN_POINTS} points on the tree, or photos that show "
+                         f"the ground round it")
     scale, scale_source = 1.0, "cameras.json" if metric else "none"
     model_to_upright = np.eye(4)
     model_to_upright[:3, :3] = rotation
-    if height is not None:
-        # scaled about the ground under the tree, which goes to z = 0
+    above_ground = float(np.median(sfm.camera_centres @ normal - offset)) if plane is not None else 0.0
+    if height is not None and not sparse:
         scale, scale_source = float(height) / float(upright[:, 2].max() - ground_z), "height"
+    elif height is not None:
+        # too few points to measure the tree by: the cameras' height for now, the hull's height later
+        scale = float(camera_height) / above_ground if not metric and above_ground > 0 else 1.0
+        scale_source = "height"
+    elif not metric and above_ground > 0:
+        # no height given: the photographer's hand is the only length left (the cameras' height above the ground)
+        scale, scale_source = float(camera_height) / above_ground, "camera height"
+    elif not metric:
+        raise PhotoError("the photos' scale is unknown (no cameras.json, and no ground plane under the cameras to "
+                         "stand them on): allowed a tree height in metres (--height M, or height= in Python)")
+    if scale_source in ("height", "camera height"):
+        # scaled about the ground under the tree, which goes to z = 0
         upright = (upright - np.array([0.0, 0.0, ground_z])) * scale
         model_to_upright[:3] *= scale
         model_to_upright[2, 3] = -scale * ground_z
         ground_z = 0.0
-    elif not metric:
-        raise PhotoError("the photos' scale is unknown (no cameras.json): allowed a tree height in metres "
-                         "(--height M, or height= in Python) to scale the tree by")
     low, label = stem_groups(upright, ground_z)
     if len(label):
         # one stem: near the ground, only the largest group is the tree's
@@ -266,11 +296,13 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                 seed: int = 0, settings: SfmSettings | None = None, name: str = "tree",
                 workdir: str | Path | None = None, log: str | Path | None = None,
                 progress: Progress | None = None, shape: str = "hull", species: str | None = None,
-                masks: str = "network", models=None, mask_net=None, sfm: SfmPoints | None = None) -> Reconstruction:
+                masks: str = "network", models=None, mask_net=None, sfm: SfmPoints | None = None,
+                camera_height: float = CAMERA_HEIGHT_M) -> Reconstruction:
     """A tree from a folder of photos: `sfm_points`, `level_and_isolate`, then `from_cloud`; its `Reconstruction`
     (method "photos"; timings "sfm.STAGE" per SfM stage, "isolate", then from_cloud's).
 
-    height   : the tree's height in metres; needed when the folder has no cameras.json (the scale is unknown).
+    height   : the tree's height in metres; where the folder has no cameras.json and no height is given, the
+               cameras are taken to stand `camera_height` metres above the ground plane (with a warning).
     settings : pycolmap's (`SfmSettings`); poses "estimate" with a cameras.json aligns the estimated model onto it.
     frame, completion, seed, name : as `from_cloud`. workdir : keeps COLMAP's database and model there.
     log, progress : where COLMAP's log goes, and who is told each stage's progress (`sfm_points`); after SfM's
@@ -282,7 +314,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                network: `mask_net` if given, else `models`' (None: the shipped default)) or "classical".
     sfm      : `sfm_points` already run on this folder with `settings` (a benchmark comparing shapes and masks on
                one registration); None runs it. Its timings stand in the result's "sfm.STAGE".
-    The result's extras say method "photos" with the SfM record (photos registered, poses, points per step).
+    The result's extras say method "photos" with the SfM record (photos registered, poses, points per step); its
+    maps "cameras" hold each registered photo's name and `PinholeView` in the scan frame (`photo_outlines`).
     Raises PhotoError (one line) for a folder SfM cannot turn into one tree.
     """
     if frame not in FRAMES:
@@ -294,12 +327,9 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         colonization_preset(species)  # said before SfM spends minutes
         network = mask_network(masks, models, mask_net)
     check_height(height)
+    check_height(camera_height, "camera height")
     settings = SfmSettings() if settings is None else settings
     cameras = known_cameras(folder, photo_names(folder))
-    if height is None and cameras is None:
-        # said before SfM spends minutes on a model that could not be scaled
-        raise PhotoError(f"{folder} has no cameras.json listing every photo, so the photos' scale is unknown: "
-                         "allowed a tree height in metres (--height M, or height= in Python) to scale the tree by")
     timer = StageTimer()
     if sfm is None:
         sfm = sfm_points(folder, settings, workdir=workdir, log=log, progress=progress)
@@ -314,7 +344,24 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         if posed is not None:
             sfm, residual = align_to_cameras(sfm, posed)
     metric = sfm.poses in ("known", "aligned")
-    tree = level_and_isolate(sfm, height, np.random.default_rng(seed), metric)
+    tree = level_and_isolate(sfm, height, np.random.default_rng(seed), metric, camera_height, few=shape == "hull")
+    drawn_masks = None
+    if len(tree.points) < MIN_POINTS:
+        # too few SfM points on the tree to say where it stands or how large it is (a phone's photos of a tree
+        # against the sky): the photos' outlines, carved round where they aim, say both; the hull's surface stands
+        # in for its cloud
+        aim = tree.model_to_upright[:3, :3] @ look_at(sfm) + tree.model_to_upright[:3, 3]
+        hull, drawn_masks = aimed_hull(sfm, tree, folder, aim, network)
+        surface = hull.origin + (np.argwhere(hull.occupancy & ~ndimage.binary_erosion(hull.occupancy)) + 0.5) \
+            * hull.voxel_size
+        tree = dataclasses.replace(tree, points=surface, colours=np.full((len(surface), 3), 128, np.uint8))
+        if tree.scale_source == "height":
+            tree = rescaled(tree, float(height) / (hull.top() - tree.ground_z))
+        warnings.append(f"SfM left {tree.counts['outliers']} points on the tree: its place and size are the photos' "
+                        "outlines' (carved round where the photos aim)")
+    if tree.scale_source == "camera height":
+        warnings.append(f"no height given: the tree is scaled so that the cameras stand {camera_height:g} m above the "
+                        f"ground ({tree.points[:, 2].max():.1f} m tall); give --height M for its true scale")
     if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:
         warnings.append(f"height {height} m scales the tree by {tree.scale:.2f} from the cameras' metres "
                         f"(cameras.json makes it {height / tree.scale:.2f} m tall)")
@@ -326,7 +373,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
     if shape == "hull":
-        result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network)
+        result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network,
+                              masks=drawn_masks)
         hull_height = result.maps["hull"].top() - tree.ground_z
         factor = float(height) / hull_height if tree.scale_source == "height" else 1.0
         if abs(factor - 1.0) > HULL_RESCALE:
@@ -349,5 +397,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
         record["alignment_residual_m"] = round(residual, 4)
     timings = {**{f"sfm.{k}": v for k, v in sfm.timings.items()}, "isolate": timer.seconds["isolate"],
                **result.timings}
+    cameras = tuple(zip(sfm.registered, photo_views(sfm, tree.model_to_upright)))
     return dataclasses.replace(result, method="photos", warnings=(*warnings, *result.warnings), timings=timings,
+                               maps={**result.maps, "cameras": cameras},
                                scan=dataclasses.replace(result.scan, provenance={"sfm": record}))

@@ -37,6 +37,7 @@ from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
+           "draw_masks", "aimed_bounds", "aimed_hull",
            "grow_in_hull_space", "took_hold", "trunk_foot", "trunk_widths", "trunk_radius_from_masks",
            "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
@@ -54,6 +55,10 @@ CROWN_STEP = 0.1         # m: the heights at which the photos' masks are read up
 CROWN_WIDENS = 3.0        # trunk diameters: the tree across the trunk's axis wider than this is the crown
 CROWN_BASE_QUANTILE = 0.75
 TRUNK_SEARCH = 0.02       # of a photo's width: how far from the trunk's projected axis its run of mask pixels may start
+# A tree SfM left too few points on is carved in a box round where the photos aim, this share of the cameras'
+# median horizontal distance to every side (a photographer walking round a tree stays outside its crown)
+AIMED_REACH = 0.9
+AIMED_MAX_ELEVATION_DEG = 75.0   # a photo's top edge steeper than this bounds nothing
 
 
 def photo_views(sfm, model_to_upright: np.ndarray) -> list[PinholeView]:
@@ -195,6 +200,45 @@ def ground_sightlines(sfm, tree, views: list[PinholeView], base: np.ndarray) -> 
     return centres[pairs[:, 1]], seen[pairs[:, 0]]
 
 
+def draw_masks(sfm, views: list[PinholeView], folder: str | Path, bounds: np.ndarray, base: np.ndarray,
+               points: np.ndarray, mask_net: MaskNetwork | None) -> list[np.ndarray]:
+    """Each registered photo's tree mask (`photo_mask`), the tree's window in it from `bounds`, `base` and the
+    `points` on it (`tree_window`)."""
+    masks = []
+    for name, view in zip(sfm.registered, views):
+        with Image.open(Path(folder) / name) as photo:
+            image = np.asarray(photo.convert("RGB"))
+        masks.append(photo_mask(image, tree_window(view, bounds, base, points), mask_net))
+    return masks
+
+
+def aimed_bounds(views: list[PinholeView], aim: np.ndarray, ground_z: float) -> np.ndarray:
+    """(2, 3) the box carved for a tree SfM left too few points on: round `aim` (3,), where the photos aim,
+    AIMED_REACH of the cameras' median horizontal distance to it on every side, from the ground `ground_z` up to
+    the highest any photo's top edge (at the middle column) reaches above the aim."""
+    centres = np.array([view.centre for view in views])
+    reach = np.linalg.norm(centres[:, :2] - aim[:2], axis=1)
+    half = AIMED_REACH * float(np.median(reach))
+    tops = []
+    for view, distance in zip(views, reach):
+        ray = view.rotation.T @ np.array([0.0, -view.principal[1] / view.focal[1], 1.0])
+        slope = ray[2] / max(float(np.linalg.norm(ray[:2])), 1e-9)
+        tops.append(view.centre[2] + distance * min(slope, np.tan(np.radians(AIMED_MAX_ELEVATION_DEG))))
+    top = max(max(tops), ground_z + 0.1 * half)
+    return np.array([[aim[0] - half, aim[1] - half, ground_z], [aim[0] + half, aim[1] + half, top]])
+
+
+def aimed_hull(sfm, tree, folder: str | Path, aim: np.ndarray, mask_net: MaskNetwork | None
+               ) -> tuple[VisualHull, list[np.ndarray]]:
+    """The visual hull of the photos' tree masks in `aimed_bounds` round `aim` (3,) in `tree`'s upright frame,
+    and the masks: where SfM left too few points on the tree to say where it stands and how large it is."""
+    views = photo_views(sfm, tree.model_to_upright)
+    bounds = aimed_bounds(views, aim, tree.ground_z)
+    base = np.array([aim[0], aim[1], tree.ground_z])
+    masks = draw_masks(sfm, views, folder, bounds, base, tree.points, mask_net)
+    return carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS), masks
+
+
 def took_hold(skeleton: Skeleton, guide: Skeleton) -> bool:
     """Whether the growth from `guide` added at least as many nodes as the guide has (else it starved)."""
     return len(skeleton) >= 2 * len(guide)
@@ -265,11 +309,7 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     bounds = hull_bounds(tree.points, tree.ground_z)
     base = np.array([*np.median(tree.points[:, :2], axis=0), tree.ground_z])
     if masks is None:
-        masks = []
-        for name, view in zip(sfm.registered, views):
-            with Image.open(Path(folder) / name) as photo:
-                image = np.asarray(photo.convert("RGB"))
-            masks.append(photo_mask(image, tree_window(view, bounds, base, tree.points), mask_net))
+        masks = draw_masks(sfm, views, folder, bounds, base, tree.points, mask_net)
     timer.lap("masks")
     hull = carve(masks, views, bounds, float(max(bounds[1] - bounds[0])) / HULL_VOXELS, points=tree.points,
                  sightlines=ground_sightlines(sfm, tree, views, base))

@@ -20,6 +20,7 @@ import numpy as np
 from species.errors import TreefarmError
 
 from .fit_budget import DEFAULT_FIT_EVALS
+from .photo_folder import CAMERA_HEIGHT_M
 
 if TYPE_CHECKING:  # the result's module imports scipy (see the module docstring)
     from .result import Reconstruction
@@ -112,6 +113,7 @@ class RunOptions:
     renderer: Any = None
     shape: str = "hull"
     masks: str = "network"
+    camera_height: float = CAMERA_HEIGHT_M
 
 
 @dataclass(frozen=True)
@@ -185,7 +187,7 @@ def _run_photos(inputs, options: RunOptions):
                        seed=options.seed, settings=settings, name=options.name, workdir=options.workdir,
                        log=options.log, progress=options.progress, shape=options.shape,
                        species=options.species, masks=options.masks, models=options.models,
-                       mask_net=options.nets.get("tree-mask"))
+                       mask_net=options.nets.get("tree-mask"), camera_height=options.camera_height)
 
 
 METHODS: dict[str, Method] = {
@@ -222,7 +224,8 @@ METHODS: dict[str, Method] = {
         source="AdTree, seed 003"),
     "photos": Method(
         "photos", (Input("photos", "photos", "a folder of photos (with cameras.json when the poses are known)"),),
-        _run_photos, models=("tree-mask",), options=("frame", "completion", "poses", "shape", "species", "masks"),
+        _run_photos, models=("tree-mask",), options=("frame", "completion", "poses", "shape", "species", "masks",
+                                                             "camera_height"),
         summary="pycolmap SfM points, levelled, scaled and isolated from the ground, then the cloud method",
         source="SfM, seed 003"),
 }

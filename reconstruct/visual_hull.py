@@ -68,6 +68,15 @@ class PinholeView:
                    (float(K[0, 0]), float(K[1, 1])), (float(K[0, 2]) + 0.5, float(K[1, 2]) + 0.5),
                    (int(camera.width), int(camera.height)))
 
+    def to_camera(self, name: str = "view", near: float = 0.1, far: float = 1000.0) -> Camera:
+        """The perspective `renderers.camera.Camera` this view is (`from_camera`'s inverse)."""
+        world_to_camera = np.eye(4)
+        world_to_camera[:3, :3] = self.rotation
+        world_to_camera[:3, 3] = -self.rotation @ self.centre
+        K = np.array([[self.focal[0], 0.0, self.principal[0] - 0.5], [0.0, self.focal[1], self.principal[1] - 0.5],
+                      [0.0, 0.0, 1.0]])
+        return Camera(int(self.size[0]), int(self.size[1]), K, world_to_camera, "perspective", near, far, name=name)
+
 
 @dataclass(frozen=True, eq=False)
 class VisualHull:

@@ -2,21 +2,23 @@
 
   farm reconstruct cloud.xyz --out tree.glb [--skeleton-ply s.ply] [--qsm-csv q.csv] [--branches-csv b.csv]
                    [--no-complete] [--up y]
-  farm reconstruct photos/ --method photos --out tree.glb [--height 9]
+  farm reconstruct photos/ --method photos --out tree.glb [--height 9 | --camera-height 1.5]
   farm reconstruct a.laz b.laz scans/ --out trees/          a batch: one tree each, summary.csv, contact_sheet.png
 
 The method is inferred when omitted: cloud files -> cloud; a folder of images -> photos; a folder of cloud files or
 of photo folders -> a batch of those. The measures (height, DBH by a circle fit at 1.3 m, crown projection, woody
 volume by order) go in the GLB's extras and, one row a tree, in --qsm-csv (a batch: NAME.qsm.csv and summary.csv).
 A batch runs one Ray task per tree; a tree that fails is reported in the summary and the others still finish (exit
-status 2 if any failed). Photos: COLMAP's log goes to NAME.sfm.log beside each GLB (the summary line names it), and
-a single run shows a progress bar per stage.
+status 2 if any failed). Photos: COLMAP's log goes to NAME.sfm.log beside each GLB (the summary line names it), the
+registered cameras in the GLB's frame to NAME.cameras.json (a cameras.json the same photos can be run at again) and
+each photo with the tree's outline over it to NAME.outlines.png; a single run shows a progress bar per stage.
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import os
+import statistics
 import sys
 import time
 import traceback
@@ -24,14 +26,15 @@ from dataclasses import replace
 from pathlib import Path
 
 from reconstruct.methods import INPUT_KINDS, METHODS, RunOptions
+from reconstruct.photo_folder import CAMERA_HEIGHT_M
 from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
 from farm.commands.ray_options import add_ray_options
 
 SUMMARY_COLUMNS = ("input", "status", "output", "points", "height_m", "scan_height_m", "dbh_m", "dbh_method",
-                   "crown_projection_area_m2", "crown_diameter_m", "total_volume_m3", "branches", "faces", "seconds",
-                   "message")
+                   "crown_projection_area_m2", "crown_diameter_m", "total_volume_m3", "branches", "faces",
+                   "outline_covers", "seconds", "message")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,6 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--masks", choices=("network", "classical"), default="network",
                        help="photos, hull: the tree masks by the tree mask network (default; --models picks a "
                             "registry's or a model folder's, else the shipped one) or classical (colour and sky)")
+    group.add_argument("--camera-height", type=float, default=CAMERA_HEIGHT_M, metavar="M",
+                       help="photos without cameras.json or --height: the cameras' height above the ground in "
+                            "metres, which scales the tree (default 1.5, a phone held at chest height)")
     add_ray_options(group, workers_help="batch: Ray tasks at once (default: the CPUs)",
                     address_help="batch: a Ray cluster to join (default: a local Ray)")
 
@@ -131,7 +137,7 @@ def _options(args: argparse.Namespace, batch: bool = False) -> RunOptions:
     """What each tree's reconstruction takes; a batch's SfM runs on one thread a Ray task."""
     return RunOptions(seed=args.seed, height=args.height, up=args.up, frame=args.frame, completion=args.complete,
                       poses=args.poses, threads=1 if batch else 0, shape=args.shape, species=args.species,
-                      masks=args.masks, models=args.models)
+                      masks=args.masks, models=args.models, camera_height=args.camera_height)
 
 
 def log_path(method: str, out: Path) -> Path | None:
@@ -153,6 +159,15 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
     result = entry.run({entry.reads[0].name: source}, replace(options, name=out.stem, log=log))
     with user_path(out, "write"):
         result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv, branches_csv=branches_csv)
+    covered = None
+    if "cameras" in result.maps:
+        from reconstruct.photo_outlines import write_outlines
+
+        # the photos' own cameras, and the tree's outline drawn over each photo: where people check the result
+        with user_path(out, "write"):
+            shares = [c for c in write_outlines(result, source, out.with_suffix(".cameras.json"),
+                                                out.with_suffix(".outlines.png")) if c is not None]
+        covered = statistics.median(shares) if shares else None
     points = result.scan.cloud.points
     if report is not None:
         from reconstruct.report import cloud_drawing, write_report
@@ -168,12 +183,21 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
             "crown_diameter_m": _rounded(measures["crown_diameter_m"], 2),
             "total_volume_m3": round(measures["total_volume_m3"], 5), "branches": measures["branch_count"],
             "faces": result.mesh.n_faces, "seconds": round(time.perf_counter() - started, 3),
+            "outline_covers": _rounded(covered, 3),
             "message": "; ".join(result.warnings), "_timings": result.timings, "_skeleton": result.skeleton,
             "_cloud": points}
 
 
 def _rounded(value: float | None, digits: int) -> float | None:
     return None if value is None else round(value, digits)
+
+
+def _outlines_said(row: dict, out: Path) -> str:
+    """The summary line's words on the photos' outlines file, if one was written."""
+    if row.get("outline_covers") is None:
+        return ""
+    return (f"; outlines {out.with_suffix('.outlines.png')}: a median {row['outline_covers']:.0%} of each photo's "
+            f"tree mask inside")
 
 
 def print_stages(timings: dict[str, float]) -> None:
@@ -210,7 +234,7 @@ def run_single(args: argparse.Namespace, method: str, source: Path) -> int:
     dbh = "n/a" if row["dbh_m"] is None else f"{row['dbh_m']:.3f} m"
     print(f"{method}: {row['points']} points -> height {row['height_m']:.2f} m, DBH {dbh}, "
           f"volume {row['total_volume_m3']:.3f} m3, {row['branches']} branches -> {out} ({row['seconds']:.2f} s"
-          f"{f'; log {log}' if log is not None else ''})")
+          f"{f'; log {log}' if log is not None else ''}{_outlines_said(row, out)})")
     return 0
 
 

@@ -3,6 +3,8 @@ in metres and isolated from the ground; and the one-line errors."""
 from __future__ import annotations
 
 import csv
+import dataclasses
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -13,12 +15,15 @@ from PIL import Image
 
 from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_and_isolate
 from reconstruct import hull_growth
-from reconstruct.hull_growth import (DEFAULT_SPECIES, crown_base_from_masks, ground_sightlines, grow_in_hull_space,
+from reconstruct.photo_outlines import OUTLINE_SIDE, outline_views
+from reconstruct.hull_growth import (DEFAULT_SPECIES, aimed_bounds, crown_base_from_masks, ground_sightlines, grow_in_hull_space,
                                      photo_views, rerooted, trunk_foot, trunk_radius_from_masks)
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
+from renderers import ViewRenderer
 from renderers.blender import load_view
+from renderers.camera import Camera, look_at as look_at_matrix
 from scipy import ndimage
 from species.colonization import VoxelSpace, grow_in_space, validate
 from species.presets import get_preset
@@ -76,9 +81,28 @@ def test_the_glb_says_photos_and_passes_the_validator(posed, tmp_path):
     assert (tmp_path / "tree.ply").is_file() and (tmp_path / "tree.csv").read_text().startswith("id,")
 
 
-def test_photos_alone_need_a_height_and_come_out_that_tall_and_upright(photos, bare_photos, photo_tree):
-    with pytest.raises(PhotoError, match="scale is unknown: allowed a tree height in metres"):
-        from_photos(bare_photos)
+def test_the_outlines_from_the_photos_cameras_cover_their_tree_masks(photos, posed):
+    renderer = ViewRenderer(OUTLINE_SIDE)
+    mesh = posed.mesh
+    away = dataclasses.replace(posed, mesh=dataclasses.replace(
+        mesh, bark=dataclasses.replace(mesh.bark, vertices=mesh.bark.vertices + [100.0, 0.0, 0.0]),
+        leaves=dataclasses.replace(mesh.leaves, vertices=mesh.leaves.vertices + [100.0, 0.0, 0.0])))
+    try:
+        drawn = outline_views(posed, photos.cameras_json.parent, renderer)
+        missed = outline_views(away, photos.cameras_json.parent, renderer)
+    finally:
+        renderer.close()
+    assert [name for name, _, _ in drawn] == [name for name, _ in posed.maps["cameras"]] and len(drawn) == 10
+    assert all(image.shape == (OUTLINE_SIDE, OUTLINE_SIDE, 3) for _, image, _ in drawn)
+    covered = np.array([share for _, _, share in drawn])
+    assert ((covered >= 0) & (covered <= 1)).all() and np.median(covered) > 0.6
+    assert all(share == 0.0 for _, _, share in missed)       # a tree 100 m off covers none of the photos' trees
+    # the outline is drawn in red where the tree is, and nowhere on a tree it misses
+    red = lambda image: ((image[..., 0] > 200) & (image[..., 1] < 80) & (image[..., 2] < 80)).sum()  # noqa: E731
+    assert all(red(image) > 50 for _, image, _ in drawn) and all(red(image) == 0 for _, image, _ in missed)
+
+
+def test_photos_alone_come_out_the_given_height_tall_and_upright(photos, bare_photos, photo_tree):
     true, _ = photo_tree
     sfm = sfm_points(bare_photos, SfmSettings(threads=1))
     tree = level_and_isolate(sfm, true.height, np.random.default_rng(0), metric=False)
@@ -94,6 +118,80 @@ def test_photos_alone_need_a_height_and_come_out_that_tall_and_upright(photos, b
     hull = grown.maps["hull"]
     assert hull.top() == pytest.approx(true.height, abs=hull.voxel_size)
     assert grown.skeleton.height == pytest.approx(true.height, rel=0.1)
+    # with no height, the cameras' height above the ground plane scales the tree: at the renders' own camera
+    # height it comes out about as tall as it is (the ground plane and the isolated top both err a little)
+    standing = float(np.median([camera.position[2] for camera in photos.cameras])) - float(true.positions[0, 2])
+    levelled = level_and_isolate(sfm, None, np.random.default_rng(0), metric=False, camera_height=standing)
+    centres = sfm.camera_centres @ levelled.model_to_upright[:3, :3].T + levelled.model_to_upright[:3, 3]
+    assert levelled.scale_source == "camera height" and levelled.ground_z == 0.0
+    assert float(np.median(centres[:, 2])) == pytest.approx(standing, rel=1e-3)   # about the tree's ground
+    assert levelled.points[:, 2].max() == pytest.approx(true.height, rel=0.15)
+    # from_photos warns that the scale is the cameras' height's (the default 1.5 m: these cameras stand higher)
+    guessed = from_photos(bare_photos, settings=SfmSettings(threads=1), sfm=sfm, shape="sparse")
+    assert guessed.scan.provenance["sfm"]["scale"] == "camera height"
+    assert any(w.startswith("no height given: the tree is scaled so that the cameras stand 1.5 m above the ground")
+               for w in guessed.warnings)
+
+
+def test_an_unscaled_model_with_no_ground_under_it_is_refused():
+    # points in a blob, no plane among them: neither a height, cameras.json nor a ground plane gives a scale
+    rng = np.random.default_rng(1)
+    points = rng.normal(0.0, 1.0, (400, 3)) + [0.0, 0.0, 5.0]
+    centres = np.array([[10.0 * np.cos(a), 10.0 * np.sin(a), 1.5] for a in np.linspace(0, 2 * np.pi, 8, False)])
+    rotations = np.array([np.array([[-np.sin(a), np.cos(a), 0.0], [0.0, 0.0, -1.0], [-np.cos(a), -np.sin(a), 0.0]])
+                          for a in np.linspace(0, 2 * np.pi, 8, False)])
+    sfm = SfmPoints(points, np.full((400, 3), 120, np.uint8), np.full(400, 3), [f"{k}.png" for k in range(8)], 8,
+                    "estimated", 0.5, centres, rotations, np.full(8, 0.5), {})
+    with pytest.raises(PhotoError, match="scale is unknown .*no ground plane.*allowed a tree height in metres"):
+        level_and_isolate(sfm, None, rng, metric=False)
+    with pytest.raises(PhotoError, match="camera height 0 is invalid: allowed a number of metres > 0"):
+        level_and_isolate(sfm, None, rng, metric=False, camera_height=0)
+
+
+def _ground_only(sfm: SfmPoints) -> SfmPoints:
+    """`sfm` with only its points near the ground (z < 0.3 m at known poses) and their tracks: SfM that found
+    nothing on the tree, as on a phone's photos of a tree against the sky."""
+    keep = sfm.points[:, 2] < 0.3
+    index = np.cumsum(keep) - 1
+    tracks = sfm.observations[keep[sfm.observations[:, 0]]]
+    return dataclasses.replace(sfm, points=sfm.points[keep], colours=sfm.colours[keep],
+                               track_length=sfm.track_length[keep],
+                               observations=np.column_stack([index[tracks[:, 0]], tracks[:, 1]]))
+
+
+def test_a_tree_sfm_found_no_points_on_is_carved_where_the_photos_aim(photos, photo_tree):
+    folder = photos.cameras_json.parent
+    thin = _ground_only(sfm_points(folder, SfmSettings(threads=1)))
+    with pytest.raises(PhotoError, match="lie on the ground or outside the photos' footprint"):
+        from_photos(folder, settings=SfmSettings(threads=1), shape="sparse", sfm=thin)
+    true, _ = photo_tree
+    grown = from_photos(folder, settings=SfmSettings(threads=1), sfm=thin, frame="scan")
+    assert any(w.startswith("SfM left 0 points on the tree: its place and size are the photos' outlines'")
+               for w in grown.warnings)
+    # the tree stands on its true root and is about as tall (known poses: metres), grown in the hull (ten photos
+    # on a 90 degree arc bound the top loosely: the hull the points bound is 5 % too tall, this one 11 %)
+    root = grown.scan.transform[:3, 3]
+    assert np.linalg.norm(root[:2] - true.positions[0, :2]) < 0.1 * true.height
+    assert grown.maps["hull"].top() == pytest.approx(true.height, rel=0.15)
+    assert grown.skeleton.height == pytest.approx(true.height, rel=0.15) and "main_skeleton" in grown.maps
+    # a height given scales it to that height, the hull's top there
+    scaled = from_photos(folder, height=2.0 * true.height, settings=SfmSettings(threads=1), sfm=thin)
+    assert scaled.maps["hull"].top() == pytest.approx(2.0 * true.height, abs=scaled.maps["hull"].voxel_size)
+
+
+def test_aimed_bounds_reach_round_the_aim_and_up_to_the_photos_top_edges():
+    # eight cameras 20 m round the origin at 1.5 m, pitched 20 degrees up, 60 degrees of view up and down
+    views = []
+    for a in np.linspace(0.0, 2.0 * np.pi, 8, endpoint=False):
+        eye = np.array([20.0 * np.cos(a), 20.0 * np.sin(a), 1.5])
+        target = np.array([0.0, 0.0, 1.5 + 20.0 * np.tan(np.radians(20.0))])
+        camera = Camera(100, 100, [[50.0 / np.tan(np.radians(30.0)), 0, 49.5], [0, 50.0 / np.tan(np.radians(30.0)),
+                                                                              49.5], [0, 0, 1]],
+                        look_at_matrix(eye, target))
+        views.append(PinholeView.from_camera(camera))
+    bounds = aimed_bounds(views, np.zeros(3), 0.0)
+    assert np.allclose(bounds[0], [-18.0, -18.0, 0.0]) and np.allclose(bounds[1, :2], [18.0, 18.0])
+    assert bounds[1, 2] == pytest.approx(1.5 + 20.0 * np.tan(np.radians(50.0)), rel=1e-6)
 
 
 def test_a_hull_no_crown_grows_in_leaves_the_sparse_tree_with_a_warning(photos, monkeypatch):
@@ -131,12 +229,12 @@ def test_camera_up_is_the_renders_up(photos):
                             np.array([np.eye(3), np.diag([1.0, -1.0, -1.0])]), np.full(2, 0.5), {}))
 
 
-def test_cli_refuses_an_unscaled_folder_before_sfm(bare_photos, tmp_path):
+def test_cli_refuses_a_bad_camera_height_before_sfm(bare_photos, tmp_path):
     refused = tmp_path / "unscaled.glb"
-    bad = subprocess.run(FARM + [str(bare_photos), "--method", "photos", "--out", str(refused)], cwd=tmp_path,
-                         capture_output=True, text=True, timeout=300)
+    bad = subprocess.run(FARM + [str(bare_photos), "--method", "photos", "--out", str(refused), "--camera-height",
+                                 "-1"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     lines = [line for line in bad.stderr.splitlines() if line.strip()]
-    assert bad.returncode == 2 and len(lines) == 1 and "scale is unknown" in lines[0], bad.stderr
+    assert bad.returncode == 2 and len(lines) == 1 and "camera height -1.0 is invalid" in lines[0], bad.stderr
     assert not refused.exists()
     wrong = subprocess.run(FARM + [str(bare_photos), "--method", "cloud", "--out", str(refused)], cwd=tmp_path,
                            capture_output=True, text=True, timeout=300)
@@ -150,8 +248,22 @@ def test_cli_keeps_colmaps_log_out_of_the_terminal_and_names_its_file(photos, tm
     assert done.returncode == 0, done.stderr[-3000:]
     assert [line for line in done.stderr.splitlines() if not line.startswith("warning: ")] == [], done.stderr[-3000:]
     log = tmp_path / "tree.sfm.log"
-    assert done.stdout.count("\n") == 1 and done.stdout.rstrip().endswith(f"; log {log})"), done.stdout
+    assert done.stdout.count("\n") == 1 and f"; log {log}; outlines {tmp_path / 'tree.outlines.png'}: a median " \
+        in done.stdout, done.stdout
     assert "Feature extraction" in log.read_text()  # COLMAP's own log, whole, in the file
+    # the registered cameras beside the GLB, in its frame (the trunk's base at the origin): the photos' own poses
+    # moved by the base's place, which the GLB's extras give
+    written = json.loads((tmp_path / "tree.cameras.json").read_text())
+    base = np.array(next(node for node in read_glb_json(out.read_bytes())["nodes"]
+                         if "extras" in node)["extras"]["treefarm"]["base_in_scan_m"])
+    given = {view["image"]: Camera.from_dict(view) for view in json.loads(photos.cameras_json.read_text())["views"]}
+    assert written["convention"] == "opencv" and len(written["views"]) == len(given)
+    for view in written["views"]:
+        camera = Camera.from_dict(view)
+        assert np.allclose(camera.K, given[view["image"]].K, atol=1e-6)
+        assert np.allclose(camera.position + base, given[view["image"]].position, atol=1e-6)
+    sheet = Image.open(tmp_path / "tree.outlines.png")
+    assert sheet.size[0] > 3 * OUTLINE_SIDE
 
 
 def test_progress_is_told_each_stage_in_order(photos):
@@ -258,10 +370,13 @@ def test_the_crown_base_from_the_masks_clears_the_hull_under_the_crown(photos, p
     assert branches.min() - 0.2 <= base <= np.percentile(branches, 25)
     assert crown_base_from_masks([np.zeros_like(m) for m in exact], views, foot, 0.1, true.height) is None
     # the grown tree's hull (from the photos' own masks) holds nothing under its crown base but the trunk
+    # (round the foot the masks give, where the tree stands: a tree SfM placed a few tenths of a metre off keeps
+    # its trunk there)
     hull = grown.maps["hull"]
     centres = hull.centres()
     low = centres[centres[:, 2] < 0.5]
-    assert len(low) and np.linalg.norm(low[:, :2], axis=1).max() <= 0.5
+    foot = grown.scan.transform[:3, 3]
+    assert len(low) and np.linalg.norm(low[:, :2] - foot[:2], axis=1).max() <= 0.3
 
 
 def test_moving_the_base_keeps_the_points_and_the_measured_skeleton_in_place(grown):
