@@ -34,7 +34,8 @@ from species.timing import StageTimer
 
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
-from .hull_growth import aimed_hull, colonization_preset, grow_in_hull, photo_views
+from .hull_growth import (aimed_hull, colonization_preset, draw_masks, grow_in_hull, hull_bounds, photo_views,
+                          triangulated_foot)
 from .photo_folder import CAMERA_HEIGHT_M
 from .photo_masks import mask_network
 from .result import Reconstruction
@@ -56,6 +57,8 @@ FOOTPRINT_SHARE = 1.0     # of the photos' footprint radius (`in_footprint`)
 SHAPES = ("sparse", "hull")  # the crown from the SfM points alone, or grown in the photos' visual hull
 HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale is warned about
 HULL_RESCALE = 0.02       # a hull this far from the given height scales the tree again, to the hull's height
+FOOT_PASSES = 5           # masks redrawn on the trunk's foot they show, where SfM gave no ground plane ...
+FOOT_SETTLED = 0.01       # ... until the foot moves less than this share of the tree's points' height
 CAMERA_HEIGHT_M = 1.5     # a handheld phone's height above the ground: the scale when no other is given
 
 
@@ -273,15 +276,20 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
         model_to_upright[:3] *= scale
         model_to_upright[2, 3] = -scale * ground_z
         ground_z = 0.0
-    low, label = stem_groups(upright, ground_z)
-    if len(label):
-        # one stem: near the ground, only the largest group is the tree's
-        stray = np.flatnonzero(low)[label != np.argmax(np.bincount(label))]
-        keep = np.ones(len(upright), bool)
-        keep[stray] = False
-        upright, colours = upright[keep], colours[keep]
+    upright, colours = _one_stem(upright, colours, ground_z)
     counts["stem"] = len(upright)
     return IsolatedTree(upright, colours, up_source, scale_source, scale, ground_z, up, counts, model_to_upright)
+
+
+def _one_stem(points: np.ndarray, colours: np.ndarray, ground_z: float) -> tuple[np.ndarray, np.ndarray]:
+    """The points and colours less those near the ground `ground_z` outside its largest group (one stem: from_cloud
+    would refuse the others as a second tree)."""
+    low, label = stem_groups(points, ground_z)
+    if not len(label):
+        return points, colours
+    keep = np.ones(len(points), bool)
+    keep[np.flatnonzero(low)[label != np.argmax(np.bincount(label))]] = False
+    return points[keep], colours[keep]
 
 
 def rescaled(tree: IsolatedTree, factor: float) -> IsolatedTree:
@@ -359,6 +367,30 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
             tree = rescaled(tree, float(height) / (hull.top() - tree.ground_z))
         warnings.append(f"SfM left {tree.counts['outliers']} points on the tree: its place and size are the photos' "
                         "outlines' (carved round where the photos aim)")
+    if shape == "hull" and "ground plane" not in tree.up_source:
+        # no ground plane among SfM's points (a ground too plain to match): their lowest point is a false match
+        # under the ground (on a phone walk round the oak at known poses, 8.9 m under it); the trunk's foot the
+        # masks show stands on the ground
+        views = photo_views(sfm, tree.model_to_upright)
+        ground, foot = tree.ground_z, None
+        for _ in range(FOOT_PASSES):
+            # the masks are cut below the ground's row in each photo: redrawn on the foot's ground, they show the
+            # trunk's bottom nearer its true foot (a bad ground keeps the crown's shadow in them)
+            base = np.array([*np.median(tree.points[:, :2], axis=0), ground])
+            foot = triangulated_foot(draw_masks(sfm, views, folder, hull_bounds(tree.points, ground), base,
+                                                tree.points, network), views)
+            if foot is None:
+                break
+            moved, ground = abs(float(foot[2]) - ground), float(foot[2])
+            if moved <= FOOT_SETTLED * float(np.ptp(tree.points[:, 2])):
+                break
+        if foot is not None and ground > tree.ground_z:
+            above = tree.points[:, 2] >= ground
+            if above.sum() >= MIN_POINTS:
+                warnings.append(f"SfM found no ground plane: the ground is where the photos' masks show the trunk's "
+                                f"foot, {ground - tree.ground_z:.1f} m over the lowest SfM point")
+                points, colours = _one_stem(tree.points[above], tree.colours[above], ground)
+                tree = dataclasses.replace(tree, points=points, colours=colours, ground_z=ground)
     if tree.scale_source == "camera height":
         warnings.append(f"no height given: the tree is scaled so that the cameras stand {camera_height:g} m above the "
                         f"ground ({tree.points[:, 2].max():.1f} m tall); give --height M for its true scale")

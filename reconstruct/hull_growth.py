@@ -37,7 +37,7 @@ from .result import Reconstruction, ScanRecord
 from .visual_hull import PinholeView, VisualHull, carve
 
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
-           "draw_masks", "aimed_bounds", "aimed_hull",
+           "draw_masks", "aimed_bounds", "aimed_hull", "triangulated_foot",
            "grow_in_hull_space", "took_hold", "trunk_foot", "trunk_widths", "trunk_radius_from_masks",
            "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
 
@@ -133,6 +133,35 @@ def trunk_widths(mask: np.ndarray, view: PinholeView, foot: np.ndarray, heights:
     k = seen[lines]
     out[k[close]] = np.where(whole[close], length[nearest[close]] * depth[k[close]] / view.focal[0], np.nan)
     return out
+
+
+def triangulated_foot(masks: list[np.ndarray], views: list[PinholeView]) -> np.ndarray | None:
+    """(3,) the trunk's foot where the rays through each photo's trunk bottom (`_trunk_pixel`) pass nearest (least
+    squares; then again without the rays farther than twice the median from it: a mask that took a shadow for
+    the trunk). The ground's height where SfM gave no ground plane. None with fewer than two rays."""
+    starts, rays = [], []
+    for mask, view in zip(masks, views):
+        pixel = _trunk_pixel(mask)
+        if pixel is not None:
+            ray = view.rotation.T @ np.array([(pixel[0] - view.principal[0]) / view.focal[0],
+                                              (pixel[1] - view.principal[1]) / view.focal[1], 1.0])
+            starts.append(view.centre)
+            rays.append(ray / np.linalg.norm(ray))
+    if len(rays) < 2:
+        return None
+    starts, rays = np.array(starts), np.array(rays)
+    keep = np.ones(len(rays), bool)
+    for _ in range(2):
+        across = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
+        try:
+            foot = np.linalg.solve(across[keep].sum(axis=0), np.einsum("kij,kj->i", across[keep], starts[keep]))
+        except np.linalg.LinAlgError:
+            return None
+        miss = np.linalg.norm(np.einsum("kij,kj->ki", across, foot - starts), axis=1)
+        keep = miss <= 2.0 * np.median(miss)
+        if keep.sum() < 2:
+            break
+    return foot
 
 
 def trunk_radius_from_masks(masks: list[np.ndarray], views: list[PinholeView], root: np.ndarray,

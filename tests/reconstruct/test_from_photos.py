@@ -17,7 +17,7 @@ from reconstruct.from_photos import camera_up, from_photos, ground_plane, level_
 from reconstruct import hull_growth
 from reconstruct.photo_outlines import OUTLINE_SIDE, outline_views
 from reconstruct.hull_growth import (DEFAULT_SPECIES, aimed_bounds, crown_base_from_masks, ground_sightlines, grow_in_hull_space,
-                                     photo_views, rerooted, trunk_foot, trunk_radius_from_masks)
+                                     photo_views, rerooted, triangulated_foot, trunk_foot, trunk_radius_from_masks)
 from reconstruct.qsm import BREAST_HEIGHT_M
 from reconstruct.sfm import PhotoError, SfmPoints, SfmSettings, align_to_cameras, known_cameras, sfm_points
 from reconstruct.visual_hull import PinholeView
@@ -177,6 +177,27 @@ def test_a_tree_sfm_found_no_points_on_is_carved_where_the_photos_aim(photos, ph
     # a height given scales it to that height, the hull's top there
     scaled = from_photos(folder, height=2.0 * true.height, settings=SfmSettings(threads=1), sfm=thin)
     assert scaled.maps["hull"].top() == pytest.approx(2.0 * true.height, abs=scaled.maps["hull"].voxel_size)
+
+
+def test_with_no_ground_plane_the_tree_stands_on_the_foot_the_masks_show(photos, photo_tree):
+    # SfM matched nothing on the ground, and a few false matches lie 3 m under it: the lowest point is no ground
+    folder = photos.cameras_json.parent
+    sfm = sfm_points(folder, SfmSettings(threads=1))
+    keep = sfm.points[:, 2] > 0.3
+    index = np.cumsum(keep) - 1
+    tracks = sfm.observations[keep[sfm.observations[:, 0]]]
+    false = np.random.default_rng(0).normal([0.0, 0.0, -3.0], 0.2, (5, 3))
+    thin = dataclasses.replace(sfm, points=np.concatenate([sfm.points[keep], false]),
+                               colours=np.concatenate([sfm.colours[keep], np.full((5, 3), 100, np.uint8)]),
+                               track_length=np.concatenate([sfm.track_length[keep], np.full(5, 3)]),
+                               observations=np.column_stack([index[tracks[:, 0]], tracks[:, 1]]))
+    grown = from_photos(folder, settings=SfmSettings(threads=1), sfm=thin, frame="scan", completion=False)
+    assert grown.scan.provenance["sfm"]["up"] == "cameras.json"          # no plane was found
+    assert any(w.startswith("SfM found no ground plane: the ground is where the photos' masks show the trunk's foot")
+               for w in grown.warnings)
+    true, _ = photo_tree
+    assert abs(grown.scan.transform[2, 3] - true.positions[0, 2]) < 0.3
+    assert grown.maps["hull"].origin[2] > -0.5 and grown.skeleton.height == pytest.approx(true.height, rel=0.15)
 
 
 def test_aimed_bounds_reach_round_the_aim_and_up_to_the_photos_top_edges():
@@ -364,6 +385,9 @@ def test_the_crown_base_from_the_masks_clears_the_hull_under_the_crown(photos, p
     views = [PinholeView.from_camera(camera) for camera in photos.cameras]
     exact = [np.asarray(Image.open(mask)) > 0 for mask in photos.masks]
     foot = trunk_foot(exact, views, 0.0)
+    # the rays through each mask's trunk bottom meet at the trunk's foot, on the ground (z = 0)
+    assert np.linalg.norm(triangulated_foot(exact, views) - true.positions[0]) < 0.15
+    assert triangulated_foot(exact[:1], views[:1]) is None
     base = crown_base_from_masks(exact, views, foot, trunk_radius_from_masks(exact, views, foot), true.height)
     branches = true.positions[true.order >= 1, 2]
     # under most of the crown: above its lowest branch (1.04 m), below the lowest quarter of its branch nodes
