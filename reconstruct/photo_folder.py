@@ -16,7 +16,6 @@ __all__ = ["PhotoError", "IMAGE_SUFFIXES", "MIN_PHOTOS", "photo_names", "check_r
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
-CAMERA_HEIGHT_M = 1.5   # a handheld phone's height above the ground: the photos' scale when no other is given
 
 
 class PhotoError(CloudError):

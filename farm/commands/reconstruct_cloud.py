@@ -18,15 +18,13 @@ from __future__ import annotations
 import argparse
 import csv
 import os
-import statistics
 import sys
 import time
 import traceback
 from dataclasses import replace
 from pathlib import Path
 
-from reconstruct.methods import INPUT_KINDS, METHODS, RunOptions
-from reconstruct.photo_folder import CAMERA_HEIGHT_M
+from reconstruct.methods import CAMERA_HEIGHT_M, INPUT_KINDS, METHODS, RunOptions
 from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
@@ -161,6 +159,8 @@ def reconstruct_one(method: str, source: Path, out: Path, options: RunOptions, s
         result.write(out, skeleton_ply=skeleton_ply, qsm_csv=qsm_csv, branches_csv=branches_csv)
     covered = None
     if "cameras" in result.maps:
+        import statistics
+
         from reconstruct.photo_outlines import write_outlines
 
         # the photos' own cameras, and the tree's outline drawn over each photo: where people check the result
