@@ -25,6 +25,7 @@ import math
 import os
 import sys
 import tempfile
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,6 +72,11 @@ class SfmSettings:
                      RANSAC draws a seed gives depends on the CPU's floating point: on ten test renders one seed
                      gave 447 points and poses 3.2 m off on one machine, the next two 470 and 606 points, 0.7 and
                      0.28 m (0.28 m is what seed 0 gave on another).
+    mapping_budget_s : seconds all the mapping attempts may take together: a later attempt starts only while some
+                     are left, and each stops (COLMAP's max_runtime_seconds) when they run out, keeping the model it
+                     has. Sparse photos that COLMAP registers one by one through its structure-less fallback took
+                     2.5-5 minutes an attempt (twelve 720 x 1280 photos walked round a tree); the orbits' attempts
+                     take under a minute and never meet it. A run that meets it depends on the machine's speed.
     """
 
     max_image_size: int = 1600
@@ -86,6 +92,7 @@ class SfmSettings:
     threads: int = 0
     seed: int = 0
     mapping_attempts: int = 3
+    mapping_budget_s: float = 360.0
 
     def __post_init__(self) -> None:
         if self.matcher not in MATCHERS:
@@ -100,6 +107,8 @@ class SfmSettings:
                 or not 1 <= self.mapping_attempts <= 20:
             raise PhotoError(f"mapping_attempts {self.mapping_attempts!r} is out of range: allowed an integer in "
                              f"[1, 20]")
+        if not (isinstance(self.mapping_budget_s, (int, float)) and self.mapping_budget_s >= 1.0):
+            raise PhotoError(f"mapping_budget_s {self.mapping_budget_s!r} is out of range: allowed seconds >= 1")
         if not 0.0 < self.min_registered <= 1.0:
             raise PhotoError(f"min_registered {self.min_registered!r} is out of range: allowed (0, 1]")
         for name in ("max_image_size", "max_features", "exhaustive_max", "overlap"):
@@ -375,7 +384,12 @@ def _run(folder: Path, names: list[str], cameras: dict[str, Camera] | None, sett
             registered[0] += 1
             progress("mapping", registered[0], attempts * len(names))
 
+        mapping_started = time.perf_counter()
         for attempt in range(attempts):
+            left = float(settings.mapping_budget_s) - (time.perf_counter() - mapping_started)
+            if attempt and left < 1.0:
+                break
+            options.max_runtime_seconds = max(1, int(left))
             registered[0] = attempt * len(names)
             progress("mapping", registered[0], attempts * len(names))
             seed = int(settings.seed) + attempt

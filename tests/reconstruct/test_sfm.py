@@ -67,6 +67,16 @@ def test_estimated_poses_match_the_rendered_ones_once_aligned(photos, known):
     assert np.median(gap) < 0.5
 
 
+def test_a_spent_mapping_budget_starts_no_further_attempt(photos, tmp_path):
+    # one second for all three attempts: the first runs (and stops when the second is spent), no other starts
+    try:
+        sfm_points(photos.cameras_json.parent, SfmSettings(poses="estimate", threads=1, mapping_budget_s=1.0),
+                   workdir=tmp_path)
+    except PhotoError as error:          # a first attempt stopped that early may register too few photos
+        assert "SfM registered" in str(error)
+    assert sorted(p.name for p in (tmp_path / "model").iterdir()) == ["attempt_0"]
+
+
 def test_renderer_depth_and_mask_files_are_not_photos(photos):
     names = photo_names(photos.cameras_json.parent)
     assert names == sorted(p.name for p in photos.images)
@@ -108,7 +118,8 @@ def test_cameras_json_errors(tmp_path):
                                           ({"poses": "guess"}, "poses 'guess' is unknown"),
                                           ({"min_registered": 0.0}, "min_registered 0.0 is out of range"),
                                           ({"overlap": 0}, "overlap 0 is too small"),
-                                          ({"max_ratio": 1.5}, "max_ratio 1.5 is out of range")])
+                                          ({"max_ratio": 1.5}, "max_ratio 1.5 is out of range"),
+                                          ({"mapping_budget_s": 0}, "mapping_budget_s 0 is out of range")])
 def test_settings_are_checked(bad, message):
     with pytest.raises(PhotoError, match=message):
         SfmSettings(**bad)
