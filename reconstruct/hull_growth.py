@@ -344,6 +344,11 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
                  sightlines=ground_sightlines(sfm, tree, views, base))
     top = hull.top()
     foot = trunk_foot(masks, views, tree.ground_z)
+    if "ground plane" not in tree.up_source:
+        # a ground read off the masks' trunk bottoms (no plane among SfM's points) is a few tenths of a metre off,
+        # and rays cast on it from eye height land metres off: where the rays meet is the foot
+        met = triangulated_foot(masks, views)
+        foot = foot if met is None else np.array([met[0], met[1], tree.ground_z])
     trunk_radius = None if foot is None else trunk_radius_from_masks(masks, views, foot)
     crown_base = None
     scan = result.scan

@@ -196,7 +196,9 @@ def test_with_no_ground_plane_the_tree_stands_on_the_foot_the_masks_show(photos,
     assert any(w.startswith("SfM found no ground plane: the ground is where the photos' masks show the trunk's foot")
                for w in grown.warnings)
     true, _ = photo_tree
-    assert abs(grown.scan.transform[2, 3] - true.positions[0, 2]) < 0.3
+    # where the rays through the masks' trunk bottoms meet (cast on a ground a little off, eye-height rays land
+    # metres away: 5.4 m on the phone walk, 0.13 m where they meet)
+    assert np.linalg.norm(grown.scan.transform[:3, 3] - true.positions[0]) < 0.3
     assert grown.maps["hull"].origin[2] > -0.5 and grown.skeleton.height == pytest.approx(true.height, rel=0.15)
 
 
