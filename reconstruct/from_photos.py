@@ -36,7 +36,7 @@ from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
 from .hull_growth import (aimed_hull, colonization_preset, draw_masks, grow_in_hull, hull_bounds, photo_views,
                           triangulated_foot)
-from .methods import CAMERA_HEIGHT_M
+from .photo_folder import CAMERA_HEIGHT_M
 from .photo_masks import mask_network
 from .result import Reconstruction
 from .sfm import PhotoError, Progress, SfmPoints, no_progress, SfmSettings, align_to_cameras, known_cameras, photo_names, sfm_points

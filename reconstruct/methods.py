@@ -20,8 +20,7 @@ import numpy as np
 from species.errors import TreefarmError
 
 from .fit_budget import DEFAULT_FIT_EVALS
-
-CAMERA_HEIGHT_M = 1.5     # a handheld phone's height above the ground: the photos' scale when no other is given
+from .photo_folder import CAMERA_HEIGHT_M
 
 if TYPE_CHECKING:  # the result's module imports scipy (see the module docstring)
     from .result import Reconstruction

@@ -1,5 +1,6 @@
 """What a folder of photos is, before SfM: its photos (IMAGE_SUFFIXES, at least MIN_PHOTOS), and the error of a
-folder that cannot become points (PhotoError). The poses of its `cameras.json` are `reconstruct.sfm.known_cameras`.
+folder that cannot become points (PhotoError), and the camera height that scales photos with no other scale
+(CAMERA_HEIGHT_M). The poses of its `cameras.json` are `reconstruct.sfm.known_cameras`.
 
 Kept apart from `reconstruct.sfm` so the command line tells a photo folder, and refuses a bad one, without
 importing pycolmap.
@@ -8,14 +9,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PIL import Image, UnidentifiedImageError
-
 from .clouds import CloudError
 
-__all__ = ["PhotoError", "IMAGE_SUFFIXES", "MIN_PHOTOS", "photo_names", "check_readable"]
+__all__ = ["PhotoError", "IMAGE_SUFFIXES", "MIN_PHOTOS", "CAMERA_HEIGHT_M", "photo_names", "check_readable"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 MIN_PHOTOS = 3          # fewer cannot triangulate a point seen from three directions
+CAMERA_HEIGHT_M = 1.5   # a handheld phone's height above the ground: the photos' scale when no other is given
 
 
 class PhotoError(CloudError):
@@ -38,6 +38,10 @@ def photo_names(folder: str | Path) -> list[str]:
 def check_readable(folder: str | Path, names: list[str]) -> None:
     """PhotoError naming the first of `names` that is not an image a reader can open (its header only is read),
     so a broken file is refused before SfM spends its time on the others."""
+    # Pillow here, not at the top: the method registry and the command line read this module's defaults, and a
+    # point cloud's run loads no image library
+    from PIL import Image, UnidentifiedImageError
+
     for name in names:
         try:
             with Image.open(Path(folder) / name) as image:

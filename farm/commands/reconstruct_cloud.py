@@ -24,7 +24,8 @@ import traceback
 from dataclasses import replace
 from pathlib import Path
 
-from reconstruct.methods import CAMERA_HEIGHT_M, INPUT_KINDS, METHODS, RunOptions
+from reconstruct.methods import INPUT_KINDS, METHODS, RunOptions
+from reconstruct.photo_folder import CAMERA_HEIGHT_M
 from species.errors import TreefarmError, user_path
 
 from farm.commands import CommandLineError
