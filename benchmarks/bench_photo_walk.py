@@ -34,7 +34,7 @@ from PIL import Image  # noqa: E402
 import species  # noqa: E402
 from benchmarks.bench_reconstruct_photos import CACHE  # noqa: E402
 from reconstruct.from_photos import from_photos  # noqa: E402
-from reconstruct.photo_outlines import registered_cameras  # noqa: E402
+from reconstruct.photo_outlines import outlines  # noqa: E402
 from reconstruct.scoring import crowns  # noqa: E402
 from reconstruct.sfm import PhotoError, SfmSettings, sfm_points  # noqa: E402
 from renderers import ViewRenderer  # noqa: E402
@@ -123,9 +123,7 @@ def outline_scores(result, truth: Path) -> tuple[float, float, float]:
     renderer = ViewRenderer(256)
     covered, ious = [], []
     try:
-        for camera in registered_cameras(result):
-            mesh = result.mesh if result.scan.frame == "base" else result.in_scan_frame()[1]
-            outline = crowns(renderer.silhouette_masks(mesh, [camera]))[0]
+        for camera, outline in outlines(result, renderer):
             true = crowns((np.asarray(Image.open(truth / views[camera.name]["mask"])) > 0)[None])[0]
             covered.append((true & outline).sum() / true.sum())
             ious.append((true & outline).sum() / (true | outline).sum())

@@ -59,7 +59,6 @@ HEIGHT_MISMATCH = 0.10    # a given height this far from the known poses' scale 
 HULL_RESCALE = 0.02       # a hull this far from the given height scales the tree again, to the hull's height
 FOOT_PASSES = 5           # masks redrawn on the trunk's foot they show, where SfM gave no ground plane ...
 FOOT_SETTLED = 0.01       # ... until the foot moves less than this share of the tree's points' height
-CAMERA_HEIGHT_M = 1.5     # a handheld phone's height above the ground: the scale when no other is given
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -23,7 +23,7 @@ from renderers.camera import Camera
 from .result import Reconstruction
 from .scoring import crowns
 
-__all__ = ["registered_cameras", "cameras_document", "outline_views", "write_outlines", "OUTLINE_SIDE"]
+__all__ = ["registered_cameras", "cameras_document", "outlines", "outline_views", "write_outlines", "OUTLINE_SIDE"]
 
 OUTLINE_SIDE = 384        # px: each photo's longer side on the outlines sheet
 OUTLINE_COLOUR = (255, 40, 40)
@@ -54,16 +54,21 @@ def cameras_document(result: Reconstruction) -> dict:
             "views": [{**camera.to_dict(), "image": camera.name} for camera in registered_cameras(result)]}
 
 
+def outlines(result: Reconstruction, renderer: ViewRenderer) -> list[tuple[Camera, np.ndarray]]:
+    """Each registered photo's camera (`registered_cameras`) and the result's outline in it: its silhouette, gaps
+    closed as the scorer's crown outlines are, (H, W) bool at the photo's size."""
+    mesh = result.mesh if result.scan.frame == "base" else result.in_scan_frame()[1]
+    return [(camera, crowns(renderer.silhouette_masks(mesh, [camera]))[0]) for camera in registered_cameras(result)]
+
+
 def outline_views(result: Reconstruction, folder: str | Path, renderer: ViewRenderer
                   ) -> list[tuple[str, np.ndarray, float | None]]:
     """(photo name, the photo shrunk to OUTLINE_SIDE on its longer side with the result's outline drawn over it
     (letterboxed to a square),
     the share of the photo's tree mask inside the outline or None without masks) for each registered photo."""
-    mesh = result.mesh if result.scan.frame == "base" else result.in_scan_frame()[1]
     masks = result.maps.get("masks")
     out = []
-    for index, camera in enumerate(registered_cameras(result)):
-        outline = crowns(renderer.silhouette_masks(mesh, [camera]))[0]
+    for index, (camera, outline) in enumerate(outlines(result, renderer)):
         with Image.open(Path(folder) / camera.name) as photo:
             image = np.asarray(photo.convert("RGB"))
         covered = None

@@ -148,15 +148,19 @@ def test_an_unscaled_model_with_no_ground_under_it_is_refused():
         level_and_isolate(sfm, None, rng, metric=False, camera_height=0)
 
 
-def _ground_only(sfm: SfmPoints) -> SfmPoints:
-    """`sfm` with only its points near the ground (z < 0.3 m at known poses) and their tracks: SfM that found
-    nothing on the tree, as on a phone's photos of a tree against the sky."""
-    keep = sfm.points[:, 2] < 0.3
+def _kept(sfm: SfmPoints, keep: np.ndarray) -> SfmPoints:
+    """`sfm` with only the points `keep` (N,) bool and their tracks, renumbered."""
     index = np.cumsum(keep) - 1
     tracks = sfm.observations[keep[sfm.observations[:, 0]]]
     return dataclasses.replace(sfm, points=sfm.points[keep], colours=sfm.colours[keep],
                                track_length=sfm.track_length[keep],
                                observations=np.column_stack([index[tracks[:, 0]], tracks[:, 1]]))
+
+
+def _ground_only(sfm: SfmPoints) -> SfmPoints:
+    """`sfm` with only its points near the ground (z < 0.3 m at known poses) and their tracks: SfM that found
+    nothing on the tree, as on a phone's photos of a tree against the sky."""
+    return _kept(sfm, sfm.points[:, 2] < 0.3)
 
 
 def test_a_tree_sfm_found_no_points_on_is_carved_where_the_photos_aim(photos, photo_tree):
@@ -183,14 +187,11 @@ def test_with_no_ground_plane_the_tree_stands_on_the_foot_the_masks_show(photos,
     # SfM matched nothing on the ground, and a few false matches lie 3 m under it: the lowest point is no ground
     folder = photos.cameras_json.parent
     sfm = sfm_points(folder, SfmSettings(threads=1))
-    keep = sfm.points[:, 2] > 0.3
-    index = np.cumsum(keep) - 1
-    tracks = sfm.observations[keep[sfm.observations[:, 0]]]
+    above = _kept(sfm, sfm.points[:, 2] > 0.3)
     false = np.random.default_rng(0).normal([0.0, 0.0, -3.0], 0.2, (5, 3))
-    thin = dataclasses.replace(sfm, points=np.concatenate([sfm.points[keep], false]),
-                               colours=np.concatenate([sfm.colours[keep], np.full((5, 3), 100, np.uint8)]),
-                               track_length=np.concatenate([sfm.track_length[keep], np.full(5, 3)]),
-                               observations=np.column_stack([index[tracks[:, 0]], tracks[:, 1]]))
+    thin = dataclasses.replace(above, points=np.concatenate([above.points, false]),
+                               colours=np.concatenate([above.colours, np.full((5, 3), 100, np.uint8)]),
+                               track_length=np.concatenate([above.track_length, np.full(5, 3)]))
     grown = from_photos(folder, settings=SfmSettings(threads=1), sfm=thin, frame="scan", completion=False)
     assert grown.scan.provenance["sfm"]["up"] == "cameras.json"          # no plane was found
     assert any(w.startswith("SfM found no ground plane: the ground is where the photos' masks show the trunk's foot")
