@@ -6,8 +6,8 @@ Upright: known poses (cameras.json) are already Z up in metres. Estimated poses 
 people and our renders keep upright) or, where no plane holds GROUND_MIN_SHARE of the points, by that camera up.
 Metric: known poses give metres; estimated ones are scaled so the isolated tree is `height` tall, or, without a
 height, so that the cameras stand `camera_height` (CAMERA_HEIGHT_M, a phone held at chest height) above the ground
-plane, with a warning; without a height, cameras.json or a ground plane the scale is unknown and `from_photos`
-says so.
+plane, with a warning; with no ground plane (a ground too plain to match), above the trunk's foot the photos'
+masks show (hull shape only); with none of these the scale is unknown and `from_photos` says so.
 
 Isolation, in order: near-black and near-white points (sky, shadow, overexposed bark: colours SfM places badly)
 are dropped; the ground plane's band is removed; so is what lies outside the photos' footprint round the point
@@ -48,6 +48,7 @@ __all__ = ["from_photos", "SHAPES", "level_and_isolate", "check_height", "ground
 DARK = 25                 # every channel at or below: near-black (deep shadow, a dark background)
 LIGHT = 235               # every channel at or above: near-white (sky, overexposed highlights)
 GROUND_MAX_TILT_DEG = 30.0
+LEVEL_RIDGE = 0.01        # `camera_up`: image-right spread below this is not taken for a level direction
 GROUND_MIN_SHARE = 0.10   # a plane holding fewer of the points is not taken for the ground
 GROUND_BAND = 0.006       # the ground band's half-width, a share of the cameras' mean distance to the points
 GROUND_TRIALS = 256
@@ -88,13 +89,21 @@ def check_height(height, what: str = "height") -> None:
 
 
 def camera_up(sfm: SfmPoints) -> np.ndarray:
-    """(3,) the cameras' mean image-up direction in the model's frame (OpenCV: -y in the camera is up)."""
+    """(3,) up in the model's frame: the cameras' mean image-up direction (OpenCV: -y in the camera is up), less
+    its share along the level directions their image-right directions span. Photos taken upright keep their
+    image-right level however far they look up or down, while their image-up leans with the pitch: 8-15 degrees
+    down on a 90 degree arc leaned the mean 10 degrees towards the tree, and without a ground plane that lean made
+    the tree 70 % too tall. A ridge (LEVEL_RIDGE) leaves the mean as it is along what the right directions do not
+    span (photos that all face one way)."""
     ups = -sfm.camera_rotations[:, 1, :]     # R.T @ (0, -1, 0) for each world-to-camera rotation R
     mean = ups.sum(axis=0)
     norm = np.linalg.norm(mean)
     if norm < 1e-9:
         raise PhotoError("the cameras' up directions cancel out: allowed photos taken upright (or cameras.json)")
-    return mean / norm
+    rights = sfm.camera_rotations[:, 0, :]   # R.T @ (1, 0, 0)
+    spread = rights.T @ rights / len(rights)
+    up = np.linalg.solve(spread + LEVEL_RIDGE * np.eye(3), mean / norm)
+    return up / np.linalg.norm(up)
 
 
 def ground_plane(points: np.ndarray, up: np.ndarray, band: float, rng: np.random.Generator
@@ -188,7 +197,8 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     little of the tree is left, unless `few`: then the points left on the tree are kept however few (the photos'
     visual hull can still carve it, `from_photos`), the ground is read under where the photos aim, and a given
     height scales the model as the cameras' height would (scale_source "height": the caller scales the tree to
-    its hull's height)."""
+    its hull's height); with no ground plane either, the cameras' height is taken over the lowest point for now
+    (from_photos stands the tree on the trunk's foot the photos' masks show, and scales it again over that)."""
     check_height(height)
     check_height(camera_height, "camera height")
     counts = {"sfm": len(sfm.points)}
@@ -256,7 +266,14 @@ def level_and_isolate(sfm: SfmPoints, height: float | None, rng: np.random.Gener
     scale, scale_source = 1.0, "cameras.json" if metric else "none"
     model_to_upright = np.eye(4)
     model_to_upright[:3, :3] = rotation
-    above_ground = float(np.median(sfm.camera_centres @ normal - offset)) if plane is not None else 0.0
+    if plane is not None:
+        above_ground = float(np.median(sfm.camera_centres @ normal - offset))
+    elif few and not sparse:
+        # for now over the lowest point: from_photos stands the tree on the trunk's foot the masks show, and scales
+        # it again by the cameras' height above that (`grounded`)
+        above_ground = float(np.median((sfm.camera_centres @ rotation.T)[:, 2])) - ground_z
+    else:
+        above_ground = 0.0
     if height is not None and not sparse:
         scale, scale_source = float(height) / float(upright[:, 2].max() - ground_z), "height"
     elif height is not None:
@@ -297,6 +314,15 @@ def rescaled(tree: IsolatedTree, factor: float) -> IsolatedTree:
     to_upright[:3] *= factor
     return dataclasses.replace(tree, points=tree.points * factor, ground_z=tree.ground_z * factor,
                                scale=tree.scale * factor, model_to_upright=to_upright)
+
+
+def grounded(tree: IsolatedTree, factor: float) -> IsolatedTree:
+    """`tree` with its ground moved to z = 0, then scaled by `factor` about it."""
+    to_ground = np.eye(4)
+    to_ground[2, 3] = -tree.ground_z
+    moved = dataclasses.replace(tree, points=tree.points - np.array([0.0, 0.0, tree.ground_z]), ground_z=0.0,
+                                model_to_upright=to_ground @ tree.model_to_upright)
+    return rescaled(moved, factor)
 
 
 def from_photos(folder: str | Path, *, height: float | None = None, frame: str = "base", completion: bool = True,
@@ -383,13 +409,23 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
             moved, ground = abs(float(foot[2]) - ground), float(foot[2])
             if moved <= FOOT_SETTLED * float(np.ptp(tree.points[:, 2])):
                 break
-        if foot is not None and ground > tree.ground_z:
+        if foot is not None:
+            # over the lowest point: that point was a false match; under it: SfM placed nothing on the trunk's foot
             above = tree.points[:, 2] >= ground
             if above.sum() >= MIN_POINTS:
                 warnings.append(f"SfM found no ground plane: the ground is where the photos' masks show the trunk's "
-                                f"foot, {ground - tree.ground_z:.1f} m over the lowest SfM point")
+                                f"foot, {abs(ground - tree.ground_z):.1f} m "
+                                f"{'over' if ground > tree.ground_z else 'under'} the lowest SfM point")
                 points, colours = _one_stem(tree.points[above], tree.colours[above], ground)
                 tree = dataclasses.replace(tree, points=points, colours=colours, ground_z=ground)
+        if tree.scale_source == "camera height":
+            standing = float(np.median([view.centre[2] for view in photo_views(sfm, tree.model_to_upright)]))
+            standing -= tree.ground_z
+            if foot is None or standing <= 0:
+                raise PhotoError("the photos' scale is unknown (no cameras.json, no ground plane under the cameras, "
+                                 "and no trunk's foot in the photos' masks to stand them over): allowed a tree "
+                                 "height in metres (--height M, or height= in Python)")
+            tree = grounded(tree, float(camera_height) / standing)
     if tree.scale_source == "camera height":
         warnings.append(f"no height given: the tree is scaled so that the cameras stand {camera_height:g} m above the "
                         f"ground ({tree.points[:, 2].max():.1f} m tall); give --height M for its true scale")

@@ -131,6 +131,15 @@ def test_photos_alone_come_out_the_given_height_tall_and_upright(photos, bare_ph
     assert guessed.scan.provenance["sfm"]["scale"] == "camera height"
     assert any(w.startswith("no height given: the tree is scaled so that the cameras stand 1.5 m above the ground")
                for w in guessed.warnings)
+    # and where SfM matched nothing on the ground (no plane), the cameras stand that high above the trunk's foot
+    # the masks show
+    on_tree = _kept(sfm, aligned.points[:, 2] > 0.3)
+    footed = from_photos(bare_photos, settings=SfmSettings(threads=1), sfm=on_tree, camera_height=standing,
+                         completion=False)
+    record = footed.scan.provenance["sfm"]
+    assert record["up"] == "camera up" and record["scale"] == "camera height"
+    assert footed.skeleton.height == pytest.approx(true.height, rel=0.15)
+    assert footed.maps["hull"].top() == pytest.approx(true.height, rel=0.15)
 
 
 def test_an_unscaled_model_with_no_ground_under_it_is_refused():
@@ -243,11 +252,17 @@ def test_ground_plane_and_camera_up_on_known_geometry():
 
 
 def test_camera_up_is_the_renders_up(photos):
-    # the renders look 8 to 15 degrees down: their image-up leans that far off +Z, towards the tree
+    # the renders look 8 to 15 degrees down: their mean image-up leans 10 degrees off +Z, towards the tree, but
+    # their image-right directions are level and span the level plane over the 90 degree arc
     rotations = np.array([camera.world_to_camera[:3, :3] for camera in photos.cameras])
     sfm = SfmPoints(np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros(0, int), [], 10, "known", 0.0,
                     np.zeros((10, 3)), rotations, np.full(10, 0.5), {})
-    assert camera_up(sfm)[2] > np.cos(np.radians(15.0))
+    mean_up = -rotations[:, 1, :].sum(axis=0)
+    assert mean_up[2] / np.linalg.norm(mean_up) < np.cos(np.radians(8.0))
+    assert camera_up(sfm)[2] > np.cos(np.radians(1.0))
+    # photos that all face one way span one level direction: up is their image-up, 10 degrees down as taken
+    alike = dataclasses.replace(sfm, camera_rotations=np.repeat(rotations[:1], 10, axis=0))
+    assert camera_up(alike) == pytest.approx(-rotations[0, 1, :])
     with pytest.raises(PhotoError, match="up directions cancel out"):
         camera_up(SfmPoints(sfm.points, sfm.colours, sfm.track_length, [], 2, "known", 0.0, np.zeros((2, 3)),
                             np.array([np.eye(3), np.diag([1.0, -1.0, -1.0])]), np.full(2, 0.5), {}))
