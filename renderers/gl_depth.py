@@ -43,6 +43,19 @@ def use_headless_gl() -> None:
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 
+def _destroy_egl_context(platform) -> None:
+    """Destroy a pyrender EGL platform's context and forget its display, leaving the display initialised for the
+    process's other renderers (pyrender's own delete_context terminates it)."""
+    if platform._egl_display is None or platform._egl_context is None:
+        return
+    from OpenGL import EGL
+
+    EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
+    EGL.eglDestroyContext(platform._egl_display, platform._egl_context)
+    platform._egl_context = None
+    platform._egl_display = None
+
+
 class DepthRenderer:
     """One pyrender OffscreenRenderer, reused across trees and views; draws depth-only passes of a tree's parts.
 
@@ -56,6 +69,11 @@ class DepthRenderer:
 
         self._pyrender = pyrender
         self._renderer = pyrender.OffscreenRenderer(size, size)
+        if os.environ.get("PYOPENGL_PLATFORM") == "egl":
+            # pyrender frees a renderer dropped without close() (its __del__) by terminating the EGL display,
+            # which is one per process: every other renderer alive died with it (EGL_BAD_CONTEXT at its next pass)
+            platform = self._renderer._platform
+            platform.delete_context = functools.partial(_destroy_egl_context, platform)
         # Swap in a renderer without multisampling (see single_sample_renderer_class).
         self._renderer._renderer = single_sample_renderer_class()(size, size)
         self._scene = pyrender.Scene(bg_color=[1.0, 1.0, 1.0, 1.0])
@@ -80,15 +98,9 @@ class DepthRenderer:
         if os.environ.get("PYOPENGL_PLATFORM") != "egl":
             self._renderer.delete()
         else:
-            from OpenGL import EGL
-
             platform.make_current()
             self._renderer._renderer.delete()
-            EGL.eglMakeCurrent(platform._egl_display, EGL.EGL_NO_SURFACE, EGL.EGL_NO_SURFACE, EGL.EGL_NO_CONTEXT)
-            EGL.eglDestroyContext(platform._egl_display, platform._egl_context)
-            # Forget the display too, so pyrender's OffscreenRenderer.__del__ has nothing left to terminate.
-            platform._egl_context = None
-            platform._egl_display = None
+            _destroy_egl_context(platform)
         self._renderer = None
         self._mesh_nodes = {}
         self._tree = None
