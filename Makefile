@@ -43,8 +43,10 @@ env: $(STAMP) blender-env node-env browser-env
 run: env
 	$(VENV)/bin/farm generate --out out/dataset
 
+# Two pytest workers, a test file each at a time: the suite waits on Ray start-ups, Blender and subprocesses
+# for much of its time, and one core sat idle then (docs/performance.md, "Test suite").
 test: env
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist loadfile
 
 # Rewrites tests/golden/*.json from the current code; a commit that changes outputs on purpose runs this.
 golden: env
