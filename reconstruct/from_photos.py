@@ -34,8 +34,8 @@ from species.timing import StageTimer
 
 from .clouds import MIN_POINTS, read_cloud
 from .from_cloud import FRAMES, from_cloud, stem_groups
-from .hull_growth import (aimed_hull, colonization_preset, draw_masks, grow_in_hull, hull_bounds, photo_views,
-                          triangulated_foot)
+from .hull_growth import (DEFAULT_SPECIES, aimed_hull, colonization_preset, crown_proportion, crown_width,
+                          draw_masks, grow_in_hull, hull_bounds, photo_views, top_unseen, triangulated_foot)
 from .photo_folder import CAMERA_HEIGHT_M
 from .photo_masks import mask_network
 from .result import Reconstruction
@@ -429,9 +429,6 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     if tree.scale_source == "camera height":
         warnings.append(f"no height given: the tree is scaled so that the cameras stand {camera_height:g} m above the "
                         f"ground ({tree.points[:, 2].max():.1f} m tall); give --height M for its true scale")
-    if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:
-        warnings.append(f"height {height} m scales the tree by {tree.scale:.2f} from the cameras' metres "
-                        f"(cameras.json makes it {height / tree.scale:.2f} m tall)")
     missed = sfm.n_photos - len(sfm.registered)
     if missed:
         warnings.append(f"{missed} of {sfm.n_photos} photos were not registered")
@@ -440,22 +437,45 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
     cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
     result = from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name)
     if shape == "hull":
+        def regrown(tree: IsolatedTree, drawn: Reconstruction, ceiling: float | None = None) -> Reconstruction:
+            # the masks do not change with the scale or the ceiling: drawn once, their seconds kept
+            cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
+            again = grow_in_hull(from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name),
+                                 sfm, tree, folder, species=species, seed=seed, mask_net=network,
+                                 masks=drawn.maps["masks"], ceiling=ceiling)
+            return dataclasses.replace(again, timings={**again.timings, "hull.masks": drawn.timings["hull.masks"]})
+
         result = grow_in_hull(result, sfm, tree, folder, species=species, seed=seed, mask_net=network,
                               masks=drawn_masks)
+        if top_unseen(result.maps["hull"]):
+            reached = result.maps["hull"].top() - tree.ground_z
+            ceiling = None
+            if height is not None and metric and tree.scale_source == "height":
+                # the given height cannot be the hull's, which has no top: the cameras' metres hold, cut there
+                reached /= tree.scale
+                tree = dataclasses.replace(grounded(tree, 1.0 / tree.scale), scale_source="cameras.json")
+            unseen = f"no photo shows the crown's top (its hull fills its box up to {reached:.1f} m)"
+            if height is not None and metric:
+                ceiling = float(height)
+                warnings.append(f"{unseen}: the hull is cut at the height given, the cameras' metres kept")
+            elif height is None:
+                ceiling = crown_proportion(colonization_preset(species)) * crown_width(result.maps["hull"])
+                warnings.append(f"{unseen}: the tree is cut at {min(ceiling, reached):.1f} m, "
+                                f"{species or DEFAULT_SPECIES}'s height for its crown's width; give --height M")
+            else:
+                warnings.append(f"{unseen}: scaled to the height given by that hull, the tree may be too narrow")
+            if ceiling is not None and ceiling < reached:
+                result = regrown(tree, result, tree.ground_z + ceiling)
         hull_height = result.maps["hull"].top() - tree.ground_z
         factor = float(height) / hull_height if tree.scale_source == "height" else 1.0
         if abs(factor - 1.0) > HULL_RESCALE:
             # the given height is the tree's, and the hull is the tree's outline: the points' top it was first
             # scaled by can be a stray point over the crown (in leaf 30 % too tall)
-            # the masks do not change with the scale: drawn once, their seconds kept
             tree = rescaled(tree, factor)
-            cloud = dataclasses.replace(read_cloud(tree.points), colours=tree.colours, source=str(folder))
-            drawn = result
-            result = grow_in_hull(from_cloud(cloud, frame=frame, completion=completion, seed=seed, name=name),
-                                  sfm, tree, folder, species=species, seed=seed, mask_net=network,
-                                  masks=drawn.maps["masks"])
-            result = dataclasses.replace(result, timings={**result.timings,
-                                                          "hull.masks": drawn.timings["hull.masks"]})
+            result = regrown(tree, result)
+    if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:
+        warnings.append(f"height {height} m scales the tree by {tree.scale:.2f} from the cameras' metres "
+                        f"(cameras.json makes it {height / tree.scale:.2f} m tall)")
     progress("tree", 2, 2)
     record = {"photos": sfm.n_photos, "registered": len(sfm.registered), "poses": sfm.poses,
               "reprojection_px": round(sfm.reprojection_px, 4), "up": tree.up_source, "scale": tree.scale_source,

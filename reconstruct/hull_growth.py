@@ -39,7 +39,8 @@ from .visual_hull import PinholeView, VisualHull, carve
 __all__ = ["grow_in_hull", "colonization_preset", "photo_views", "hull_bounds", "rerooted", "ground_sightlines",
            "draw_masks", "aimed_bounds", "aimed_hull", "triangulated_foot",
            "grow_in_hull_space", "took_hold", "trunk_foot", "trunk_widths", "trunk_radius_from_masks",
-           "crown_base_from_masks", "DEFAULT_SPECIES", "HULL_VOXELS"]
+           "crown_base_from_masks", "top_unseen", "crown_proportion", "crown_width", "DEFAULT_SPECIES",
+           "HULL_VOXELS"]
 
 HULL_VOXELS = 64          # voxels along the hull box's longest side
 GROUND_SIGHT_BAND = 0.05  # of the tree's height: SfM points this near the ground plane are the ground's
@@ -203,6 +204,26 @@ def _under_crown_cleared(hull: VisualHull, foot: np.ndarray, crown_base: float, 
     return dataclasses.replace(hull, occupancy=occupancy)
 
 
+def top_unseen(hull: VisualHull) -> bool:
+    """Whether `hull` fills the top layer of the box it was carved in: no photo saw the space over the crown
+    outside its tree mask. From eye height near a wide crown its near side hides the top from every photo (on the
+    phone walk round the 15.5 m oak, the hull rose to 33.5 m)."""
+    return bool(hull.occupancy[:, :, -1].any())
+
+
+def crown_proportion(preset: Preset) -> float:
+    """The colonization preset's tree height over its crown's width, at their base values: (crown_base +
+    crown_height) / (2 crown_radius), all in internodes."""
+    ranges = preset.ranges
+    return (ranges["crown_base"].base + ranges["crown_height"].base) / (2.0 * ranges["crown_radius"].base)
+
+
+def crown_width(hull: VisualHull) -> float:
+    """Metres: the hull's wider horizontal extent (x or y) over its occupied voxels."""
+    occupied = np.argwhere(hull.occupancy)
+    return float((np.ptp(occupied[:, :2], axis=0).max() + 1) * hull.voxel_size)
+
+
 def hull_bounds(points: np.ndarray, ground_z: float) -> np.ndarray:
     """(2, 3) the box carved: the tree's points' box grown by HULL_MARGIN, from the ground up."""
     lo, hi = points.min(axis=0), points.max(axis=0)
@@ -320,7 +341,7 @@ def colonization_preset(species: str | None) -> Preset:
 
 def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, species: str | None = None,
                  seed: int = 0, mask_net: MaskNetwork | None = None,
-                 masks: tuple[np.ndarray, ...] | None = None) -> Reconstruction:
+                 masks: tuple[np.ndarray, ...] | None = None, ceiling: float | None = None) -> Reconstruction:
     """`result` (the cloud method's, from `tree`'s points) regrown inside the photos' visual hull (module
     docstring); timings add "hull.masks", "hull.hull", "hull.growth" and "hull.mesh"; maps add "hull" (the
     `VisualHull`, upright metric frame), "masks" (each registered photo's) and "main_skeleton" (the bole it grew
@@ -330,12 +351,16 @@ def grow_in_hull(result: Reconstruction, sfm, tree, folder: str | Path, *, speci
     mask_net : the tree mask network that draws the photos' masks (`photo_masks.mask_network`); None: classical.
     masks    : the registered photos' masks already drawn (an earlier call's maps["masks"] on the same photos: they
                do not change with the tree's scale); None draws them.
+    ceiling  : the height (z, upright frame) the hull is carved up to at most (a top no photo saw, `top_unseen`,
+               cut at a given height); None: the tree's points' box.
     A hull no crown grows in (`grow_in_hull_space` gave no more than the bole) leaves the cloud method's tree, with
     the hull and masks in its maps and a warning that says so."""
     preset = colonization_preset(species)
     timer = StageTimer()
     views = photo_views(sfm, tree.model_to_upright)
     bounds = hull_bounds(tree.points, tree.ground_z)
+    if ceiling is not None:
+        bounds[1, 2] = min(bounds[1, 2], float(ceiling))
     base = np.array([*np.median(tree.points[:, :2], axis=0), tree.ground_z])
     if masks is None:
         masks = draw_masks(sfm, views, folder, bounds, base, tree.points, mask_net)

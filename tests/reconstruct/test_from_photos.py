@@ -238,6 +238,51 @@ def test_a_hull_no_crown_grows_in_leaves_the_sparse_tree_with_a_warning(photos, 
     assert "hull" in starved.maps and "main_skeleton" not in starved.maps
 
 
+def _crown_over_the_top(draw):
+    """`draw_masks` whose masks are the tree up to the photo's top edge over the columns the tree spans: photos
+    taken under a crown that hides its top (eye height near a wide crown)."""
+    def drawn(*args, **kwargs):
+        masks = draw(*args, **kwargs)
+        out = []
+        for mask in masks:
+            filled = mask.copy()
+            rows, columns = np.nonzero(mask)
+            if len(rows):
+                filled[:rows.min(), columns.min():columns.max() + 1] = True
+            out.append(filled)
+        return out
+    return drawn
+
+
+def test_a_crown_top_no_photo_sees_is_cut_at_the_height_or_the_species_proportion(photos, photo_tree,
+                                                                                    monkeypatch):
+    folder = photos.cameras_json.parent
+    true, _ = photo_tree
+    sfm = sfm_points(folder, SfmSettings(threads=1))
+    seen = from_photos(folder, settings=SfmSettings(threads=1), sfm=sfm, completion=False)
+    assert not hull_growth.top_unseen(seen.maps["hull"])
+    monkeypatch.setattr(hull_growth, "draw_masks", _crown_over_the_top(hull_growth.draw_masks))
+    # known poses and a height: the hull is cut there, the cameras' metres (and so the crown's width) kept
+    cut = from_photos(folder, height=0.8 * true.height, settings=SfmSettings(threads=1), sfm=sfm, completion=False)
+    hull = cut.maps["hull"]
+    assert any(w.startswith("no photo shows the crown's top") and "cut at the height given" in w
+               for w in cut.warnings)
+    assert cut.scan.provenance["sfm"]["scale"] == "cameras.json" and cut.scan.provenance["sfm"]["scale_factor"] == 1.0
+    assert hull.top() - hull.origin[2] == pytest.approx(0.8 * true.height, abs=hull.voxel_size)
+    assert hull_growth.crown_width(hull) == pytest.approx(hull_growth.crown_width(seen.maps["hull"]),
+                                                          abs=2 * hull.voxel_size)
+    # no height: the species' height for the crown's width
+    guessed = from_photos(folder, settings=SfmSettings(threads=1), sfm=sfm, completion=False,
+                          species="sc_broad_oak")
+    proportion = hull_growth.crown_proportion(get_preset("sc_broad_oak"))
+    assert proportion == pytest.approx((6.0 + 18.0) / 38.0)
+    hull = guessed.maps["hull"]
+    assert any("the tree is cut at" in w and "sc_broad_oak's height for its crown's width" in w
+               for w in guessed.warnings)
+    assert hull.top() - hull.origin[2] == pytest.approx(proportion * hull_growth.crown_width(hull),
+                                                        abs=2 * hull.voxel_size)
+
+
 def test_ground_plane_and_camera_up_on_known_geometry():
     rng = np.random.default_rng(0)
     tilt = np.radians(10.0)
