@@ -392,6 +392,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
             tree = rescaled(tree, float(height) / (hull.top() - tree.ground_z))
         warnings.append(f"SfM left {tree.counts['outliers']} points on the tree: its place and size are the photos' "
                         "outlines' (carved round where the photos aim)")
+    foot_moved = None
     if shape == "hull" and "ground plane" not in tree.up_source:
         # no ground plane among SfM's points (a ground too plain to match): their lowest point is a false match
         # under the ground (on a phone walk round the oak at known poses, 8.9 m under it); the trunk's foot the
@@ -413,9 +414,7 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
             # over the lowest point: that point was a false match; under it: SfM placed nothing on the trunk's foot
             above = tree.points[:, 2] >= ground
             if above.sum() >= MIN_POINTS:
-                warnings.append(f"SfM found no ground plane: the ground is where the photos' masks show the trunk's "
-                                f"foot, {abs(ground - tree.ground_z):.1f} m "
-                                f"{'over' if ground > tree.ground_z else 'under'} the lowest SfM point")
+                foot_moved = (ground - tree.ground_z, tree.scale)   # said once the tree's scale is final
                 points, colours = _one_stem(tree.points[above], tree.colours[above], ground)
                 tree = dataclasses.replace(tree, points=points, colours=colours, ground_z=ground)
         if tree.scale_source == "camera height":
@@ -473,6 +472,10 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
             # scaled by can be a stray point over the crown (in leaf 30 % too tall)
             tree = rescaled(tree, factor)
             result = regrown(tree, result)
+    if foot_moved is not None:
+        moved = foot_moved[0] * tree.scale / foot_moved[1]
+        warnings.insert(0, f"SfM found no ground plane: the ground is where the photos' masks show the trunk's foot, "
+                           f"{abs(moved):.1f} m {'over' if moved > 0 else 'under'} the lowest SfM point")
     if metric and tree.scale_source == "height" and abs(tree.scale - 1.0) > HEIGHT_MISMATCH:
         warnings.append(f"height {height} m scales the tree by {tree.scale:.2f} from the cameras' metres "
                         f"(cameras.json makes it {height / tree.scale:.2f} m tall)")
