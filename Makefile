@@ -44,7 +44,7 @@ run: env
 	$(VENV)/bin/farm generate --out out/dataset
 
 # Two pytest workers, a test file each at a time: the suite waits on Ray start-ups, Blender and subprocesses
-# for much of its time, and one core sat idle then (docs/performance.md, "Test suite").
+# for much of its time, and one core sat idle then (docs/performance.md, "Measurements behind choices").
 test: env
 	$(PY) -m pytest -q -n 2 --dist loadfile
 

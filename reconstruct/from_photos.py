@@ -418,8 +418,8 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                 points, colours = _one_stem(tree.points[above], tree.colours[above], ground)
                 tree = dataclasses.replace(tree, points=points, colours=colours, ground_z=ground)
         if tree.scale_source == "camera height":
-            standing = float(np.median([view.centre[2] for view in photo_views(sfm, tree.model_to_upright)]))
-            standing -= tree.ground_z
+            # the views the foot was read in: the ground's move left the frame as it was
+            standing = float(np.median([view.centre[2] for view in views])) - tree.ground_z
             if foot is None or standing <= 0:
                 raise PhotoError("the photos' scale is unknown (no cameras.json, no ground plane under the cameras, "
                                  "and no trunk's foot in the photos' masks to stand them over): allowed a tree "
@@ -448,21 +448,19 @@ def from_photos(folder: str | Path, *, height: float | None = None, frame: str =
                               masks=drawn_masks)
         if top_unseen(result.maps["hull"]):
             reached = result.maps["hull"].top() - tree.ground_z
-            ceiling = None
-            if height is not None and metric and tree.scale_source == "height":
-                # the given height cannot be the hull's, which has no top: the cameras' metres hold, cut there
-                reached /= tree.scale
-                tree = dataclasses.replace(grounded(tree, 1.0 / tree.scale), scale_source="cameras.json")
-            unseen = f"no photo shows the crown's top (its hull fills its box up to {reached:.1f} m)"
             if height is not None and metric:
-                ceiling = float(height)
-                warnings.append(f"{unseen}: the hull is cut at the height given, the cameras' metres kept")
+                if tree.scale_source == "height":
+                    # the given height cannot be the hull's, which has no top: the cameras' metres hold, cut there
+                    reached /= tree.scale
+                    tree = dataclasses.replace(grounded(tree, 1.0 / tree.scale), scale_source="cameras.json")
+                ceiling, done = float(height), "the hull is cut at the height given, the cameras' metres kept"
             elif height is None:
                 ceiling = crown_proportion(colonization_preset(species)) * crown_width(result.maps["hull"])
-                warnings.append(f"{unseen}: the tree is cut at {min(ceiling, reached):.1f} m, "
-                                f"{species or DEFAULT_SPECIES}'s height for its crown's width; give --height M")
+                done = (f"the tree is cut at {min(ceiling, reached):.1f} m, {species or DEFAULT_SPECIES}'s height "
+                        f"for its crown's width; give --height M")
             else:
-                warnings.append(f"{unseen}: scaled to the height given by that hull, the tree may be too narrow")
+                ceiling, done = None, "scaled to the height given by that hull, the tree may be too narrow"
+            warnings.append(f"no photo shows the crown's top (its hull fills its box up to {reached:.1f} m): {done}")
             if ceiling is not None and ceiling < reached:
                 result = regrown(tree, result, tree.ground_z + ceiling)
         hull_height = result.maps["hull"].top() - tree.ground_z

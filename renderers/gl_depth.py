@@ -86,12 +86,10 @@ class DepthRenderer:
         return list(self._mesh_nodes)
 
     def close(self) -> None:
-        """Free this renderer's GL objects and context.
-
-        pyrender's own delete() also calls eglTerminate, and the EGL display is one per process: that would
-        break every other renderer alive in the process, so for EGL the context is destroyed and the display
-        left initialised.
-        """
+        """Free this renderer's GL objects and context (for EGL the context alone: the display, one per process,
+        stays initialised for the other renderers; see __init__). pyrender's delete() would do the same through
+        the patched delete_context, but then runs a full gc.collect(), which a close per library asset need not
+        pay."""
         if self._renderer is None:
             return
         platform = self._renderer._platform
